@@ -1,0 +1,56 @@
+// Shared helpers for the binding files: numpy checks that refuse rather than convert.
+#pragma once
+
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+
+#include <cmath>
+#include <string>
+
+namespace py = pybind11;
+
+namespace mmrl {
+
+void bind_bvh(py::module_& m);
+void bind_database(py::module_& m);
+void bind_search(py::module_& m);
+
+template <class T>
+using carray = py::array_t<T, py::array::c_style>;
+
+// Checks that obj is a C-contiguous numpy array of dtype T with the given shape
+// (-1 = any size in that dimension) and returns it without copying. Raises TypeError /
+// ValueError naming the argument otherwise.
+template <class T>
+carray<T> check_array(const py::handle& obj, const char* name, std::initializer_list<py::ssize_t> shape) {
+  if (!py::isinstance<py::array>(obj))
+    throw py::type_error(std::string(name) + ": expected a numpy array, got " +
+                         std::string(py::str(py::type::of(obj).attr("__name__"))));
+  py::array arr = py::reinterpret_borrow<py::array>(obj);
+  if (!arr.dtype().is(py::dtype::of<T>()))
+    throw py::type_error(std::string(name) + ": expected dtype " + std::string(py::str(py::dtype::of<T>())) +
+                         ", got " + std::string(py::str(arr.dtype())));
+  if (arr.ndim() != static_cast<py::ssize_t>(shape.size()))
+    throw py::value_error(std::string(name) + ": expected " + std::to_string(shape.size()) + " dimensions, got " +
+                          std::to_string(arr.ndim()));
+  py::ssize_t i = 0;
+  for (py::ssize_t s : shape) {
+    if (s >= 0 && arr.shape(i) != s)
+      throw py::value_error(std::string(name) + ": expected size " + std::to_string(s) + " in dimension " +
+                            std::to_string(i) + ", got " + std::to_string(arr.shape(i)));
+    ++i;
+  }
+  if (!(arr.flags() & py::array::c_style))
+    throw py::value_error(std::string(name) + ": array must be C-contiguous (use np.ascontiguousarray)");
+  return py::reinterpret_borrow<carray<T>>(arr);
+}
+
+// Raises ValueError naming the argument if any value is NaN or infinite.
+inline void check_finite(const float* data, py::ssize_t n, const char* name) {
+  for (py::ssize_t i = 0; i < n; ++i)
+    if (!std::isfinite(data[i]))
+      throw py::value_error(std::string(name) + ": contains NaN or inf (at flat index " + std::to_string(i) + ")");
+}
+
+}  // namespace mmrl

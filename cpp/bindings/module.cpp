@@ -1,0 +1,10 @@
+// The mmrl._core extension module. Bindings only: convert, check, forward; no logic.
+// Each concept registers itself from its own bind_*.cpp file.
+#include "bindings.hpp"
+
+PYBIND11_MODULE(_core, m) {
+  m.doc() = "mmrl C++ core: BVH, features, matching, controller and batched environments";
+  mmrl::bind_bvh(m);
+  mmrl::bind_database(m);
+  mmrl::bind_search(m);
+}

@@ -1,0 +1,53 @@
+// A small persistent thread pool for batched work over environments or queries.
+// parallel_for splits [0, n) into contiguous chunks, runs them on the workers and the
+// calling thread, and returns when all are done. Dispatch allocates nothing: the job is
+// passed as a function pointer plus a context pointer.
+#pragma once
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace mmrl {
+
+class ThreadPool {
+ public:
+  // num_threads counts the calling thread; 0 means std::thread::hardware_concurrency().
+  explicit ThreadPool(int num_threads = 0);
+  ~ThreadPool();
+  ThreadPool(const ThreadPool&) = delete;
+  ThreadPool& operator=(const ThreadPool&) = delete;
+
+  int num_threads() const { return static_cast<int>(workers_.size()) + 1; }
+
+  // Calls fn(begin, end, thread_index) over chunks of [0, n). thread_index < num_threads().
+  template <class Fn>
+  void parallel_for(int64_t n, Fn&& fn, int64_t min_chunk = 1) {
+    auto trampoline = [](void* ctx, int64_t b, int64_t e, int t) { (*static_cast<Fn*>(ctx))(b, e, t); };
+    run(n, min_chunk, trampoline, static_cast<void*>(&fn));
+  }
+
+ private:
+  using Job = void (*)(void*, int64_t, int64_t, int);
+  void run(int64_t n, int64_t min_chunk, Job job, void* ctx);
+  void worker_loop(int index);
+  void run_chunks(int thread_index);
+
+  std::vector<std::thread> workers_;
+  std::mutex mutex_;
+  std::condition_variable start_cv_, done_cv_;
+  uint64_t generation_ = 0;
+  int pending_ = 0;
+  bool stop_ = false;
+  // Current job.
+  Job job_ = nullptr;
+  void* ctx_ = nullptr;
+  int64_t n_ = 0, chunk_ = 1;
+  std::atomic<int64_t> next_{0};
+  std::mutex run_mutex_;  // one parallel_for at a time per pool
+};
+
+}  // namespace mmrl

@@ -1,0 +1,14 @@
+"""mmrl: motion matching driven by deep reinforcement learning.
+
+Train character controllers that write motion-matching queries, in seconds on a CPU.
+"""
+from importlib.metadata import PackageNotFoundError, version as _version
+
+from . import _core  # noqa: F401  (the C++ core)
+
+try:
+    __version__ = _version("mmrl")
+except PackageNotFoundError:  # running from a source tree without installing
+    __version__ = "0.0.0+unknown"
+
+__all__ = ["__version__"]
