@@ -119,8 +119,7 @@ class ObstacleActorCritic(nn.Module):
     env's layout here if it differs.
 
     PPO should leave the binary maps unnormalized: pass
-    ``obs_norm_exclude=net.map_slice`` to ``PPOConfig``... or use
-    ``ObstacleActorCritic.map_range(layout)`` to get (start, stop).
+    ``PPOConfig(obs_norm_exclude=ObstacleActorCritic.map_range(layout))``.
     """
 
     def __init__(self, act_dim: int, layout: tuple[tuple[str, int], ...] = OBSTACLE_DEFAULT_LAYOUT,
