@@ -29,6 +29,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <stdexcept>
@@ -58,6 +59,10 @@ struct SearchFilter {
 
 class KDTree {
  public:
+  // kLanes floats processed together. GCC/Clang vector extensions: the compiler maps them to
+  // AVX/SSE/NEON registers (or scalar code), with the same per-lane operations everywhere.
+  typedef float Lanes __attribute__((vector_size(32)));
+  typedef int32_t LaneMask __attribute__((vector_size(32)));
   static constexpr int kLanes = 8;       // rows per SoA block (one AVX2 register of floats)
   static constexpr int kMaxDim = 128;    // the query is staged in a fixed stack buffer
   static constexpr int kMaxDepth = 96;   // median splits keep depth near log2(n)
@@ -216,17 +221,33 @@ class KDTree {
   float box_sqdist(const float* q, int32_t node) const {
     const float* lo = box_.data() + static_cast<size_t>(node) * 2 * dim_padded_;
     const float* hi = lo + dim_padded_;
-    float acc[kLanes] = {};
-    for (int d0 = 0; d0 < dim_padded_; d0 += kLanes)
-      for (int l = 0; l < kLanes; ++l) {
-        const float below = lo[d0 + l] - q[d0 + l];
-        const float above = q[d0 + l] - hi[d0 + l];
-        const float gap = std::max(std::max(below, above), 0.0f);
-        acc[l] += gap * gap;
-      }
+    Lanes acc = {};
+    const Lanes zero = {};
+    for (int d0 = 0; d0 < dim_padded_; d0 += kLanes) {
+      const Lanes qv = load_lanes(q + d0);
+      const Lanes below = load_lanes(lo + d0) - qv;
+      const Lanes above = qv - load_lanes(hi + d0);
+      Lanes gap = below > above ? below : above;
+      gap = gap > zero ? gap : zero;
+      acc += gap * gap;
+    }
     float s = 0.0f;
     for (int l = 0; l < kLanes; ++l) s += acc[l];
     return s;
+  }
+
+  static Lanes load_lanes(const float* p) {
+    Lanes v;
+    std::memcpy(&v, p, sizeof(v));
+    return v;
+  }
+  static bool all_greater(Lanes acc, float w) {
+    const LaneMask m = acc > w;
+    int64_t words[kLanes / 2];
+    std::memcpy(words, &m, sizeof(words));
+    int64_t all = -1;
+    for (int i = 0; i < kLanes / 2; ++i) all &= words[i];
+    return all == -1;
   }
 
   // A box bound computed in float may exceed a contained row's float distance by a few
@@ -296,29 +317,21 @@ class KDTree {
     const int32_t nb = (leaf.end - leaf.begin + kLanes - 1) / kLanes;
     for (int32_t b = leaf.first_block; b < leaf.first_block + nb; ++b) {
       const float* x = blocks_.data() + static_cast<size_t>(b) * dim_ * kLanes;
-      float acc[kLanes];
-      for (int l = 0; l < kLanes; ++l) acc[l] = block_init_[static_cast<size_t>(b) * kLanes + l];
+      // One lane per row; each lane accumulates in dimension order like sqdist_row.
+      Lanes acc = load_lanes(block_init_.data() + static_cast<size_t>(b) * kLanes);
       float w = out_d[k - 1];
       bool pruned = false;
       // Checkpoint every 8 dims: stop once every lane's partial sum is past the k-th best
-      // (partial sums only grow, so the row cannot rank).
+      // (partial sums only grow, so none of these rows can rank).
       for (int d0 = 0; d0 < dim_; d0 += 8) {
         const int d1 = std::min(dim_, d0 + 8);
         for (int d = d0; d < d1; ++d) {
-          const float qd = q[d];
-          const float* xd = x + d * kLanes;
-          for (int l = 0; l < kLanes; ++l) {
-            const float diff = qd - xd[l];
-            acc[l] += diff * diff;
-          }
+          const Lanes diff = q[d] - load_lanes(x + d * kLanes);
+          acc += diff * diff;
         }
-        if (d1 < dim_) {
-          int over = 0;
-          for (int l = 0; l < kLanes; ++l) over += acc[l] > w;
-          if (over == kLanes) {
-            pruned = true;
-            break;
-          }
+        if (d1 < dim_ && all_greater(acc, w)) {
+          pruned = true;
+          break;
         }
       }
       if (pruned) continue;
