@@ -1,5 +1,6 @@
 #include "mmrl/search.hpp"
 
+#include <algorithm>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -11,7 +12,8 @@ namespace {
 void check_points(const float* points, int64_t num_points, int dim, const char* who) {
   if (num_points < 0) throw std::invalid_argument(std::string(who) + ": num_points must be >= 0");
   if (num_points > 0 && points == nullptr) throw std::invalid_argument(std::string(who) + ": points is null");
-  if (dim <= 0) throw std::invalid_argument(std::string(who) + ": dim must be >= 1");
+  if (dim <= 0 || dim > kMaxDim)
+    throw std::invalid_argument(std::string(who) + ": dim must be in [1, " + std::to_string(kMaxDim) + "]");
 }
 
 bool is_allowed(int64_t i, const SearchFilter& f) {
@@ -34,9 +36,12 @@ int brute_force_knn(const float* points, int64_t num_points, int dim, const floa
     out_sqdist[j] = std::numeric_limits<float>::infinity();
   }
   int found = 0;
+  float dist[kLanes];
   for (int64_t i = 0; i < num_points; ++i) {
+    if (i % kLanes == 0)
+      rows_sqdist(query, points + i * dim, static_cast<int>(std::min<int64_t>(kLanes, num_points - i)), dim, dist);
     if (!is_allowed(i, filter)) continue;
-    const float d = sqdist_row(query, points + i * dim, dim);
+    const float d = dist[i % kLanes];
     // Scanning in index order, a tie never displaces an earlier (lower) index.
     if (found == k && !(d < out_sqdist[k - 1])) continue;
     int pos = found < k ? found++ : k - 1;
@@ -63,9 +68,12 @@ int64_t brute_force_match(const float* points, int64_t num_points, int dim, cons
     best = bound_index;
     best_cost = sqdist_row(query, points + bound_index * dim, dim);
   }
+  float dist[kLanes];
   for (int64_t i = 0; i < num_points; ++i) {
+    if (i % kLanes == 0)
+      rows_sqdist(query, points + i * dim, static_cast<int>(std::min<int64_t>(kLanes, num_points - i)), dim, dist);
     if ((valid && !valid[i]) || (i >= exclude_lo && i < exclude_hi)) continue;
-    const float d = sqdist_row(query, points + i * dim, dim);
+    const float d = dist[i % kLanes];
     if (d < best_cost || (best < 0 && d == best_cost)) {
       best_cost = d;
       best = i;

@@ -18,7 +18,7 @@
 //     block as soon as every lane's partial sum exceeds the k-th best.
 //   - Determinism: results are ordered by (squared distance, original index); on equal
 //     distance the lowest index wins, so results equal a brute-force scan exactly (both
-//     use sqdist_row's per-row operation order).
+//     go through lanes_sqdist, the one distance kernel).
 //   - Filters: an optional build mask (rows left out of the tree entirely), an optional
 //     query mask of allowed rows, and an optional excluded index window [lo, hi).
 //   - No heap allocation during a query: the traversal stack is a fixed array and the
@@ -38,16 +38,48 @@
 
 namespace mmrl {
 
-// Squared L2 distance between two rows, accumulated in dimension order 0..dim-1.
-// Every distance in this library (tree leaves, brute force, bounds of the continuation)
-// uses exactly this per-row sequence of operations so results compare equal bit for bit.
-inline float sqdist_row(const float* a, const float* b, int dim) {
-  float acc = 0.0f;
-  for (int d = 0; d < dim; ++d) {
-    const float diff = a[d] - b[d];
+// kLanes floats processed together. GCC/Clang vector extensions: the compiler maps them
+// to AVX/SSE/NEON registers (or scalar code), with the same per-lane operations everywhere.
+constexpr int kLanes = 8;
+constexpr int kMaxDim = 128;  // rows are staged in fixed stack buffers: no heap per query
+typedef float Lanes __attribute__((vector_size(kLanes * sizeof(float))));
+typedef int32_t LaneMask __attribute__((vector_size(kLanes * sizeof(float))));
+
+inline Lanes load_lanes(const float* p) {
+  Lanes v;
+  std::memcpy(&v, p, sizeof(v));
+  return v;
+}
+
+// The one distance kernel of the library. x is a block of kLanes rows stored
+// dimension-major (x[d * kLanes + lane]); adds dims [d_begin, d_end) of each lane's
+// squared distance to q into acc, in dimension order. Tree leaves, brute force and the
+// continuation bound all call this, so every distance is computed by the same sequence of
+// operations (whatever the compiler's FMA contraction does, it does it everywhere) and the
+// results compare equal bit for bit.
+inline Lanes lanes_sqdist(const float* q, const float* x, int d_begin, int d_end, Lanes acc) {
+  for (int d = d_begin; d < d_end; ++d) {
+    const Lanes diff = q[d] - load_lanes(x + d * kLanes);
     acc += diff * diff;
   }
   return acc;
+}
+
+// Squared distances from q to up to kLanes rows of a row-major array (rows[i * dim ..]),
+// written to out[0..count). Used for brute force and single rows.
+inline void rows_sqdist(const float* q, const float* rows, int count, int dim, float* out) {
+  float block[kLanes * kMaxDim];
+  for (int d = 0; d < dim; ++d)
+    for (int l = 0; l < kLanes; ++l) block[d * kLanes + l] = l < count ? rows[static_cast<int64_t>(l) * dim + d] : 0.0f;
+  const Lanes acc = lanes_sqdist(q, block, 0, dim, Lanes{});
+  for (int l = 0; l < count; ++l) out[l] = acc[l];
+}
+
+// Squared L2 distance between two rows (dim <= kMaxDim), by the shared kernel.
+inline float sqdist_row(const float* a, const float* b, int dim) {
+  float out;
+  rows_sqdist(a, b, 1, dim, &out);
+  return out;
 }
 
 // What a query may return. Default: every row of the tree.
@@ -59,12 +91,8 @@ struct SearchFilter {
 
 class KDTree {
  public:
-  // kLanes floats processed together. GCC/Clang vector extensions: the compiler maps them to
-  // AVX/SSE/NEON registers (or scalar code), with the same per-lane operations everywhere.
-  typedef float Lanes __attribute__((vector_size(32)));
-  typedef int32_t LaneMask __attribute__((vector_size(32)));
-  static constexpr int kLanes = 8;       // rows per SoA block (one AVX2 register of floats)
-  static constexpr int kMaxDim = 128;    // the query is staged in a fixed stack buffer
+  static constexpr int kLanes = mmrl::kLanes;  // rows per SoA block
+  static constexpr int kMaxDim = mmrl::kMaxDim;
   static constexpr int kMaxDepth = 96;   // median splits keep depth near log2(n)
 
   // points: n x dim row-major float32, borrowed (see header comment). leaf_size >= 1.
@@ -236,11 +264,6 @@ class KDTree {
     return s;
   }
 
-  static Lanes load_lanes(const float* p) {
-    Lanes v;
-    std::memcpy(&v, p, sizeof(v));
-    return v;
-  }
   static bool all_greater(Lanes acc, float w) {
     const LaneMask m = acc > w;
     int64_t words[kLanes / 2];
@@ -317,7 +340,7 @@ class KDTree {
     const int32_t nb = (leaf.end - leaf.begin + kLanes - 1) / kLanes;
     for (int32_t b = leaf.first_block; b < leaf.first_block + nb; ++b) {
       const float* x = blocks_.data() + static_cast<size_t>(b) * dim_ * kLanes;
-      // One lane per row; each lane accumulates in dimension order like sqdist_row.
+      // One lane per row; each lane accumulates in dimension order like every distance here.
       Lanes acc = load_lanes(block_init_.data() + static_cast<size_t>(b) * kLanes);
       float w = out_d[k - 1];
       bool pruned = false;
@@ -325,10 +348,7 @@ class KDTree {
       // (partial sums only grow, so none of these rows can rank).
       for (int d0 = 0; d0 < dim_; d0 += 8) {
         const int d1 = std::min(dim_, d0 + 8);
-        for (int d = d0; d < d1; ++d) {
-          const Lanes diff = q[d] - load_lanes(x + d * kLanes);
-          acc += diff * diff;
-        }
+        acc = lanes_sqdist(q, x, d0, d1, acc);
         if (d1 < dim_ && all_greater(acc, w)) {
           pruned = true;
           break;

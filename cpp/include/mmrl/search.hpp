@@ -5,7 +5,7 @@
 //   Matcher                              the production search: a KDTree (kdtree.hpp) over
 //                                        the valid rows, single and batched queries.
 //
-// Every distance goes through sqdist_row's operation order, so the Matcher returns
+// Every distance goes through lanes_sqdist (kdtree.hpp), so the Matcher returns
 // exactly what brute force returns (same index, bit-identical cost).
 #pragma once
 
