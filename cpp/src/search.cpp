@@ -109,7 +109,7 @@ int64_t Matcher::match(const float* query, int64_t exclude_lo, int64_t exclude_h
 namespace {
 
 template <class One>
-void run_batch(const char* who, const float* queries, int64_t num_queries, int dim, int64_t* out_indices,
+void run_batch(const char* who, const float* queries, int64_t num_queries, int64_t num_rows, int dim, int64_t* out_indices,
                float* out_costs, ThreadPool& pool, const int64_t* exclude_lo, const int64_t* exclude_hi,
                const int64_t* bound_indices, One&& one) {
   if (num_queries < 0) throw std::invalid_argument(std::string(who) + ": num_queries must be >= 0");
@@ -117,6 +117,13 @@ void run_batch(const char* who, const float* queries, int64_t num_queries, int d
   if (!queries || !out_indices || !out_costs) throw std::invalid_argument(std::string(who) + ": null pointer");
   if ((exclude_lo == nullptr) != (exclude_hi == nullptr))
     throw std::invalid_argument(std::string(who) + ": give both exclude_lo and exclude_hi, or neither");
+  // Validate up front: nothing may throw inside the pool's workers.
+  if (bound_indices)
+    for (int64_t q = 0; q < num_queries; ++q)
+      if (bound_indices[q] < -1 || bound_indices[q] >= num_rows)
+        throw std::out_of_range(std::string(who) + ": bound index " + std::to_string(bound_indices[q]) +
+                                " of query " + std::to_string(q) + " is outside [-1, " + std::to_string(num_rows) +
+                                ")");
   pool.parallel_for(
       num_queries,
       [&](int64_t b, int64_t e, int) {
@@ -132,7 +139,7 @@ void run_batch(const char* who, const float* queries, int64_t num_queries, int d
 void Matcher::match_batch(const float* queries, int64_t num_queries, int64_t* out_indices, float* out_costs,
                           ThreadPool& pool, const int64_t* exclude_lo, const int64_t* exclude_hi,
                           const int64_t* bound_indices) const {
-  run_batch("Matcher::match_batch", queries, num_queries, dim(), out_indices, out_costs, pool, exclude_lo,
+  run_batch("Matcher::match_batch", queries, num_queries, num_rows(), dim(), out_indices, out_costs, pool, exclude_lo,
             exclude_hi, bound_indices, [this](const float* q, int64_t lo, int64_t hi, int64_t bound, float* cost) {
               return match(q, lo, hi, bound, cost);
             });
@@ -141,7 +148,7 @@ void Matcher::match_batch(const float* queries, int64_t num_queries, int64_t* ou
 void Matcher::brute_force_batch(const float* queries, int64_t num_queries, int64_t* out_indices, float* out_costs,
                                 ThreadPool& pool, const int64_t* exclude_lo, const int64_t* exclude_hi,
                                 const int64_t* bound_indices) const {
-  run_batch("Matcher::brute_force_batch", queries, num_queries, dim(), out_indices, out_costs, pool, exclude_lo,
+  run_batch("Matcher::brute_force_batch", queries, num_queries, num_rows(), dim(), out_indices, out_costs, pool, exclude_lo,
             exclude_hi, bound_indices, [this](const float* q, int64_t lo, int64_t hi, int64_t bound, float* cost) {
               return brute_force_match(rows_, num_rows(), dim(), valid_, q, lo, hi, bound, cost);
             });

@@ -142,13 +142,26 @@ class KDTree {
     return found;
   }
 
+  // knn for M queries (M x dim row-major), results M x k row-major. Serial; see
+  // mmrl::Matcher for the threaded motion-matching batch.
+  void knn_batch(const float* queries, int64_t num_queries, int k, int64_t* out_indices, float* out_sqdist,
+                 const SearchFilter& filter = {}) const {
+    if (num_queries < 0) throw std::invalid_argument("KDTree::knn_batch: num_queries must be >= 0");
+    if (num_queries > 0 && (queries == nullptr || out_indices == nullptr || out_sqdist == nullptr))
+      throw std::invalid_argument("KDTree::knn_batch: null pointer");
+    for (int64_t q = 0; q < num_queries; ++q)
+      knn(queries + q * dim_, k, out_indices + q * k, out_sqdist + q * k, filter);
+  }
+
   // Nearest row, starting from a known candidate: bound_index's distance (any row of the
   // borrowed array, -1 for none) is the starting best, and only a strictly closer allowed
   // row replaces it (ties keep the bound). Returns the index (-1 if none) and its cost.
   int64_t nearest_with_bound(const float* query, int64_t bound_index, float* out_cost,
                              const SearchFilter& filter = {}) const {
     if (query == nullptr) throw std::invalid_argument("KDTree::nearest_with_bound: null query");
-    if (bound_index >= n_) throw std::out_of_range("KDTree::nearest_with_bound: bound_index out of range");
+    if (bound_index < -1 || bound_index >= n_)
+      throw std::out_of_range("KDTree::nearest_with_bound: bound_index " + std::to_string(bound_index) +
+                              " is outside [-1, " + std::to_string(n_) + ")");
     int64_t idx = -1;
     float cost = std::numeric_limits<float>::infinity();
     bool bound_set = false;
