@@ -1,5 +1,6 @@
 #include "bindings.hpp"
 #include "mmrl/bvh.hpp"
+#include "mmrl/database.hpp"
 #include "mmrl/skeleton.hpp"
 
 namespace mmrl {
@@ -114,6 +115,9 @@ void bind_bvh(py::module_& m) {
             return roles_to_dict(mo.skeleton, skeleton_find_roles(mo.skeleton, overrides));
           },
           py::arg("overrides") = std::map<std::string, std::string>(), "Joint roles found by name: role -> joint name.")
+      .def(
+          "mirrored", [](const Motion& mo) { return motion_mirror(mo, skeleton_mirror_map(mo.skeleton)); },
+          "A copy mirrored across the world YZ plane (x -> -x) with left and right joints swapped.")
       .def("to_bvh", &bvh_write, "BVH text of this motion on its own skeleton, in the file's units.")
       .def("__repr__", [](const Motion& mo) {
         return "<mmrl.Motion '" + mo.source + "': " + std::to_string(mo.num_frames) + " frames, " +

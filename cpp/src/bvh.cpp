@@ -255,7 +255,8 @@ float bvh_infer_scale(const Motion& m) {
       hi = std::max(hi, e.y());
     }
   }
-  const float h = hi - lo;
+  // The floor is taken at y = 0 unless joints go below it.
+  const float h = hi - std::min(lo, 0.0f);
   if (!(h > 0)) return 1.0f;
   const float candidates[4] = {1.0f, 0.01f, 0.0254f, 0.001f};
   float best = 1.0f, best_err = INFINITY;

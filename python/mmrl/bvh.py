@@ -21,8 +21,9 @@ def load_bvh(path: "str | os.PathLike[str]", scale: Optional[float] = None) -> M
     Args:
         path: the file.
         scale: file units to meters. ``None`` infers it: the skeleton's height in the first
-            frame (vertical extent of joints and End Sites) is matched to 1.5 m on a log scale
-            among meters, centimeters, inches and millimeters.
+            frame (its highest joint or End Site above the floor y = 0, or above its lowest
+            point if that is below the floor) is matched to 1.5 m on a log scale among
+            meters, centimeters, inches and millimeters.
 
     Returns:
         A :class:`Motion` with ``joint_names``, ``parents``, ``fps``, ``num_frames``,

@@ -258,7 +258,7 @@ class Database:
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such database file")
         try:
-            with np.load(path, allow_pickle=False) as z:
+            with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
                 if "format" not in z.files or str(z["format"]) != FILE_FORMAT:
                     raise DatabaseFileError(f"{path}: not an mmrl database file")
                 version = int(z["version"])

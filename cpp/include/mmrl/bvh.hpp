@@ -69,8 +69,9 @@ Motion bvh_parse(const std::string& text, const std::string& source, float scale
 // Reads and parses a file. Throws BVHError (line 0 when the file cannot be read).
 Motion bvh_load(const std::string& path, float scale = 0.0f);
 
-// The unit rule: the skeleton's height h in file units is the vertical extent of all
-// joints and End Sites in the first frame. The scale is the one of {1 (m), 0.01 (cm),
+// The unit rule: the skeleton's height h in file units is the highest joint or End Site in
+// the first frame, measured from the floor y = 0 (or from the lowest point if that is below
+// the floor). The scale is the one of {1 (m), 0.01 (cm),
 // 0.0254 (inch), 0.001 (mm)} that brings h closest to 1.5 m on a log scale.
 float bvh_infer_scale(const Motion& motion_in_file_units);
 
