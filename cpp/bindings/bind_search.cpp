@@ -3,6 +3,7 @@
 #include <memory>
 
 #include "bindings.hpp"
+#include "py_matcher.hpp"
 #include "mmrl/kdtree.hpp"
 #include "mmrl/search.hpp"
 #include "mmrl/threadpool.hpp"
@@ -15,13 +16,6 @@ namespace {
 struct PyKDTree {
   carray<float> points;
   KDTree tree;
-};
-
-struct PyMatcher {
-  carray<float> points;
-  py::array valid;  // uint8 or bool, borrowed by the Matcher's brute-force path
-  Matcher matcher;
-  std::unique_ptr<ThreadPool> pool;
 };
 
 carray<float> check_points(const py::handle& obj) {
