@@ -6,6 +6,8 @@
 #include <pybind11/stl.h>
 
 #include <cmath>
+#include <sstream>
+#include <vector>
 #include <string>
 
 namespace py = pybind11;
@@ -53,4 +55,14 @@ inline void check_finite(const float* data, py::ssize_t n, const char* name) {
       throw py::value_error(std::string(name) + ": contains NaN or inf (at flat index " + std::to_string(i) + ")");
 }
 
+}  // namespace mmrl
+
+namespace mmrl {
+struct Skeleton;
+struct JointRoles;
+// A read-only numpy view of C++-owned memory that keeps `owner` alive.
+template <class T>
+py::array make_view(const T* data, std::vector<py::ssize_t> shape, py::handle owner);
+py::array skeleton_offsets(const Skeleton& sk);
+py::dict roles_to_dict(const Skeleton& sk, const JointRoles& roles);
 }  // namespace mmrl
