@@ -20,8 +20,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _shared_dataset_dir():
-    candidates = [os.environ.get("MMRL_BANDAI_DIR"), REPO.parent / "shared" / "data" / "bandai-namco-2",
-                  "/work/shared/data/bandai-namco-2"]
+    # $MMRL_BANDAI_DIR (e.g. for a git worktree), else ../shared beside the checkout as in conftest.py
+    candidates = [os.environ.get("MMRL_BANDAI_DIR"), REPO.parent / "shared" / "data" / "bandai-namco-2"]
     for c in candidates:
         if c and (Path(c) / "normal").is_dir():
             return Path(c)
@@ -210,3 +210,16 @@ def test_manifest_is_valid_json_with_hex_hashes():
     assert manifest == data.dataset_manifest()
     for f in manifest["files"]:
         assert len(f["sha256"]) == 64 and int(f["sha256"], 16) >= 0 and f["size"] > 0
+
+
+def test_mmrl_command_line_runs_data_fetch(server, tmp_path, capsys):
+    from mmrl import cli
+
+    httpd, url = server
+    code = cli.main(["data", "fetch", "bandai-namco-2", "--styles", "normal", "--contents", "walk-turn-right",
+                     "--dest", str(tmp_path), "--base-url", url, "--url-template", "{base_url}/{style}/{file}",
+                     "--no-progress"])
+    assert code == 0
+    n = sum(1 for f in data.dataset_manifest()["files"]
+            if f["style"] == "normal" and f["content"] == "walk-turn-right")
+    assert len(list((tmp_path / "normal").glob("*.bvh"))) == n

@@ -341,7 +341,7 @@ def _animate(speed: np.ndarray, turn_rate: np.ndarray, fps: float, pad: int, yaw
     motion = np.clip(gait_speed / 0.8, 0.0, 1.0)  # 0 standing .. 1 locomoting (scales secondary motion)
     w_run = _smoothstep((speed - 2.0) / 0.5)
     stride_freq = style.cadence_scale * ((1.0 - w_run) * (0.75 + 0.25 * gait_speed)
-                                         + w_run * (1.40 + 0.1 * (speed - 2.5)))  # strides/s
+                                         + w_run * (1.40 + 0.15 * (speed - 2.5)))  # strides/s
     duty = (1.0 - w_run) * (0.62 - 0.04 * gait_speed) + w_run * (0.34 - 0.04 * (speed - 2.5))
     phase = style.phase0 + _cumtrapz(stride_freq, dt)
     stance_l = np.mod(phase, 1.0) < duty
