@@ -178,6 +178,12 @@ class PlaneVectorEnv(VectorEnv):
         """World-space state of environment i: root x, z, yaw, database frame, target."""
         return self._core.state(i)
 
+    def current_frames(self) -> np.ndarray:
+        """Each environment's current database frame (int64, N)."""
+        out = np.empty(self.num_envs, np.int64)
+        self._core.current_frames(out)
+        return out
+
     def set_target(self, i: int, x: float, z: float) -> None:
         """Move environment i's target (world meters) and return nothing; the next observation shows it."""
         self._core.set_target(i, float(x), float(z))
