@@ -6,6 +6,8 @@
 #include <pybind11/stl.h>
 
 #include <cmath>
+#include <sstream>
+#include <vector>
 #include <string>
 
 namespace py = pybind11;
@@ -15,6 +17,7 @@ namespace mmrl {
 void bind_bvh(py::module_& m);
 void bind_database(py::module_& m);
 void bind_search(py::module_& m);
+void bind_env(py::module_& m);
 
 template <class T>
 using carray = py::array_t<T, py::array::c_style>;
@@ -53,4 +56,14 @@ inline void check_finite(const float* data, py::ssize_t n, const char* name) {
       throw py::value_error(std::string(name) + ": contains NaN or inf (at flat index " + std::to_string(i) + ")");
 }
 
+}  // namespace mmrl
+
+namespace mmrl {
+struct Skeleton;
+struct JointRoles;
+// A read-only numpy view of C++-owned memory that keeps `owner` alive.
+template <class T>
+py::array make_view(const T* data, std::vector<py::ssize_t> shape, py::handle owner);
+py::array skeleton_offsets(const Skeleton& sk);
+py::dict roles_to_dict(const Skeleton& sk, const JointRoles& roles);
 }  // namespace mmrl

@@ -7,4 +7,5 @@ PYBIND11_MODULE(_core, m) {
   mmrl::bind_bvh(m);
   mmrl::bind_database(m);
   mmrl::bind_search(m);
+  mmrl::bind_env(m);
 }

@@ -5,10 +5,18 @@ Train character controllers that write motion-matching queries, in seconds on a 
 from importlib.metadata import PackageNotFoundError, version as _version
 
 from . import _core  # noqa: F401  (the C++ core)
+from .bvh import BVHError, JointRoleError, Motion, load_bvh, parse_bvh
+from .database import Database, DatabaseFileError
+from .search import KDTree
+from . import synth, data  # noqa: F401
+from .envs import register_envs as _register_envs
+
+_register_envs()
 
 try:
     __version__ = _version("mmrl")
 except PackageNotFoundError:  # running from a source tree without installing
     __version__ = "0.0.0+unknown"
 
-__all__ = ["__version__"]
+__all__ = ["__version__", "BVHError", "JointRoleError", "Motion", "load_bvh", "parse_bvh", "Database",
+           "DatabaseFileError", "KDTree"]

@@ -1,0 +1,129 @@
+#include "bindings.hpp"
+#include "mmrl/vecenv.hpp"
+#include "py_matcher.hpp"
+
+namespace mmrl {
+
+namespace {
+
+// The env borrows the database and the matcher; keep_alive holds their Python owners.
+struct PyPlaneVecEnv {
+  PlaneVecEnv env;
+};
+
+template <class T>
+T* out_buffer(const py::handle& obj, const char* name, std::initializer_list<py::ssize_t> shape) {
+  auto a = check_array<T>(obj, name, shape);
+  if (!a.writeable()) throw py::value_error(std::string(name) + ": array is read-only");
+  return a.mutable_data();
+}
+
+}  // namespace
+
+void bind_env(py::module_& m) {
+  py::class_<TargetTaskConfig>(m, "TargetTaskConfig", "Numbers of the target-reaching tasks (see vecenv.hpp).")
+      .def(py::init<>())
+      .def_readwrite("frames_per_step", &TargetTaskConfig::frames_per_step)
+      .def_readwrite("target_half_extent", &TargetTaskConfig::target_half_extent)
+      .def_readwrite("min_target_distance", &TargetTaskConfig::min_target_distance)
+      .def_readwrite("success_radius", &TargetTaskConfig::success_radius)
+      .def_readwrite("success_bonus", &TargetTaskConfig::success_bonus)
+      .def_readwrite("max_steps", &TargetTaskConfig::max_steps)
+      .def_readwrite("action_limit_std", &TargetTaskConfig::action_limit_std)
+      .def_readwrite("random_heading", &TargetTaskConfig::random_heading);
+
+  py::class_<PyPlaneVecEnv>(m, "PlaneVecEnv", "Batched plane-task environments (C++ core of mmrl.envs).")
+      .def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const TargetTaskConfig& config,
+                       int num_threads) {
+             if (num_threads < 0) throw py::value_error("num_threads: must be >= 0 (0 = all cores)");
+             return new PyPlaneVecEnv{PlaneVecEnv(db, matcher.matcher, num_envs, config, num_threads)};
+           }),
+           py::arg("db"), py::arg("matcher"), py::arg("num_envs"), py::arg("config"), py::arg("num_threads") = 0,
+           py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
+      .def_property_readonly("num_envs", [](const PyPlaneVecEnv& s) { return s.env.num_envs(); })
+      .def_property_readonly_static("obs_dim", [](py::object) { return PlaneVecEnv::kObsDim; })
+      .def_property_readonly_static("action_dim", [](py::object) { return PlaneVecEnv::kActionDim; })
+      .def_property_readonly("action_low",
+                             [](const PyPlaneVecEnv& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_low()); })
+      .def_property_readonly("action_high",
+                             [](const PyPlaneVecEnv& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_high()); })
+      .def(
+          "reset",
+          [](PyPlaneVecEnv& s, uint64_t seed, const py::handle& obs) {
+            float* o = out_buffer<float>(obs, "obs", {s.env.num_envs(), PlaneVecEnv::kObsDim});
+            py::gil_scoped_release release;
+            s.env.reset(seed, o);
+          },
+          py::arg("seed"), py::arg("obs"))
+      .def(
+          "reset_env",
+          [](PyPlaneVecEnv& s, int i, const py::handle& obs) {
+            if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
+            float* o = out_buffer<float>(obs, "obs", {s.env.num_envs(), PlaneVecEnv::kObsDim});
+            s.env.reset_env(i, o + static_cast<size_t>(i) * PlaneVecEnv::kObsDim);
+          },
+          py::arg("index"), py::arg("obs"))
+      .def(
+          "step",
+          [](PyPlaneVecEnv& s, const py::handle& actions, const py::handle& obs, const py::handle& rewards,
+             const py::handle& terminated, const py::handle& truncated, const py::handle& success,
+             const py::handle& final_obs, const py::handle& episode_return, const py::handle& episode_length) {
+            const py::ssize_t n = s.env.num_envs();
+            auto a = check_array<float>(actions, "actions", {n, PlaneVecEnv::kActionDim});
+            check_finite(a.data(), a.size(), "actions");
+            float* o = out_buffer<float>(obs, "obs", {n, PlaneVecEnv::kObsDim});
+            float* r = out_buffer<float>(rewards, "rewards", {n});
+            uint8_t* te = out_buffer<uint8_t>(terminated, "terminated", {n});
+            uint8_t* tr = out_buffer<uint8_t>(truncated, "truncated", {n});
+            uint8_t* su = out_buffer<uint8_t>(success, "success", {n});
+            float* fo = out_buffer<float>(final_obs, "final_obs", {n, PlaneVecEnv::kObsDim});
+            float* er = out_buffer<float>(episode_return, "episode_return", {n});
+            int32_t* el = out_buffer<int32_t>(episode_length, "episode_length", {n});
+            py::gil_scoped_release release;
+            s.env.step(a.data(), o, r, te, tr, su, fo, er, el);
+          },
+          py::arg("actions"), py::arg("obs"), py::arg("rewards"), py::arg("terminated"), py::arg("truncated"),
+          py::arg("success"), py::arg("final_obs"), py::arg("episode_return"), py::arg("episode_length"))
+      .def(
+          "state",
+          [](const PyPlaneVecEnv& s, int i) {
+            if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
+            const TargetEnvState& st = s.env.state(i);
+            py::dict d;
+            d["x"] = st.root.x;
+            d["z"] = st.root.z;
+            d["yaw"] = st.root.yaw;
+            d["frame"] = st.frame;
+            d["target"] = py::make_tuple(st.target_x, st.target_z);
+            d["steps"] = st.steps;
+            d["last_match"] = st.last_match;
+            d["last_transition"] = st.last_transition;
+            return d;
+          },
+          py::arg("index"), "The world-space state of environment i (root, frame, target).")
+      .def(
+          "observe",
+          [](const PyPlaneVecEnv& s, int i, const py::handle& out) {
+            if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
+            float* o = out_buffer<float>(out, "out", {PlaneVecEnv::kObsDim});
+            s.env.observe(i, o);
+          },
+          py::arg("index"), py::arg("out"), "Writes environment i's current observation into out (float32, 17).")
+      .def(
+          "current_frames",
+          [](const PyPlaneVecEnv& s, const py::handle& out) {
+            int64_t* o = out_buffer<int64_t>(out, "out", {s.env.num_envs()});
+            for (int i = 0; i < s.env.num_envs(); ++i) o[i] = s.env.state(i).frame;
+          },
+          py::arg("out"), "Writes each environment's current database frame into out (int64, N).")
+      .def(
+          "set_target",
+          [](PyPlaneVecEnv& s, int i, float x, float z) {
+            if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
+            if (!std::isfinite(x) || !std::isfinite(z)) throw py::value_error("target must be finite");
+            s.env.set_target(i, x, z);
+          },
+          py::arg("index"), py::arg("x"), py::arg("z"));
+}
+
+}  // namespace mmrl

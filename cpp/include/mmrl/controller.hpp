@@ -1,0 +1,65 @@
+// The motion-matching decision and root-motion playback shared by every runtime path.
+//
+// A character is a world-space root (x, z in meters, yaw in radians) and a current
+// database frame: the frame whose pose is shown now. One controller step:
+//   1. query = [normalized pose part of the current frame (15), trajectory part (12)];
+//   2. match: the nearest valid frame j. The current frame is the starting best when it is
+//      itself a valid match, so playback continues unless another frame is strictly
+//      better (the continuation rule);
+//   3. playback: frames j+1 .. j+n are shown; the root advances by the database root
+//      deltas of frames j .. j+n-1 (each expressed in its own character frame), and the
+//      current frame becomes j+n.
+// A valid j has j + 30 inside its clip, so playback of n <= 30 frames never leaves the clip.
+// The fast path (training) is exactly this; the full path adds poses on top of it.
+#pragma once
+
+#include <cstdint>
+
+#include "mmrl/database.hpp"
+#include "mmrl/search.hpp"
+
+namespace mmrl {
+
+struct RootState {
+  float x = 0.0f, z = 0.0f, yaw = 0.0f;
+};
+
+// Applies one frame of root motion: delta = (dx, dz, dyaw) in the character frame.
+inline void root_advance(RootState& r, const float* delta) {
+  const Vec2 w = local_to_world_xz(delta[0], delta[1], r.yaw);
+  r.x += w.x();
+  r.z += w.y();
+  r.yaw = wrap_angle(r.yaw + delta[2]);
+}
+
+// Writes the 27-d normalized query for the current frame and a normalized trajectory part.
+inline void controller_query(const Database& db, int64_t frame, const float* trajectory, float* query) {
+  const float* pose = &db.normalized[static_cast<size_t>(frame) * kFeatureDim];
+  for (int k = 0; k < kPoseDim; ++k) query[k] = pose[k];
+  for (int k = 0; k < kTrajectoryDim; ++k) query[kPoseDim + k] = trajectory[k];
+}
+
+// The match with the continuation rule (see above). Returns the frame to play from.
+inline int64_t controller_match(const Database& db, const Matcher& matcher, int64_t frame, const float* query,
+                                float* cost = nullptr) {
+  const int64_t bound = (frame >= 0 && db.valid[frame]) ? frame : -1;
+  return matcher.match(query, 0, 0, bound, cost);
+}
+
+// Normalized trajectory features <-> raw (meters, unit directions) in the character frame.
+inline void trajectory_denormalize(const Database& db, const float* normalized, float* raw) {
+  const auto scale = db.normalization.column_scale();
+  for (int k = 0; k < kTrajectoryDim; ++k)
+    raw[k] = normalized[k] * scale[kPoseDim + k] + db.normalization.mean[kPoseDim + k];
+}
+inline void trajectory_normalize(const Database& db, const float* raw, float* normalized) {
+  const auto scale = db.normalization.column_scale();
+  for (int k = 0; k < kTrajectoryDim; ++k)
+    normalized[k] = (raw[k] - db.normalization.mean[kPoseDim + k]) / scale[kPoseDim + k];
+}
+
+// Per-dimension box for trajectory actions in normalized units: mean +- limit_std * std
+// over the valid frames (low, high: 12 each).
+void trajectory_action_box(const Database& db, float limit_std, float* low, float* high);
+
+}  // namespace mmrl

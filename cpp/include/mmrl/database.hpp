@@ -1,0 +1,84 @@
+// The motion database: clips concatenated into flat per-frame arrays (Holden style).
+//
+// Offline code: database_build parses nothing itself; it takes parsed Motions, finds the
+// joint roles, optionally adds mirrored copies, and computes character frames, features,
+// root deltas, the valid-match mask and the normalisation.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+#include "mmrl/bvh.hpp"
+#include "mmrl/features.hpp"
+#include "mmrl/skeleton.hpp"
+
+namespace mmrl {
+
+struct DatabaseOptions {
+  // Add a left/right mirrored copy of every clip (after all originals, in the same order).
+  bool mirror = false;
+  // Role name -> joint name, overriding detection (see skeleton.hpp).
+  std::map<std::string, std::string> roles;
+  // Block weights in feature_blocks() order.
+  std::array<float, kNumBlocks> weights = {0.75f, 1.0f, 1.0f, 1.0f, 1.5f};
+};
+
+struct Database {
+  // Skeleton shared by all clips.
+  Skeleton skeleton;
+  JointRoles roles;
+  float fps = 30.0f;
+  float source_scale = 1.0f;  // file units -> meters of the source BVH (for export)
+  int num_frames = 0;
+  int num_joints = 0;
+
+  // Clips: [start, stop) frame ranges in database order, their source names and whether
+  // they are mirrored copies.
+  std::vector<int32_t> clip_ranges;  // C x 2
+  std::vector<std::string> clip_names;
+  std::vector<uint8_t> clip_mirrored;
+
+  // Per-frame local pose (meters; quaternions w x y z), N x J x 3 and N x J x 4.
+  std::vector<float> bone_translations;
+  std::vector<float> bone_rotations;
+
+  // Character frame in world space: root positions (N x 3, y = 0) and yaws (N, radians).
+  std::vector<float> root_positions;
+  std::vector<float> root_yaws;
+  // Root motion from frame i to i + 1 in frame i's character frame: (dx, dz, dyaw) (N x 3).
+  // The last frame of a clip repeats the previous delta.
+  std::vector<float> root_deltas;
+
+  std::vector<float> features;    // N x 27, raw units
+  std::vector<float> normalized;  // N x 27, (f - mean) / column_scale
+  FeatureNormalization normalization;
+  // 1 where frame i + 30 stays inside frame i's clip: the frames a search may return.
+  std::vector<uint8_t> valid;
+  // Per frame, the clip index.
+  std::vector<int32_t> frame_clip;
+
+  int num_clips() const { return static_cast<int>(clip_names.size()); }
+
+  // Recomputes `normalized` for new block weights (the mean and block scales stay).
+  void set_weights(const std::array<float, kNumBlocks>& weights);
+  // Recomputes normalization (mean, block scales) from the features and current weights.
+  void refit_normalization();
+  // Fills the derived per-frame arrays (valid, frame_clip) from clip_ranges. Called by
+  // build and after loading.
+  void index_clips();
+  // Throws std::invalid_argument if array sizes disagree or values are not finite.
+  void validate() const;
+};
+
+// Mirrors a motion across the world YZ plane (x -> -x), swapping left and right joints.
+// Local translations are recomputed so that FK of the result gives the exact mirrored
+// positions; mirroring twice gives the original.
+Motion motion_mirror(const Motion& motion, const std::vector<int>& mirror_map);
+
+Database database_build(const std::vector<const Motion*>& clips, const DatabaseOptions& options = {});
+Database database_build(const std::vector<Motion>& clips, const DatabaseOptions& options = {});
+
+}  // namespace mmrl

@@ -1,0 +1,70 @@
+// The 27-d motion-matching feature, its blocks and normalisation.
+//
+// All features of frame i are in frame i's character frame (see math.hpp), meters and m/s:
+//   [0:3]  left foot position        [3:6]  right foot position
+//   [6:9]  left foot velocity        [9:12] right foot velocity
+//   [12:15] hips velocity
+//   [15:17] root position (x, z) at +10 frames, [17:19] facing direction (x, z) at +10
+//   [19:21], [21:23] the same at +20 frames;    [23:25], [25:27] at +30 frames.
+// Directions are unit vectors. The first 15 columns are the pose part c, the last 12 the
+// trajectory part t (the policy's action).
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include "mmrl/math.hpp"
+
+namespace mmrl {
+
+constexpr int kFeatureDim = 27;
+constexpr int kPoseDim = 15;
+constexpr int kTrajectoryDim = 12;
+constexpr int kTrajectoryOffsets[3] = {10, 20, 30};
+constexpr int kNumBlocks = 5;
+
+// A block shares one normalisation scale and one weight. Columns need not be contiguous
+// (trajectory positions and directions interleave by horizon).
+struct FeatureBlock {
+  const char* name;
+  std::array<int, 6> columns;
+  int size;
+  float default_weight;  // Holden's defaults
+};
+
+const std::array<FeatureBlock, kNumBlocks>& feature_blocks();
+
+// Character frame smoothing: the raw forward (left upper leg - right upper leg) x up is
+// filtered with a Gaussian of this standard deviation (seconds) within each clip, which
+// removes the pelvis sway of the gait (about 1 Hz) while keeping turns.
+constexpr float kForwardSmoothingSigmaSeconds = 0.3f;
+
+// Computes the character frame of every frame of one clip. hips, left/right upper leg are
+// global positions (F x 3, meters). Outputs root positions (F x 3, y = 0) and yaws (F).
+void clip_character_frames(int num_frames, float fps, const float* hips, const float* left_upper_leg,
+                           const float* right_upper_leg, float* root_positions, float* root_yaws);
+
+// Features of every frame of one clip (F x 27) from global joint positions of the feet and
+// hips (F x 3 each) and the clip's character frames. Velocities are central differences
+// (one-sided at the clip ends); trajectory samples past the clip end clamp to its last
+// frame (such frames are not valid matches).
+void clip_features(int num_frames, float fps, const float* left_foot, const float* right_foot, const float* hips,
+                   const float* root_positions, const float* root_yaws, float* features);
+
+// Normalisation: mean per column; one scale per block (the mean of its columns' standard
+// deviations); normalized = (f - mean) / scale * weight. Computed over all frames.
+struct FeatureNormalization {
+  std::array<float, kFeatureDim> mean{};
+  std::array<float, kNumBlocks> block_scale{};
+  std::array<float, kNumBlocks> weights{};
+  // Per-column divisor: block_scale / weight (normalized = (f - mean) / column_scale).
+  std::array<float, kFeatureDim> column_scale() const;
+};
+
+FeatureNormalization features_fit_normalization(const float* features, int num_frames,
+                                                const std::array<float, kNumBlocks>& weights);
+
+void features_normalize(const FeatureNormalization& norm, const float* features, int num_rows, float* out);
+
+}  // namespace mmrl

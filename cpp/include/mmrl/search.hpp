@@ -1,0 +1,70 @@
+// Motion-matching search: exact nearest neighbour over the database's normalized,
+// weighted feature rows (plain squared L2 on those rows).
+//
+//   brute_force_knn / brute_force_match  the reference: a row-major scan in index order.
+//   Matcher                              the production search: a KDTree (kdtree.hpp) over
+//                                        the valid rows, single and batched queries.
+//
+// Every distance goes through lanes_sqdist (kdtree.hpp), so the Matcher returns
+// exactly what brute force returns (same index, bit-identical cost).
+#pragma once
+
+#include <cstdint>
+
+#include "mmrl/kdtree.hpp"
+#include "mmrl/threadpool.hpp"
+
+namespace mmrl {
+
+// k nearest rows of `query` among `points` (n x dim, row-major), ranked by (squared
+// distance, index). Same contract as KDTree::knn (slots without a result: -1 / +inf).
+int brute_force_knn(const float* points, int64_t num_points, int dim, const float* query, int k,
+                    int64_t* out_indices, float* out_sqdist, const SearchFilter& filter = {});
+
+// Motion-matching semantics: the nearest row with valid[i] != 0 outside
+// [exclude_lo, exclude_hi), unless bound_index >= 0 is at least as close (the current
+// frame's continuation: its cost is the starting best and wins ties). Returns the row
+// (-1 when nothing is allowed and there is no bound) and writes its squared cost.
+int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
+                          const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
+                          float* out_cost);
+
+struct MatcherOptions {
+  int leaf_size = 16;                // rows per KD-tree leaf (a sweep in bench/ picks this)
+  int64_t brute_force_below = 512;   // fewer valid rows than this: one leaf, i.e. a blocked scan
+};
+
+class Matcher {
+ public:
+  // rows: n x dim normalized features, row-major, borrowed: must outlive the Matcher.
+  // valid: n flags (1 = may be returned), copied into the tree structure; null = all valid.
+  Matcher(const float* rows, int64_t num_rows, int dim, const uint8_t* valid, const MatcherOptions& options = {});
+
+  int64_t num_rows() const { return tree_.size(); }
+  int64_t num_valid() const { return tree_.indexed_size(); }
+  int dim() const { return tree_.dim(); }
+  const KDTree& tree() const { return tree_; }
+
+  // One query (dim floats). See brute_force_match for the semantics; exclude window and
+  // bound_index are in original row numbers. out_cost may be null.
+  int64_t match(const float* query, int64_t exclude_lo = 0, int64_t exclude_hi = 0, int64_t bound_index = -1,
+                float* out_cost = nullptr) const;
+
+  // M queries (M x dim row-major) across the pool. Per-query exclude windows and bound
+  // indices are optional arrays of M entries (null = none). Allocates nothing.
+  void match_batch(const float* queries, int64_t num_queries, int64_t* out_indices, float* out_costs,
+                   ThreadPool& pool, const int64_t* exclude_lo = nullptr, const int64_t* exclude_hi = nullptr,
+                   const int64_t* bound_indices = nullptr) const;
+
+  // The same contract as match_batch, answered by brute_force_match (tests, benchmarks).
+  void brute_force_batch(const float* queries, int64_t num_queries, int64_t* out_indices, float* out_costs,
+                         ThreadPool& pool, const int64_t* exclude_lo = nullptr, const int64_t* exclude_hi = nullptr,
+                         const int64_t* bound_indices = nullptr) const;
+
+ private:
+  const float* rows_;
+  const uint8_t* valid_;
+  KDTree tree_;
+};
+
+}  // namespace mmrl

@@ -1,0 +1,195 @@
+#include "mmrl/database.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace mmrl {
+
+Motion motion_mirror(const Motion& m, const std::vector<int>& mirror_map) {
+  const int J = m.skeleton.num_joints();
+  Motion out = m;
+  out.source = m.source;
+  std::vector<float> gp(static_cast<size_t>(J) * 3), gr(static_cast<size_t>(J) * 4);
+  std::vector<Vec3> mp(J);
+  std::vector<Quat> mr(J);
+  for (int f = 0; f < m.num_frames; ++f) {
+    const size_t o = static_cast<size_t>(f) * J;
+    pose_forward_kinematics(m.skeleton.parents, &m.translations[o * 3], &m.rotations[o * 4], gp.data(), gr.data());
+    for (int j = 0; j < J; ++j) {
+      const int s = mirror_map[j];
+      mp[j] = Vec3(-gp[s * 3], gp[s * 3 + 1], gp[s * 3 + 2]);
+      mr[j] = quat_mirror_x(quat_load(&gr[s * 4]));
+    }
+    for (int j = 0; j < J; ++j) {
+      const int p = m.skeleton.parents[j];
+      Vec3 t;
+      Quat r;
+      if (p < 0) {
+        t = mp[j];
+        r = mr[j];
+      } else {
+        const Quat pinv = mr[p].conjugate();
+        t = pinv * (mp[j] - mp[p]);
+        r = (pinv * mr[j]).normalized();
+      }
+      float* tr = &out.translations[(o + j) * 3];
+      tr[0] = t.x();
+      tr[1] = t.y();
+      tr[2] = t.z();
+      quat_store(r, &out.rotations[(o + j) * 4]);
+    }
+  }
+  return out;
+}
+
+void Database::index_clips() {
+  valid.assign(num_frames, 0);
+  frame_clip.assign(num_frames, -1);
+  const int C = static_cast<int>(clip_ranges.size() / 2);
+  for (int c = 0; c < C; ++c) {
+    const int b = clip_ranges[c * 2], e = clip_ranges[c * 2 + 1];
+    for (int i = b; i < e; ++i) {
+      frame_clip[i] = c;
+      valid[i] = (i + kTrajectoryOffsets[2] < e) ? 1 : 0;
+    }
+  }
+}
+
+void Database::set_weights(const std::array<float, kNumBlocks>& w) {
+  for (float x : w)
+    if (!(x > 0) || !std::isfinite(x)) throw std::invalid_argument("feature block weights must be positive and finite");
+  normalization.weights = w;
+  normalized.resize(features.size());
+  features_normalize(normalization, features.data(), num_frames, normalized.data());
+}
+
+void Database::refit_normalization() {
+  normalization = features_fit_normalization(features.data(), num_frames, normalization.weights);
+  set_weights(normalization.weights);
+}
+
+void Database::validate() const {
+  const size_t N = num_frames, J = num_joints;
+  auto need = [&](size_t got, size_t want, const char* what) {
+    if (got != want)
+      throw std::invalid_argument(std::string("database array '") + what + "' has " + std::to_string(got) +
+                                  " values, expected " + std::to_string(want));
+  };
+  if (skeleton.num_joints() != num_joints) throw std::invalid_argument("database skeleton size mismatch");
+  need(bone_translations.size(), N * J * 3, "bone_translations");
+  need(bone_rotations.size(), N * J * 4, "bone_rotations");
+  need(root_positions.size(), N * 3, "root_positions");
+  need(root_yaws.size(), N, "root_yaws");
+  need(root_deltas.size(), N * 3, "root_deltas");
+  need(features.size(), N * kFeatureDim, "features");
+  need(clip_names.size() * 2, clip_ranges.size(), "clip_ranges");
+  need(clip_mirrored.size(), clip_names.size(), "clip_mirrored");
+  int prev = 0;
+  for (size_t c = 0; c < clip_names.size(); ++c) {
+    const int b = clip_ranges[c * 2], e = clip_ranges[c * 2 + 1];
+    if (b != prev || e <= b || e > num_frames) throw std::invalid_argument("database clip_ranges are not contiguous");
+    prev = e;
+  }
+  if (prev != num_frames) throw std::invalid_argument("database clip_ranges do not cover all frames");
+  for (float v : features)
+    if (!std::isfinite(v)) throw std::invalid_argument("database features contain NaN or inf");
+  for (int p : skeleton.parents)
+    if (p >= num_joints) throw std::invalid_argument("database skeleton parent index out of range");
+}
+
+Database database_build(const std::vector<Motion>& clips, const DatabaseOptions& opt) {
+  std::vector<const Motion*> ptrs;
+  for (const Motion& m : clips) ptrs.push_back(&m);
+  return database_build(ptrs, opt);
+}
+
+Database database_build(const std::vector<const Motion*>& clips_in, const DatabaseOptions& opt) {
+  if (clips_in.empty()) throw std::invalid_argument("no clips to build a database from");
+  for (const Motion* m : clips_in)
+    if (!m) throw std::invalid_argument("database_build: null clip");
+  const Motion& first = *clips_in.front();
+  for (const Motion* mp : clips_in) {
+    const Motion& m = *mp;
+    if (!m.skeleton.same_hierarchy(first.skeleton))
+      throw std::invalid_argument("'" + m.source + "' has a different skeleton (joint names or hierarchy) than '" +
+                                  first.source + "'; a database needs one skeleton");
+    if (std::fabs(m.frame_time - first.frame_time) > 1e-4f * first.frame_time + 1e-7f)
+      throw std::invalid_argument("'" + m.source + "' has frame time " + std::to_string(m.frame_time) + " but '" +
+                                  first.source + "' has " + std::to_string(first.frame_time) +
+                                  "; resample the clips to one frame rate");
+  }
+  Database db;
+  db.skeleton = first.skeleton;
+  db.roles = skeleton_find_roles(db.skeleton, opt.roles);
+  db.fps = first.fps();
+  db.source_scale = first.scale;
+  db.num_joints = db.skeleton.num_joints();
+  db.normalization.weights = opt.weights;
+
+  std::vector<const Motion*> clips;
+  std::vector<Motion> mirrored;
+  for (const Motion* m : clips_in) clips.push_back(m);
+  if (opt.mirror) {
+    const auto map = skeleton_mirror_map(db.skeleton);
+    mirrored.reserve(clips_in.size());
+    for (const Motion* m : clips_in) mirrored.push_back(motion_mirror(*m, map));
+    for (const Motion& m : mirrored) clips.push_back(&m);
+  }
+
+  size_t N = 0;
+  for (const Motion* m : clips) N += m->num_frames;
+  if (N > static_cast<size_t>(INT32_MAX)) throw std::invalid_argument("too many frames");
+  const int J = db.num_joints;
+  db.num_frames = static_cast<int>(N);
+  db.bone_translations.resize(N * J * 3);
+  db.bone_rotations.resize(N * J * 4);
+  db.root_positions.resize(N * 3);
+  db.root_yaws.resize(N);
+  db.root_deltas.resize(N * 3);
+  db.features.resize(N * kFeatureDim);
+
+  const JointRoles& r = db.roles;
+  size_t start = 0;
+  std::vector<float> gp;
+  std::vector<float> hips, lul, rul, lf, rf;
+  for (size_t c = 0; c < clips.size(); ++c) {
+    const Motion& m = *clips[c];
+    const int F = m.num_frames;
+    std::copy(m.translations.begin(), m.translations.end(), db.bone_translations.begin() + start * J * 3);
+    std::copy(m.rotations.begin(), m.rotations.end(), db.bone_rotations.begin() + start * J * 4);
+    gp.resize(static_cast<size_t>(F) * J * 3);
+    motion_forward_kinematics(m, gp.data(), nullptr);
+    auto track = [&](int joint, std::vector<float>& out) {
+      out.resize(static_cast<size_t>(F) * 3);
+      for (int f = 0; f < F; ++f)
+        for (int k = 0; k < 3; ++k) out[f * 3 + k] = gp[(static_cast<size_t>(f) * J + joint) * 3 + k];
+    };
+    track(r.hips, hips);
+    track(r.upper_leg[0], lul);
+    track(r.upper_leg[1], rul);
+    track(r.foot[0], lf);
+    track(r.foot[1], rf);
+    float* rp = &db.root_positions[start * 3];
+    float* ry = &db.root_yaws[start];
+    clip_character_frames(F, db.fps, hips.data(), lul.data(), rul.data(), rp, ry);
+    clip_features(F, db.fps, lf.data(), rf.data(), hips.data(), rp, ry, &db.features[start * kFeatureDim]);
+    float* rd = &db.root_deltas[start * 3];
+    for (int i = 0; i + 1 < F; ++i) {
+      const Vec2 d = world_to_local_xz(rp[(i + 1) * 3] - rp[i * 3], rp[(i + 1) * 3 + 2] - rp[i * 3 + 2], ry[i]);
+      rd[i * 3] = d.x();
+      rd[i * 3 + 1] = d.y();
+      rd[i * 3 + 2] = wrap_angle(ry[i + 1] - ry[i]);
+    }
+    for (int k = 0; k < 3; ++k) rd[(F - 1) * 3 + k] = F > 1 ? rd[(F - 2) * 3 + k] : 0.0f;
+    db.clip_ranges.push_back(static_cast<int32_t>(start));
+    db.clip_ranges.push_back(static_cast<int32_t>(start + F));
+    db.clip_names.push_back(m.source);
+    db.clip_mirrored.push_back(c >= clips_in.size() ? 1 : 0);
+    start += F;
+  }
+  db.index_clips();
+  db.refit_normalization();
+  return db;
+}
+
+}  // namespace mmrl

@@ -1,0 +1,157 @@
+#include "mmrl/search.hpp"
+
+#include <algorithm>
+#include <limits>
+#include <stdexcept>
+#include <string>
+
+namespace mmrl {
+
+namespace {
+
+void check_points(const float* points, int64_t num_points, int dim, const char* who) {
+  if (num_points < 0) throw std::invalid_argument(std::string(who) + ": num_points must be >= 0");
+  if (num_points > 0 && points == nullptr) throw std::invalid_argument(std::string(who) + ": points is null");
+  if (dim <= 0 || dim > kMaxDim)
+    throw std::invalid_argument(std::string(who) + ": dim must be in [1, " + std::to_string(kMaxDim) + "]");
+}
+
+bool is_allowed(int64_t i, const SearchFilter& f) {
+  return !(i >= f.exclude_lo && i < f.exclude_hi) && (!f.allowed || f.allowed[i]);
+}
+
+}  // namespace
+
+int brute_force_knn(const float* points, int64_t num_points, int dim, const float* query, int k,
+                    int64_t* out_indices, float* out_sqdist, const SearchFilter& filter) {
+  check_points(points, num_points, dim, "brute_force_knn");
+  if (query == nullptr || out_indices == nullptr || out_sqdist == nullptr)
+    throw std::invalid_argument("brute_force_knn: null pointer");
+  if (k < 1) throw std::invalid_argument("brute_force_knn: k must be >= 1");
+  if (k > std::max<int64_t>(1, num_points))
+    throw std::invalid_argument("brute_force_knn: k = " + std::to_string(k) + " exceeds the " +
+                                std::to_string(num_points) + " rows");
+  for (int j = 0; j < k; ++j) {
+    out_indices[j] = -1;
+    out_sqdist[j] = std::numeric_limits<float>::infinity();
+  }
+  int found = 0;
+  float dist[kLanes];
+  for (int64_t i = 0; i < num_points; ++i) {
+    if (i % kLanes == 0)
+      rows_sqdist(query, points + i * dim, static_cast<int>(std::min<int64_t>(kLanes, num_points - i)), dim, dist);
+    if (!is_allowed(i, filter)) continue;
+    const float d = dist[i % kLanes];
+    // Scanning in index order, a tie never displaces an earlier (lower) index.
+    if (found == k && !(d < out_sqdist[k - 1])) continue;
+    int pos = found < k ? found++ : k - 1;
+    while (pos > 0 && d < out_sqdist[pos - 1]) {
+      out_sqdist[pos] = out_sqdist[pos - 1];
+      out_indices[pos] = out_indices[pos - 1];
+      --pos;
+    }
+    out_sqdist[pos] = d;
+    out_indices[pos] = i;
+  }
+  return found;
+}
+
+int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
+                          const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
+                          float* out_cost) {
+  check_points(points, num_points, dim, "brute_force_match");
+  if (query == nullptr) throw std::invalid_argument("brute_force_match: null query");
+  if (bound_index >= num_points) throw std::out_of_range("brute_force_match: bound_index out of range");
+  int64_t best = -1;
+  float best_cost = std::numeric_limits<float>::infinity();
+  if (bound_index >= 0) {
+    best = bound_index;
+    best_cost = sqdist_row(query, points + bound_index * dim, dim);
+  }
+  float dist[kLanes];
+  for (int64_t i = 0; i < num_points; ++i) {
+    if (i % kLanes == 0)
+      rows_sqdist(query, points + i * dim, static_cast<int>(std::min<int64_t>(kLanes, num_points - i)), dim, dist);
+    if ((valid && !valid[i]) || (i >= exclude_lo && i < exclude_hi)) continue;
+    const float d = dist[i % kLanes];
+    if (d < best_cost || (best < 0 && d == best_cost)) {
+      best_cost = d;
+      best = i;
+    }
+  }
+  if (out_cost) *out_cost = best_cost;
+  return best;
+}
+
+Matcher::Matcher(const float* rows, int64_t num_rows, int dim, const uint8_t* valid, const MatcherOptions& options)
+    : rows_(rows),
+      valid_(valid),
+      tree_([&] {
+        check_points(rows, num_rows, dim, "Matcher");
+        if (options.leaf_size < 1) throw std::invalid_argument("Matcher: leaf_size must be >= 1");
+        int64_t num_valid = 0;
+        for (int64_t i = 0; i < num_rows; ++i) num_valid += (!valid || valid[i]) ? 1 : 0;
+        // Tiny databases: a tree cannot prune enough to pay for itself; one leaf is a
+        // plain blocked scan with early termination.
+        const bool scan = num_valid < options.brute_force_below;
+        const int leaf = scan ? static_cast<int>(std::max<int64_t>(1, num_valid)) : options.leaf_size;
+        return KDTree(rows, num_rows, dim, leaf, valid);
+      }()) {}
+
+int64_t Matcher::match(const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
+                       float* out_cost) const {
+  SearchFilter filter;
+  filter.exclude_lo = exclude_lo;
+  filter.exclude_hi = exclude_hi;
+  return tree_.nearest_with_bound(query, bound_index, out_cost, filter);
+}
+
+namespace {
+
+template <class One>
+void run_batch(const char* who, const float* queries, int64_t num_queries, int64_t num_rows, int dim, int64_t* out_indices,
+               float* out_costs, ThreadPool& pool, const int64_t* exclude_lo, const int64_t* exclude_hi,
+               const int64_t* bound_indices, One&& one) {
+  if (num_queries < 0) throw std::invalid_argument(std::string(who) + ": num_queries must be >= 0");
+  if (num_queries == 0) return;
+  if (!queries || !out_indices || !out_costs) throw std::invalid_argument(std::string(who) + ": null pointer");
+  if ((exclude_lo == nullptr) != (exclude_hi == nullptr))
+    throw std::invalid_argument(std::string(who) + ": give both exclude_lo and exclude_hi, or neither");
+  // Validate up front: nothing may throw inside the pool's workers.
+  if (bound_indices)
+    for (int64_t q = 0; q < num_queries; ++q)
+      if (bound_indices[q] < -1 || bound_indices[q] >= num_rows)
+        throw std::out_of_range(std::string(who) + ": bound index " + std::to_string(bound_indices[q]) +
+                                " of query " + std::to_string(q) + " is outside [-1, " + std::to_string(num_rows) +
+                                ")");
+  pool.parallel_for(
+      num_queries,
+      [&](int64_t b, int64_t e, int) {
+        for (int64_t q = b; q < e; ++q)
+          out_indices[q] = one(queries + q * dim, exclude_lo ? exclude_lo[q] : 0, exclude_hi ? exclude_hi[q] : 0,
+                               bound_indices ? bound_indices[q] : -1, out_costs + q);
+      },
+      /*min_chunk=*/4);
+}
+
+}  // namespace
+
+void Matcher::match_batch(const float* queries, int64_t num_queries, int64_t* out_indices, float* out_costs,
+                          ThreadPool& pool, const int64_t* exclude_lo, const int64_t* exclude_hi,
+                          const int64_t* bound_indices) const {
+  run_batch("Matcher::match_batch", queries, num_queries, num_rows(), dim(), out_indices, out_costs, pool, exclude_lo,
+            exclude_hi, bound_indices, [this](const float* q, int64_t lo, int64_t hi, int64_t bound, float* cost) {
+              return match(q, lo, hi, bound, cost);
+            });
+}
+
+void Matcher::brute_force_batch(const float* queries, int64_t num_queries, int64_t* out_indices, float* out_costs,
+                                ThreadPool& pool, const int64_t* exclude_lo, const int64_t* exclude_hi,
+                                const int64_t* bound_indices) const {
+  run_batch("Matcher::brute_force_batch", queries, num_queries, num_rows(), dim(), out_indices, out_costs, pool, exclude_lo,
+            exclude_hi, bound_indices, [this](const float* q, int64_t lo, int64_t hi, int64_t bound, float* cost) {
+              return brute_force_match(rows_, num_rows(), dim(), valid_, q, lo, hi, bound, cost);
+            });
+}
+
+}  // namespace mmrl

@@ -1,0 +1,141 @@
+// Matcher == brute_force_match exactly: masks, exclude windows, continuation bounds, batches.
+#include <gtest/gtest.h>
+
+#include <random>
+#include <vector>
+
+#include "mmrl/search.hpp"
+
+namespace {
+
+// Smooth random walks: consecutive rows are close, like frames of motion clips.
+std::vector<float> walk_rows(int64_t n, int dim, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  std::vector<float> p(static_cast<size_t>(n * dim));
+  std::vector<float> x(dim, 0.0f);
+  for (int64_t i = 0; i < n; ++i) {
+    if (i % 500 == 0)
+      for (auto& v : x) v = g(rng);
+    for (int d = 0; d < dim; ++d) {
+      x[d] = 0.98f * x[d] + 0.1f * g(rng);
+      p[i * dim + d] = x[d];
+    }
+  }
+  return p;
+}
+
+struct Case {
+  std::vector<float> queries;
+  std::vector<int64_t> lo, hi, bound;
+};
+
+Case make_queries(const std::vector<float>& rows, int64_t n, int dim, int m, float noise, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> g(0.0f, 1.0f);
+  Case c;
+  c.queries.resize(static_cast<size_t>(m) * dim);
+  for (int q = 0; q < m; ++q) {
+    const int64_t row = std::uniform_int_distribution<int64_t>(0, n - 2)(rng);
+    for (int d = 0; d < dim; ++d) c.queries[q * dim + d] = rows[row * dim + d] + noise * g(rng);
+    c.lo.push_back(std::max<int64_t>(0, row - 20));
+    c.hi.push_back(std::min<int64_t>(n, row + 20));
+    c.bound.push_back(q % 3 == 0 ? -1 : row + 1);
+  }
+  return c;
+}
+
+void expect_matcher_equals_brute_force(int64_t n, int dim, const std::vector<uint8_t>& valid, int leaf,
+                                       int64_t brute_below) {
+  const auto rows = walk_rows(n, dim, static_cast<uint32_t>(n + dim));
+  mmrl::MatcherOptions opts;
+  opts.leaf_size = leaf;
+  opts.brute_force_below = brute_below;
+  mmrl::Matcher matcher(rows.data(), n, dim, valid.data(), opts);
+  mmrl::ThreadPool pool(2);
+  for (float noise : {0.0f, 0.05f, 0.5f, 2.0f}) {
+    const int m = 200;
+    Case c = make_queries(rows, n, dim, m, noise, 17);
+    std::vector<int64_t> ti(m), bi(m);
+    std::vector<float> tc(m), bc(m);
+    // With windows and bounds.
+    matcher.match_batch(c.queries.data(), m, ti.data(), tc.data(), pool, c.lo.data(), c.hi.data(), c.bound.data());
+    matcher.brute_force_batch(c.queries.data(), m, bi.data(), bc.data(), pool, c.lo.data(), c.hi.data(),
+                              c.bound.data());
+    for (int q = 0; q < m; ++q) {
+      ASSERT_EQ(ti[q], bi[q]) << "noise " << noise << " query " << q;
+      ASSERT_EQ(tc[q], bc[q]) << "noise " << noise << " query " << q;
+      float single_cost = -1;
+      ASSERT_EQ(matcher.match(c.queries.data() + q * dim, c.lo[q], c.hi[q], c.bound[q], &single_cost), ti[q]);
+      ASSERT_EQ(single_cost, tc[q]);
+    }
+    // Plain nearest valid row.
+    matcher.match_batch(c.queries.data(), m, ti.data(), tc.data(), pool);
+    matcher.brute_force_batch(c.queries.data(), m, bi.data(), bc.data(), pool);
+    for (int q = 0; q < m; ++q) {
+      ASSERT_EQ(ti[q], bi[q]) << "noise " << noise << " query " << q;
+      ASSERT_EQ(tc[q], bc[q]);
+      if (ti[q] >= 0) {
+        ASSERT_TRUE(valid[ti[q]]);
+      }
+    }
+  }
+}
+
+TEST(Matcher, EqualsBruteForceWithMasksWindowsAndBounds) {
+  for (int64_t n : {2, 17, 1000, 20000})
+    for (int dim : {5, 27}) {
+      std::mt19937 rng(static_cast<uint32_t>(n));
+      std::vector<uint8_t> valid(n);
+      for (auto& v : valid) v = (rng() % 10) != 0;
+      for (int leaf : {4, 16, 64}) {
+        expect_matcher_equals_brute_force(n, dim, valid, leaf, 0);
+        expect_matcher_equals_brute_force(n, dim, valid, leaf, 1 << 30);  // blocked-scan fallback
+      }
+    }
+}
+
+TEST(Matcher, BoundWinsTiesAndNothingValid) {
+  const int dim = 3;
+  std::vector<float> rows = {0, 0, 0, 1, 1, 1, 1, 1, 1, 2, 2, 2};
+  std::vector<uint8_t> valid = {1, 1, 1, 1};
+  mmrl::Matcher m(rows.data(), 4, dim, valid.data());
+  const float q[3] = {1, 1, 1};
+  float cost = -1;
+  EXPECT_EQ(m.match(q, 0, 0, -1, &cost), 1);  // rows 1 and 2 tie: lowest index
+  EXPECT_EQ(cost, 0.0f);
+  EXPECT_EQ(m.match(q, 0, 0, 2, &cost), 2);  // the bound keeps a tie
+  EXPECT_EQ(m.match(q, 0, 0, 3, &cost), 1);  // strictly better than the bound
+  std::vector<uint8_t> none(4, 0);
+  mmrl::Matcher empty(rows.data(), 4, dim, none.data());
+  EXPECT_EQ(empty.num_valid(), 0);
+  EXPECT_EQ(empty.match(q, 0, 0, -1, &cost), -1);
+  EXPECT_TRUE(std::isinf(cost));
+  EXPECT_EQ(empty.match(q, 0, 0, 3, &cost), 3);  // only the bound is left
+  EXPECT_EQ(cost, 3.0f);
+  EXPECT_EQ(m.match(q, 0, 4, -1, &cost), -1);  // window excludes everything
+}
+
+TEST(Matcher, RefusesBadInput) {
+  std::vector<float> rows(30, 0.0f);
+  EXPECT_THROW(mmrl::Matcher(nullptr, 10, 3, nullptr), std::invalid_argument);
+  EXPECT_THROW(mmrl::Matcher(rows.data(), 10, 0, nullptr), std::invalid_argument);
+  EXPECT_THROW(mmrl::Matcher(rows.data(), -1, 3, nullptr), std::invalid_argument);
+  mmrl::MatcherOptions bad;
+  bad.leaf_size = 0;
+  EXPECT_THROW(mmrl::Matcher(rows.data(), 10, 3, nullptr, bad), std::invalid_argument);
+  mmrl::Matcher m(rows.data(), 10, 3, nullptr);
+  mmrl::ThreadPool pool(2);
+  int64_t idx[2];
+  float cost[2];
+  EXPECT_THROW(m.match(nullptr), std::invalid_argument);
+  EXPECT_THROW(m.match(rows.data(), 0, 0, 10), std::out_of_range);
+  EXPECT_THROW(m.match_batch(nullptr, 2, idx, cost, pool), std::invalid_argument);
+  EXPECT_THROW(m.match_batch(rows.data(), 2, nullptr, cost, pool), std::invalid_argument);
+  EXPECT_THROW(m.match_batch(rows.data(), -1, idx, cost, pool), std::invalid_argument);
+  const int64_t lo[2] = {0, 0};
+  EXPECT_THROW(m.match_batch(rows.data(), 2, idx, cost, pool, lo, nullptr), std::invalid_argument);
+  EXPECT_THROW(mmrl::brute_force_match(rows.data(), 10, 3, nullptr, nullptr, 0, 0, -1, cost), std::invalid_argument);
+}
+
+}  // namespace

@@ -1,0 +1,87 @@
+"""``mmrl db build`` and ``mmrl db info``."""
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def parse_roles(items):
+    roles = {}
+    for item in items or []:
+        if "=" not in item:
+            raise ValueError(f"--role expects ROLE=JOINT, got {item!r}")
+        k, v = item.split("=", 1)
+        roles[k.strip()] = v.strip()
+    return roles
+
+
+def register_cli(sub) -> None:
+    db = sub.add_parser("db", help="build and inspect motion databases")
+    dsub = db.add_subparsers(dest="db_command", metavar="SUBCOMMAND")
+    dsub.required = True
+
+    b = dsub.add_parser("build", help="build a database from BVH files or directories")
+    b.add_argument("data", nargs="+", help="BVH files or directories (searched recursively)")
+    b.add_argument("-o", "--output", required=True, help="output .npz file")
+    b.add_argument("--mirror", action="store_true", help="add left/right mirrored copies of every clip")
+    b.add_argument("--scale", type=float, default=None, help="file units to meters (default: inferred)")
+    b.add_argument("--role", action="append", metavar="ROLE=JOINT",
+                   help="override a joint role, e.g. --role left_foot=LeftAnkle (repeatable)")
+    b.set_defaults(func=cmd_build)
+
+    i = dsub.add_parser("info", help="print clips, frames, skeleton roles and feature statistics")
+    i.add_argument("database", help="a .npz database, a BVH file or a directory")
+    i.set_defaults(func=cmd_info)
+
+
+def cmd_build(args: argparse.Namespace) -> int:
+    from ..database import Database
+
+    t0 = time.perf_counter()
+    db = Database.from_bvh(args.data, mirror=args.mirror, scale=args.scale, roles=parse_roles(args.role),
+                           progress=True)
+    t1 = time.perf_counter()
+    db.save(args.output)
+    print(f"{db!r}\nbuilt in {t1 - t0:.2f} s, saved to {args.output} in {time.perf_counter() - t1:.2f} s")
+    return 0
+
+
+def load_any(path: str):
+    """A database from a .npz file, or built from BVH files/directories."""
+    from ..database import Database
+
+    p = Path(path)
+    if p.is_file() and p.suffix == ".npz":
+        return Database.load(p)
+    return Database.from_bvh(p)
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from ..database import FEATURE_BLOCKS
+
+    db = load_any(args.database)
+    lengths = np.diff(db.clip_ranges, axis=1)[:, 0] / db.fps
+    print(f"database     {args.database}")
+    print(f"clips        {db.num_clips} ({int(db.clip_mirrored.sum())} mirrored), "
+          f"length {lengths.min():.1f}-{lengths.max():.1f} s (median {np.median(lengths):.1f} s)")
+    print(f"frames       {db.num_frames} at {db.fps:g} fps = {db.minutes:.1f} min; "
+          f"{int(db.valid_mask.sum())} valid matches")
+    print(f"skeleton     {db.num_joints} joints")
+    for role, joint in db.roles.items():
+        print(f"  {role:<16} {joint}")
+    f = db.features[db.valid_mask]
+    speed = np.hypot(f[:, 23], f[:, 24])
+    turn = np.degrees(np.arctan2(f[:, 25], f[:, 26]))
+    print(f"speed +1 s   median {np.median(speed):.2f} m/s, 5-95% {np.percentile(speed, 5):.2f}-"
+          f"{np.percentile(speed, 95):.2f} m/s")
+    print(f"turn +1 s    5-95% {np.percentile(turn, 5):.0f} to {np.percentile(turn, 95):.0f} deg")
+    print("features     block                  weight  scale   columns: mean/std")
+    scale = db.feature_scale
+    w = db.weights
+    for name, cols, _ in FEATURE_BLOCKS:
+        stats = " ".join(f"{db.features[:, c].mean():+.2f}/{db.features[:, c].std():.2f}" for c in cols)
+        print(f"             {name:<22} {w[name]:<7.2f} {scale[cols[0]] * w[name]:<7.3f} {stats}")
+    return 0

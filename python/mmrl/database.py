@@ -1,0 +1,316 @@
+"""The motion database: clips, 27-d features, root motion, normalisation, save/load.
+
+Offline: :meth:`Database.from_bvh` parses BVH files (in C++, in parallel) and builds the
+features. Runtime: :meth:`Database.match` searches the normalized features.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+import zipfile
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _core
+from .bvh import load_bvh
+
+PathLike = Union[str, os.PathLike]
+
+FEATURE_DIM: int = _core.FEATURE_DIM
+POSE_DIM: int = _core.POSE_DIM
+TRAJECTORY_DIM: int = _core.TRAJECTORY_DIM
+#: (name, columns, default weight) of each normalisation block.
+FEATURE_BLOCKS: List[Tuple[str, List[int], float]] = [tuple(b) for b in _core.FEATURE_BLOCKS]
+BLOCK_NAMES: List[str] = [b[0] for b in FEATURE_BLOCKS]
+DEFAULT_WEIGHTS: Dict[str, float] = {b[0]: b[2] for b in FEATURE_BLOCKS}
+
+FILE_FORMAT = "mmrl.database"
+FILE_VERSION = 1
+
+
+class DatabaseFileError(ValueError):
+    """A database file is corrupt, foreign or of an unsupported version."""
+
+
+def find_bvh_files(paths: Union[PathLike, Iterable[PathLike]]) -> List[Path]:
+    """Expand a file, a directory (searched recursively, sorted) or a list of them."""
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    out: List[Path] = []
+    for p in paths:
+        p = Path(p)
+        if p.is_dir():
+            found = sorted(q for q in p.rglob("*") if q.suffix.lower() == ".bvh" and q.is_file())
+            if not found:
+                raise FileNotFoundError(f"{p}: no .bvh files in this directory")
+            out.extend(found)
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise FileNotFoundError(f"{p}: no such file or directory")
+    if not out:
+        raise ValueError("no BVH files given")
+    return out
+
+
+def _weights_list(weights: Optional[Union[Mapping[str, float], Sequence[float]]], base: Sequence[float]) -> List[float]:
+    if weights is None:
+        return list(base)
+    if isinstance(weights, Mapping):
+        unknown = set(weights) - set(BLOCK_NAMES)
+        if unknown:
+            raise ValueError(f"weights: unknown feature blocks {sorted(unknown)}; blocks are {BLOCK_NAMES}")
+        w = list(base)
+        for k, v in weights.items():
+            w[BLOCK_NAMES.index(k)] = float(v)
+        return w
+    w = [float(v) for v in weights]
+    if len(w) != len(BLOCK_NAMES):
+        raise ValueError(f"weights: expected {len(BLOCK_NAMES)} values ({BLOCK_NAMES}), got {len(w)}")
+    return w
+
+
+class Database:
+    """A motion-matching database over one skeleton.
+
+    Arrays (read-only numpy views of C++ memory, N frames, J joints, C clips):
+
+    - ``features`` (N, 27) raw units; ``normalized_features`` (N, 27) searched by ``match``;
+    - ``clip_ranges`` (C, 2) start inclusive, stop exclusive, in input order (mirrored
+      copies, if any, follow all originals in the same order);
+    - ``valid_mask`` (N,) bool: frames whose +30 future stays inside their clip;
+    - ``root_positions`` (N, 3) and ``root_yaws`` (N,): the character frame in world space;
+    - ``root_deltas`` (N, 3): (dx, dz, dyaw) from frame i to i+1 in frame i's character frame;
+    - ``bone_translations`` (N, J, 3), ``bone_rotations`` (N, J, 4) local pose (w, x, y, z).
+    """
+
+    def __init__(self, core: "_core.Database"):
+        self._db = core
+        self._matcher = None
+
+    # ----------------------------------------------------------------- building
+    @classmethod
+    def from_bvh(
+        cls,
+        paths: Union[PathLike, Iterable[PathLike]],
+        *,
+        mirror: bool = False,
+        scale: Optional[float] = None,
+        roles: Optional[Mapping[str, str]] = None,
+        weights: Optional[Union[Mapping[str, float], Sequence[float]]] = None,
+        progress: bool = False,
+        num_workers: Optional[int] = None,
+    ) -> "Database":
+        """Build a database from BVH files.
+
+        Args:
+            paths: a file, a directory (searched recursively, in sorted order) or a list.
+            mirror: add a left/right mirrored copy of every clip.
+            scale: file units to meters; ``None`` infers it per file (see :func:`mmrl.load_bvh`).
+            roles: overrides of the joint-role detection, e.g. ``{"left_foot": "LeftAnkle"}``.
+            weights: block weights by name (see ``BLOCK_NAMES``) or as a 5-sequence.
+            progress: show a progress bar while parsing.
+            num_workers: parsing threads (default: all cores).
+        """
+        files = find_bvh_files(paths)
+        workers = num_workers or os.cpu_count() or 1
+        bar = None
+        if progress:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(files), unit="file", desc="parsing BVH")
+        motions = []
+        try:
+            with ThreadPoolExecutor(max_workers=workers) as pool:
+                for m in pool.map(lambda f: load_bvh(f, scale), files):
+                    motions.append(m)
+                    if bar is not None:
+                        bar.update(1)
+        finally:
+            if bar is not None:
+                bar.close()
+        return cls.from_motions(motions, mirror=mirror, roles=roles, weights=weights)
+
+    @classmethod
+    def from_motions(cls, motions: Sequence["_core.Motion"], *, mirror: bool = False,
+                     roles: Optional[Mapping[str, str]] = None,
+                     weights: Optional[Union[Mapping[str, float], Sequence[float]]] = None) -> "Database":
+        """Build a database from parsed motions (see :func:`mmrl.load_bvh`)."""
+        w = _weights_list(weights, [DEFAULT_WEIGHTS[n] for n in BLOCK_NAMES])
+        return cls(_core.Database.build(list(motions), bool(mirror), dict(roles or {}), w))
+
+    # ----------------------------------------------------------------- properties
+    num_frames = property(lambda self: self._db.num_frames, doc="Number of frames N.")
+    num_joints = property(lambda self: self._db.num_joints, doc="Number of joints J.")
+    num_clips = property(lambda self: self._db.num_clips, doc="Number of clips C.")
+    fps = property(lambda self: self._db.fps, doc="Frames per second.")
+    joint_names = property(lambda self: list(self._db.joint_names))
+    parents = property(lambda self: list(self._db.parents))
+    roles = property(lambda self: dict(self._db.roles), doc="Role name -> joint name.")
+    clip_names = property(lambda self: list(self._db.clip_names))
+    features = property(lambda self: self._db.features)
+    normalized_features = property(lambda self: self._db.normalized_features)
+    valid_mask = property(lambda self: self._db.valid_mask.view(np.bool_))
+    frame_clip = property(lambda self: self._db.frame_clip, doc="Clip index of each frame.")
+    feature_mean = property(lambda self: self._state()["feature_mean"])
+    feature_scale = property(lambda self: self._db.feature_scale,
+                             doc="Per-column divisor: normalized = (features - mean) / scale.")
+
+    def _state(self):
+        return self._db.state()
+
+    @property
+    def clip_ranges(self) -> np.ndarray:
+        return self._state()["clip_ranges"]
+
+    @property
+    def clip_mirrored(self) -> np.ndarray:
+        return self._state()["clip_mirrored"].view(np.bool_)
+
+    @property
+    def root_positions(self) -> np.ndarray:
+        return self._state()["root_positions"]
+
+    @property
+    def root_yaws(self) -> np.ndarray:
+        return self._state()["root_yaws"]
+
+    @property
+    def root_deltas(self) -> np.ndarray:
+        return self._state()["root_deltas"]
+
+    @property
+    def bone_translations(self) -> np.ndarray:
+        return self._state()["bone_translations"]
+
+    @property
+    def bone_rotations(self) -> np.ndarray:
+        return self._state()["bone_rotations"]
+
+    @property
+    def weights(self) -> Dict[str, float]:
+        w = self._state()["weights"]
+        return {n: float(w[i]) for i, n in enumerate(BLOCK_NAMES)}
+
+    def set_weights(self, weights: Union[Mapping[str, float], Sequence[float]]) -> None:
+        """Change block weights (by name or as a 5-sequence); renormalizes the features."""
+        cur = self._state()["weights"].tolist()
+        self._db.set_weights(_weights_list(weights, cur))
+        self._matcher = None
+
+    def normalize(self, features: np.ndarray) -> np.ndarray:
+        """Map raw features (..., 27) into the normalized, weighted search space."""
+        return ((np.asarray(features, np.float32) - self.feature_mean) / self.feature_scale).astype(np.float32)
+
+    def denormalize(self, normalized: np.ndarray) -> np.ndarray:
+        """Inverse of :meth:`normalize`."""
+        return (np.asarray(normalized, np.float32) * self.feature_scale + self.feature_mean).astype(np.float32)
+
+    @property
+    def minutes(self) -> float:
+        return self.num_frames / self.fps / 60.0
+
+    def __repr__(self) -> str:
+        return (f"<mmrl.Database: {self.num_clips} clips, {self.num_frames} frames "
+                f"({self.minutes:.1f} min) at {self.fps:g} fps, {self.num_joints} joints>")
+
+    # ----------------------------------------------------------------- save / load
+    def save(self, path: PathLike) -> None:
+        """Write the database to one versioned ``.npz`` file, atomically."""
+        path = Path(path)
+        s = self._state()
+        arrays = {k: np.asarray(v) for k, v in s.items() if k not in ("joint_names", "channels", "clip_names", "roles", "fps", "source_scale")}
+        arrays["joint_names"] = np.array(s["joint_names"], dtype=np.str_)
+        arrays["channels"] = np.array(s["channels"], dtype=np.str_)
+        arrays["clip_names"] = np.array(s["clip_names"], dtype=np.str_)
+        arrays["roles"] = np.array(s["roles"], dtype=np.int32)
+        arrays["fps"] = np.array(s["fps"], dtype=np.float32)
+        arrays["source_scale"] = np.array(s["source_scale"], dtype=np.float32)
+        arrays["format"] = np.array(FILE_FORMAT)
+        arrays["version"] = np.array(FILE_VERSION, dtype=np.int32)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+        try:
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, **arrays)
+                f.flush()
+                os.fsync(f.fileno())
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(tmp, 0o666 & ~umask)
+            os.replace(tmp, path)
+        except BaseException:
+            if os.path.exists(tmp):
+                os.unlink(tmp)
+            raise
+
+    @classmethod
+    def load(cls, path: PathLike) -> "Database":
+        """Load a database written by :meth:`save`.
+
+        Raises:
+            DatabaseFileError: the file is corrupt, not an mmrl database, or of another version.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"{path}: no such database file")
+        try:
+            with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
+                if "format" not in z.files or str(z["format"]) != FILE_FORMAT:
+                    raise DatabaseFileError(f"{path}: not an mmrl database file")
+                version = int(z["version"])
+                if version != FILE_VERSION:
+                    raise DatabaseFileError(f"{path}: database file version {version}, this mmrl reads version {FILE_VERSION}; rebuild it with 'mmrl db build'")
+                state = {k: z[k] for k in z.files if k not in ("format", "version")}
+        except DatabaseFileError:
+            raise
+        except (zipfile.BadZipFile, OSError, ValueError, KeyError, EOFError) as e:
+            raise DatabaseFileError(f"{path}: corrupt or unreadable database file ({e})") from e
+        try:
+            state["joint_names"] = [str(x) for x in state["joint_names"]]
+            state["channels"] = [str(x) for x in state["channels"]]
+            state["clip_names"] = [str(x) for x in state["clip_names"]]
+            state["roles"] = [int(x) for x in state["roles"]]
+            state["fps"] = float(state["fps"])
+            state["source_scale"] = float(state["source_scale"])
+            state = {k: (np.ascontiguousarray(v) if isinstance(v, np.ndarray) else v) for k, v in state.items()}
+            return cls(_core.Database.from_state(state))
+        except (KeyError, TypeError, ValueError) as e:
+            raise DatabaseFileError(f"{path}: corrupt database file ({e})") from e
+
+    # ----------------------------------------------------------------- matching
+    def match(self, queries: np.ndarray, *, normalized: bool = False,
+              bound_indices: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+        """Nearest valid frame for each query.
+
+        Args:
+            queries: (M, 27) float32 raw features, or already normalized if ``normalized``.
+            bound_indices: optional (M,) int64 current frames; a query keeps its bound frame
+                unless another valid frame is strictly better.
+
+        Returns:
+            (indices (M,) int64, costs (M,) float32): costs are squared distances in the
+            normalized, weighted space.
+        """
+        q = queries
+        if not isinstance(q, np.ndarray):
+            raise TypeError(f"queries: expected a numpy array, got {type(q).__name__}")
+        if q.dtype != np.float32:
+            raise TypeError(f"queries: expected dtype float32, got {q.dtype}")
+        if q.ndim != 2 or q.shape[1] != FEATURE_DIM:
+            raise ValueError(f"queries: expected shape (M, {FEATURE_DIM}), got {q.shape}")
+        if not np.isfinite(q).all():
+            raise ValueError("queries: contains NaN or inf")
+        if not normalized:
+            q = self.normalize(q)
+        return self.matcher.match(np.ascontiguousarray(q), bound_indices)
+
+    @property
+    def matcher(self):
+        """The search structure over the normalized features (built on first use)."""
+        if self._matcher is None:
+            self._matcher = _core.Matcher(self.normalized_features, self._db.valid_mask)
+        return self._matcher
