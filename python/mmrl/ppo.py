@@ -661,7 +661,8 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
             "return_rms": return_rms.state_dict(), "global_step": global_step, "wall_s": wall_s,
             "iteration": iteration, "snapshots": sorted(saved_snapshots), "rng": rng,
             "config": dataclasses.asdict(cfg),
-            "action_center": action_center, "action_half": action_half,
+            "action_center": None if action_center is None else action_center.tolist(),
+            "action_half": None if action_half is None else action_half.tolist(),
             "callbacks": {i: cb.state_dict() for i, cb in enumerate(callbacks) if hasattr(cb, "state_dict")},
         }
 
