@@ -154,6 +154,10 @@ class PPOConfig:
     """Clip scaled rewards to [-reward_clip, reward_clip]; None keeps the bonus
     intact (clipping at the common 10 would flatten a +1000 bonus)."""
 
+    init_log_std: float = 0.0
+    """Initial log standard deviation of the Gaussian policy (in the policy's action units;
+    with ``rescale_actions`` 0 means one box half-width). Used by the default network."""
+
     rescale_actions: bool = True
     """When the env's action Box is finite, the policy acts in standardized units:
     env action = center + half_width * a, so a = +-1 reaches the box's faces and the
@@ -499,9 +503,9 @@ def _resolve_device(device: str) -> torch.device:
     return torch.device(device)
 
 
-def _default_policy_factory(obs_dim: int, act_dim: int) -> nn.Module:
+def _default_policy_factory(obs_dim: int, act_dim: int, init_log_std: float = 0.0) -> nn.Module:
     from .networks import PlaneActorCritic
-    return PlaneActorCritic(obs_dim, act_dim)
+    return PlaneActorCritic(obs_dim, act_dim, init_log_std=init_log_std)
 
 
 def _check_env(envs: gym.vector.VectorEnv) -> tuple[int, int]:
@@ -621,7 +625,10 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
     torch.manual_seed(cfg.seed)
     generator = torch.Generator().manual_seed(cfg.seed)
 
-    model = (policy_factory or _default_policy_factory)(obs_dim, act_dim).to(device)
+    if policy_factory is None:
+        model = _default_policy_factory(obs_dim, act_dim, cfg.init_log_std).to(device)
+    else:
+        model = policy_factory(obs_dim, act_dim).to(device)
     # The fused Adam kernel (CPU and CUDA, torch >= 2.4) is ~7x cheaper per step
     # than the default for-loop on these tiny networks.
     try:
