@@ -79,8 +79,9 @@ def test_layout_matches_the_network_default():
     assert _core.ObstacleVecEnv.obs_dim == 529
 
 
-def test_sensor_maps_match_brute_force_on_random_moving_scenes(db):
-    env = make(db, n=6, target_half_extent=5.0, obstacle_max_speed=0.5)
+@pytest.mark.parametrize("speed", [0.0, 0.05, 0.5, 2.0])  # grid rebuilt never, every 16, 4, 1 steps
+def test_sensor_maps_and_collisions_match_brute_force_on_random_moving_scenes(db, speed):
+    env = make(db, n=6, target_half_extent=5.0, obstacle_max_speed=speed)
     obs, _ = env.reset(seed=3)
     rng = np.random.default_rng(0)
     low, high = env.single_action_space.low, env.single_action_space.high
@@ -97,6 +98,12 @@ def test_sensor_maps_match_brute_force_on_random_moving_scenes(db):
             np.testing.assert_array_equal(env._core.sensor_map_bruteforce(i), got)
             checked += int(sure.sum())
             ones += int(ref.sum())
+            # Body-disc collisions near the character, exact through the (possibly older) grid.
+            pts = np.array([st["x"], st["z"]]) + rng.uniform(-3, 3, (20, 2))
+            d = obb_distance(ob, pts[:, 0], pts[:, 1]).min(axis=-1)
+            got_c = np.array([env._core.collides(i, float(x), float(z)) for x, z in pts])
+            sure_c = np.abs(d - 0.25) > 1e-4
+            np.testing.assert_array_equal(got_c[sure_c], (d <= 0.25)[sure_c])
         actions = rng.uniform(low, high, (env.num_envs, 12)).astype(np.float32)
         obs, _, term, trunc, infos = env.step(actions)
         done = term | trunc

@@ -9,6 +9,10 @@ namespace mmrl {
 
 namespace {
 
+// How far (meters) obstacles may travel between grid rebuilds (at least one step's travel).
+constexpr float kRebuildTravel = 0.4f;
+constexpr int kMaxRebuildInterval = 16;
+
 // Validates the task config and derives the obstacle field's config from it.
 ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c) {
   auto finite = [](float v) { return std::isfinite(v); };
@@ -33,7 +37,8 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
   f.min_side = c.obstacle_min_side;
   f.max_side = c.obstacle_max_side;
   f.cell_size = c.grid_cell_size;
-  f.max_margin = c.body_radius + c.speed_cap * static_cast<float>(c.frames_per_step) / db.fps + 0.01f;
+  f.max_margin = c.body_radius + std::max(kRebuildTravel, c.speed_cap * static_cast<float>(c.frames_per_step) / db.fps) +
+                 0.01f;
   f.sensor_size = c.sensor_size;
   f.sensor_forward = c.sensor_forward;
   return f;
@@ -71,12 +76,24 @@ void ObstacleVecEnv::set_stage(float max_speed, float target_half_extent) {
   stage_half_extent_ = target_half_extent;
 }
 
-float ObstacleVecEnv::margin(int i) const {
-  return config_.body_radius + envs_[i].max_speed * static_cast<float>(config_.frames_per_step) * frame_dt_ + 0.005f;
+int ObstacleVecEnv::rebuild_interval(int i) const {
+  const float step_travel = envs_[i].max_speed * static_cast<float>(config_.frames_per_step) * frame_dt_;
+  if (!(step_travel > 0)) return 1 << 30;  // static obstacles: the reset's grid stays exact
+  return std::max(1, std::min(kMaxRebuildInterval, static_cast<int>(kRebuildTravel / step_travel)));
 }
 
-void ObstacleVecEnv::refresh(int i, bool keep_previous) {
-  field_.rebuild(i, margin(i));
+float ObstacleVecEnv::margin(int i) const {
+  const float step_travel = envs_[i].max_speed * static_cast<float>(config_.frames_per_step) * frame_dt_;
+  const int interval = rebuild_interval(i);
+  return config_.body_radius + (step_travel > 0 ? step_travel * static_cast<float>(interval) : 0.0f) + 0.005f;
+}
+
+void ObstacleVecEnv::refresh(int i, bool keep_previous, bool force_rebuild) {
+  ObstacleEnvState& st = envs_[i];
+  if (force_rebuild || st.grid_age >= rebuild_interval(i)) {
+    field_.rebuild(i, margin(i));
+    st.grid_age = 0;
+  }
   uint8_t* cur = &maps_[static_cast<size_t>(i) * 2 * kMapCells];
   if (keep_previous) std::copy(cur, cur + kMapCells, cur + kMapCells);
   const ObstacleEnvState& s = envs_[i];
@@ -118,7 +135,7 @@ void ObstacleVecEnv::reset_env(int i, float* obs_row) {
   std::fill(s.hit_points, s.hit_points + 6, 0.0f);
   std::fill(s.hit_inside, s.hit_inside + 3, uint8_t{0});
   s.collided = false;
-  refresh(i, false);
+  refresh(i, false, true);
   if (obs_row) observe(i, obs_row);
 }
 
@@ -198,14 +215,15 @@ void ObstacleVecEnv::step(const float* actions, float* obs, float* rewards, uint
       collision[i] = coll;
       hits[i] = h;
       float* row = obs + i * kObsDim;
+      envs_[i].grid_age += 1;
       if (term || trunc) {
-        refresh(env, true);
+        refresh(env, true, false);
         observe(env, final_obs + i * kObsDim);
         episode_return[i] = static_cast<float>(envs_[i].episode_return);
         episode_length[i] = envs_[i].steps;
         reset_env(env, row);
       } else {
-        refresh(env, true);
+        refresh(env, true, false);
         observe(env, row);
       }
     }
@@ -221,7 +239,7 @@ void ObstacleVecEnv::set_root(int i, float x, float z, float yaw) {
   envs_[i].root.x = x;
   envs_[i].root.z = z;
   envs_[i].root.yaw = wrap_angle(yaw);
-  refresh(i, false);
+  refresh(i, false, true);
 }
 
 void ObstacleVecEnv::set_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
@@ -232,7 +250,7 @@ void ObstacleVecEnv::set_obstacles(int i, int n, const float* centres, const flo
   if (fastest > config_.speed_cap) throw std::invalid_argument("obstacle speed exceeds speed_cap");
   field_.set(i, n, centres, half_sizes, angles, velocities);
   envs_[i].max_speed = fastest;
-  refresh(i, false);
+  refresh(i, false, true);
 }
 
 }  // namespace mmrl

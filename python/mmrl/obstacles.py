@@ -96,7 +96,7 @@ class ObstaclesConfig:
     """Side of the square sensor map (meters), 16 x 16 point sensors."""
     sensor_forward: float = 1.5
     """Centre of the sensor square ahead of the root (meters); 0 centres it on the character."""
-    grid_cell_size: float = 1.0
+    grid_cell_size: float = 1.5
     """Cell side (meters) of the uniform grid used for sensors, hits and collisions."""
 
     def to_core(self) -> "_core.ObstacleTaskConfig":

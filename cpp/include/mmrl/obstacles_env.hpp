@@ -27,6 +27,10 @@
 // no turning in place or walking backwards), so 4.5 m ahead and 1.5 m behind (still
 // covering the body and the sides during a turn) is worth more than 3 m behind.
 //
+// Broadphase: the grid (grid.hpp) is rebuilt every rebuild_interval() steps, with a margin
+// covering the obstacles' motion over that many steps (about 0.4 m), never for static
+// obstacles; every query is exact on the current positions.
+//
 // Curriculum: set_stage(max_speed, target_half_extent) stores the stage; each environment
 // picks it up at its next reset (episodes in flight keep theirs).
 #pragma once
@@ -62,7 +66,7 @@ struct ObstacleTaskConfig {
   float target_clearance = 0.5f;       // no obstacle starts within this of the target
   float sensor_size = 6.0f;            // sensor square side (meters)
   float sensor_forward = 1.5f;         // sensor square centre ahead of the root (meters; 0 = centred)
-  float grid_cell_size = 1.0f;         // broadphase cell side (meters)
+  float grid_cell_size = 1.5f;         // broadphase cell side (meters)
 };
 
 struct ObstacleEnvState {
@@ -80,6 +84,7 @@ struct ObstacleEnvState {
   float hit_points[6] = {0, 0, 0, 0, 0, 0};
   uint8_t hit_inside[3] = {0, 0, 0};
   bool collided = false;
+  int grid_age = 0;  // RL steps since env's grid was rebuilt
   Rng rng;
 };
 
@@ -134,8 +139,12 @@ class ObstacleVecEnv {
  private:
   bool advance(int i, const float* action, float* reward, bool* terminated, bool* truncated, bool* collided,
                int* hits);
+  // Steps between grid rebuilds for env i, and the margin that keeps the grid exact over them.
+  int rebuild_interval(int i) const;
   float margin(int i) const;
-  void refresh(int i, bool keep_previous);
+  // Rebuilds the grid if forced or due, then recomputes the sensor map (keep_previous: the
+  // old current map becomes the previous one; else both are the new map).
+  void refresh(int i, bool keep_previous, bool force_rebuild);
 
   const Database& db_;
   const Matcher& matcher_;
