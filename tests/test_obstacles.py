@@ -74,7 +74,14 @@ def set_scene(env, i, centres, half_sizes, angles=None, velocities=None):
 # -- sensors ---------------------------------------------------------------------------------
 
 def test_layout_matches_the_network_default():
+    from mmrl.obstacles import OBSTACLE_MAP_RANGE
+
     assert OBSTACLE_LAYOUT == (("maps", 512), ("pose", 15), ("goal", 2))
+    assert OBSTACLE_MAP_RANGE == (0, 512)
+    from mmrl.obstacles import obstacle_policy_factory
+
+    with pytest.raises(ValueError, match="obs_dim 17"):
+        obstacle_policy_factory()(17, 12)
     assert OBSTACLE_MAP_SHAPE == (2, 16, 16)
     assert _core.ObstacleVecEnv.obs_dim == 529
 
@@ -241,7 +248,8 @@ def test_success_terminates_with_bonus(db):
     env.reset(seed=6)
     set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
     st = env.env_state(0)
-    env.set_target(0, st["x"], st["z"])
+    obs = env.set_target(0, st["x"], st["z"])
+    np.testing.assert_array_equal(obs[-2:], [0.0, 0.0])  # g_t: the target is on the root
     _, r, term, _, infos = env.step(_action_of_frame(db, int(np.flatnonzero(db.valid_mask)[0]))[None])
     assert term[0] and infos["success"][0] and not infos["collision"][0]
     assert r[0] > 10.0

@@ -50,6 +50,24 @@ from .envs import _check_actions, resolve_database
 OBSTACLE_LAYOUT = tuple((str(name), int(size)) for name, size in _core.ObstacleVecEnv.layout)
 #: Shape of the "maps" segment: (channel, row, col), channel 0 current, 1 previous.
 OBSTACLE_MAP_SHAPE = (2, _core.OBSTACLE_MAP_SIDE, _core.OBSTACLE_MAP_SIDE)
+#: [start, stop) of the binary maps in the flat observation (``PPOConfig.obs_norm_exclude``).
+OBSTACLE_MAP_RANGE = (0, 2 * _core.OBSTACLE_MAP_SIDE ** 2)
+
+
+def obstacle_policy_factory(envs=None):
+    """``policy_factory(obs_dim, act_dim)`` for ``ppo.train``: the paper's CNN actor-critic
+    (``mmrl.networks.ObstacleActorCritic``) with this env's observation layout."""
+    layout = getattr(envs, "layout", OBSTACLE_LAYOUT)
+    map_shape = getattr(envs, "map_shape", OBSTACLE_MAP_SHAPE)
+
+    def factory(obs_dim: int, act_dim: int):
+        if obs_dim != sum(size for _, size in layout):
+            raise ValueError(f"obstacle_policy_factory: obs_dim {obs_dim} does not match the layout {layout}")
+        from .networks import ObstacleActorCritic
+
+        return ObstacleActorCritic(act_dim, layout=layout, map_shape=map_shape)
+
+    return factory
 
 
 @dataclass
@@ -247,9 +265,20 @@ class ObstaclesVectorEnv(VectorEnv):
         """World (x, z) of env i's sensors, (16, 16, 2)."""
         return self._core.sensor_positions(i)
 
-    def set_target(self, i: int, x: float, z: float) -> None:
-        """Move env i's target (world meters); the next observation shows it."""
+    def current_frames(self) -> np.ndarray:
+        """Each env's current database frame (int64, N)."""
+        return np.array([self._core.state(i)["frame"] for i in range(self.num_envs)], np.int64)
+
+    def observe(self, i: int) -> np.ndarray:
+        """Env i's current observation (529,), also written to the env's observation buffer."""
+        out = self._core.observe(i)
+        self._obs[i] = out
+        return out
+
+    def set_target(self, i: int, x: float, z: float) -> np.ndarray:
+        """Move env i's target (world meters); returns its new observation."""
         self._core.set_target(i, float(x), float(z))
+        return self.observe(i)
 
 
 class ObstaclesEnv(gym.Env):
