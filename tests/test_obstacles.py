@@ -518,6 +518,10 @@ def test_bad_inputs_are_refused(db):
     with pytest.raises(ValueError, match="at most num_obstacles"):
         core.set_obstacles(0, np.zeros((101, 2), np.float32), np.zeros((101, 2), np.float32),
                            np.zeros(101, np.float32), np.zeros((101, 2), np.float32))
+    with pytest.raises(ValueError, match="half sizes must be in"):
+        core.set_obstacles(0, z2, np.full((1, 2), 1.6, np.float32), np.zeros(1, np.float32), z2)
+    with pytest.raises(ValueError, match="centres must lie in the square"):
+        core.set_obstacles(0, np.full((1, 2), 10.5, np.float32), z2, np.zeros(1, np.float32), z2)
     with pytest.raises(ValueError, match="speed_cap"):
         core.set_obstacles(0, z2, z2, np.zeros(1, np.float32), np.full((1, 2), 5.0, np.float32))
     with pytest.raises(ValueError, match="action"):

@@ -126,6 +126,14 @@ void ObstacleField::spawn(int env, Rng& rng, float max_speed, const ClearDisc* c
 void ObstacleField::set(int env, int n, const float* centres, const float* half_sizes, const float* angles,
                         const float* velocities) {
   if (n < 0 || n > config_.num_obstacles) throw std::invalid_argument("obstacle count exceeds the field's capacity");
+  // The grid's bounds and item capacity assume these limits; refuse rather than overflow.
+  const float h = config_.square_half, side = 0.5f * config_.max_side;
+  for (int k = 0; k < n; ++k) {
+    if (!(std::abs(centres[2 * k]) <= h) || !(std::abs(centres[2 * k + 1]) <= h))
+      throw std::invalid_argument("obstacle centres must lie in the square [-square_half, square_half]^2");
+    if (!(half_sizes[2 * k] >= 0 && half_sizes[2 * k] <= side) || !(half_sizes[2 * k + 1] >= 0 && half_sizes[2 * k + 1] <= side))
+      throw std::invalid_argument("obstacle half sizes must be in [0, max_side / 2]");
+  }
   count_[env] = n;
   for (int k = 0; k < n; ++k) {
     const size_t a = at(env, k);

@@ -29,6 +29,16 @@ TEST(ObstacleField, RefusesBadConfig) {
   EXPECT_THROW(ObstacleField(1, c), std::invalid_argument);
 }
 
+TEST(ObstacleField, SetRefusesObstaclesTheGridCannotHold) {
+  ObstacleField field(1, small_config());
+  const float c[2] = {0, 0}, big[2] = {1.6f, 0.1f}, ok[2] = {1.5f, 0.1f}, a[1] = {0}, v[2] = {0, 0};
+  const float far[2] = {10.5f, 0};
+  EXPECT_THROW(field.set(0, 1, c, big, a, v), std::invalid_argument);
+  EXPECT_THROW(field.set(0, 1, far, ok, a, v), std::invalid_argument);
+  EXPECT_THROW(field.set(0, 101, c, ok, a, v), std::invalid_argument);
+  EXPECT_NO_THROW(field.set(0, 1, c, ok, a, v));
+}
+
 TEST(ObstacleField, SensorMapMatchesBruteForceOnRandomRotatedScenes) {
   const int envs = 3;
   ObstacleField field(envs, small_config());

@@ -79,7 +79,8 @@ class ObstacleField {
   // obstacle that still fails becomes a 1 cm square in the farthest corner from the discs).
   void spawn(int env, Rng& rng, float max_speed, const ClearDisc* clear, int num_clear);
   // Replaces env's obstacles (count <= capacity): centres, half sizes (n x 2), angles (n),
-  // velocities (n x 2). Values are not checked here.
+  // velocities (n x 2). Throws std::invalid_argument unless every centre is in the square
+  // and every half size in [0, max_side / 2] (the grid is sized for those).
   void set(int env, int n, const float* centres, const float* half_sizes, const float* angles,
            const float* velocities);
   // Advances env's obstacles by dt seconds with bouncing.
