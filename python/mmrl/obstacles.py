@@ -17,7 +17,8 @@ buffers, autoreset bookkeeping, infos and the curriculum.
   in section 5).
   Mind the incentive: every surviving step earns up to 2, so under discounting (gamma 0.99)
   avoiding obstacles forever is worth far more than a bonus of 10; a short PPO run here
-  learned to wander (episode length 15 -> 195 at stage 1). A bonus of a few hundred removes it.
+  learned to wander (episode length 15 -> 195 at stage 1). A bonus of a few hundred should
+  remove the incentive (a 150k-step run with 200 did not wander but had not left stage 1 yet).
 - termination: success, or collision of the body disc (``body_radius``) with any obstacle,
   both tested on every played frame. Truncation only at the ``max_steps`` safety cap (the
   paper has no step limit).
