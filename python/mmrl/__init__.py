@@ -8,6 +8,7 @@ from . import _core  # noqa: F401  (the C++ core)
 from .bvh import BVHError, JointRoleError, Motion, load_bvh, parse_bvh
 from .database import Database, DatabaseFileError
 from .search import KDTree
+from .ppo import CheckpointError, NonFiniteError, PPOConfig, TrainResult, load_policy, train
 from . import synth, data  # noqa: F401
 from .envs import register_envs as _register_envs
 
@@ -20,4 +21,5 @@ except PackageNotFoundError:  # running from a source tree without installing
     __version__ = "0.0.0+unknown"
 
 __all__ = ["__version__", "BVHError", "JointRoleError", "Motion", "load_bvh", "parse_bvh", "Database",
-           "DatabaseFileError", "KDTree"]
+           "DatabaseFileError", "KDTree", "PPOConfig", "TrainResult", "train",
+           "load_policy", "CheckpointError", "NonFiniteError"]
