@@ -13,6 +13,7 @@ from . import synth, data  # noqa: F401
 from .envs import register_envs as _register_envs
 
 _register_envs()
+from . import obstacles as _obstacles  # noqa: F401,E402  (registers mmrl/MovingObstacles-v0)
 
 try:
     __version__ = _version("mmrl")
