@@ -160,7 +160,8 @@ void bind_character(py::module_& m) {
         const py::ssize_t n = f.size();
         {
           py::gil_scoped_release release;
-          for (py::ssize_t i = 0; i < n; ++i) database_pose_global(db, fp[i], o + i * db.num_joints * 3);
+          std::vector<float> scratch(static_cast<size_t>(db.num_joints) * 4);
+          for (py::ssize_t i = 0; i < n; ++i) database_pose_global(db, fp[i], o + i * db.num_joints * 3, scratch.data());
         }
         return out;
       },

@@ -18,10 +18,10 @@ inline float smoothstep(float x) { return x * x * (3.0f - 2.0f * x); }
 
 }  // namespace
 
-void database_pose_global(const Database& db, int64_t frame, float* positions) {
+void database_pose_global(const Database& db, int64_t frame, float* positions, float* rotations_scratch) {
   const size_t o = static_cast<size_t>(frame) * db.num_joints;
   pose_forward_kinematics(db.skeleton.parents, &db.bone_translations[o * 3], &db.bone_rotations[o * 4], positions,
-                          nullptr);
+                          rotations_scratch);
 }
 
 Character::Character(const Database& db, const Matcher& matcher, const CharacterOptions& options)

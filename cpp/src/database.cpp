@@ -105,11 +105,11 @@ void database_compute_contacts(Database& db, const ContactOptions& opt) {
   // Global positions of the two toes and two ankles (N x 4 x 3), one FK per frame.
   const int joints[4] = {db.roles.toe[0], db.roles.toe[1], db.roles.foot[0], db.roles.foot[1]};
   std::vector<float> track(static_cast<size_t>(N) * 4 * 3);
-  std::vector<float> gp(static_cast<size_t>(J) * 3);
+  std::vector<float> gp(static_cast<size_t>(J) * 3), gr(static_cast<size_t>(J) * 4);
   for (int f = 0; f < N; ++f) {
     const size_t o = static_cast<size_t>(f) * J;
     pose_forward_kinematics(db.skeleton.parents, &db.bone_translations[o * 3], &db.bone_rotations[o * 4], gp.data(),
-                            nullptr);
+                            gr.data());
     for (int k = 0; k < 4; ++k)
       for (int c = 0; c < 3; ++c) track[(static_cast<size_t>(f) * 4 + k) * 3 + c] = gp[joints[k] * 3 + c];
   }

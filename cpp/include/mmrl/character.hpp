@@ -49,7 +49,8 @@ struct CharacterOptions {
 };
 
 // Global positions (J x 3, meters) of database frame f in the database's world.
-void database_pose_global(const Database& db, int64_t frame, float* positions);
+// rotations_scratch: J x 4 floats of caller-owned scratch (the global rotations on return).
+void database_pose_global(const Database& db, int64_t frame, float* positions, float* rotations_scratch);
 
 class Character {
  public:
