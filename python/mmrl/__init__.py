@@ -8,6 +8,8 @@ from . import _core  # noqa: F401  (the C++ core)
 from .bvh import BVHError, JointRoleError, Motion, load_bvh, parse_bvh
 from .database import Database, DatabaseFileError
 from .search import KDTree
+from .controller import Controller, StepResult
+from . import metrics, policies  # noqa: F401
 from . import synth, data  # noqa: F401
 from .envs import register_envs as _register_envs
 
@@ -19,4 +21,4 @@ except PackageNotFoundError:  # running from a source tree without installing
     __version__ = "0.0.0+unknown"
 
 __all__ = ["__version__", "BVHError", "JointRoleError", "Motion", "load_bvh", "parse_bvh", "Database",
-           "DatabaseFileError", "KDTree"]
+           "DatabaseFileError", "KDTree", "Controller", "StepResult", "metrics", "policies"]
