@@ -44,8 +44,12 @@ def _quality(db: Database, rec: Dict[str, np.ndarray]) -> Dict[str, float]:
 
 def evaluate_plane(db: Database, policy, *, episodes: int = 20, seed: int = 0,
                    config: Optional[PlaneConfig] = None, ik: bool = True, foot_locking: bool = True,
-                   inertialization_halflife: float = 0.1, fast: bool = False) -> Dict[str, Any]:
+                   inertialization_halflife: float = 0.1, fast: bool = False,
+                   target_distance: Optional[float] = None) -> Dict[str, Any]:
     """Run plane-task episodes with ``policy.act(obs[1, 17]) -> actions[1, 12]``.
+
+    ``target_distance`` (meters) puts every target at that distance in a uniformly random
+    direction instead of the task's square.
 
     Returns success_rate, mean_time_to_target_s (successful episodes), the quality metrics
     over all played frames (foot sliding and transitions averaged over episodes weighted by
@@ -68,7 +72,11 @@ def evaluate_plane(db: Database, policy, *, episodes: int = 20, seed: int = 0,
     for _ in range(episodes):
         start = int(rng.choice(valid))
         yaw = float(rng.uniform(-np.pi, np.pi)) if config.random_heading else 0.0
-        target = sample_target(rng, config)
+        if target_distance is None:
+            target = sample_target(rng, config)
+        else:
+            a = rng.uniform(-np.pi, np.pi)
+            target = float(target_distance) * np.array([np.sin(a), np.cos(a)])
         ctrl.reset(start, (0.0, 0.0), yaw)
         success, time_s = False, None
         for step in range(config.max_steps):

@@ -291,13 +291,15 @@ def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray
         raise ValueError(f"{path}: the output must end in .mp4 or .gif")
     pos = recording["positions"]
     fps = float(fps or recording.get("fps", db.fps))
+    if suffix == ".mp4":  # H.264 with 4:2:0 chroma needs even sizes
+        width, height = width - width % 2, height - height % 2
     targets = recording.get("targets")
     qframes = recording.get("query_frames")
     renderer = Renderer(db.parents, body_joints=body_joints(db), joint_names=db.joint_names, width=width,
                         height=height, success_radius=success_radius)
     path.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".mp4":
-        writer = iio.get_writer(str(path), fps=fps, codec="libx264", quality=7, macro_block_size=8,
+        writer = iio.get_writer(str(path), fps=fps, codec="libx264", quality=7, macro_block_size=2,
                                 ffmpeg_log_level="error", pixelformat="yuv420p")
     else:
         writer = iio.get_writer(str(path), mode="I", duration=1000.0 / fps, loop=0)
