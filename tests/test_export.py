@@ -9,17 +9,15 @@ import mmrl
 from mmrl.cli import main
 
 
-def read_video(path):
-    """All frames of a video through imageio-ffmpeg, closing the ffmpeg pipes."""
+def read_video(path, width, height):
+    """All frames of a video decoded by imageio-ffmpeg's ffmpeg (subprocess.run closes every pipe)."""
+    import subprocess
+
     import imageio_ffmpeg
 
-    gen = imageio_ffmpeg.read_frames(str(path))
-    try:
-        meta = next(gen)
-        w, h = meta["size"]
-        return [np.frombuffer(b, np.uint8).reshape(h, w, 3) for b in gen]
-    finally:
-        gen.close()
+    out = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path), "-f", "rawvideo",
+                          "-pix_fmt", "rgb24", "-"], capture_output=True, check=True).stdout
+    return np.frombuffer(out, np.uint8).reshape(-1, height, width, 3)
 
 
 def test_export_bvh_round_trip_synthetic(tmp_path, capsys):
@@ -50,7 +48,7 @@ def test_render_mp4_shows_the_character_moving(tmp_path, shared_data):
     data = sorted((shared_data / "normal").glob("*.bvh"))[:30]
     assert main(["render", "--data", *map(str, data), "--seconds", "2", "-o", str(out),
                  "--size", "320x180", "--still", str(tmp_path / "still.png")]) == 0
-    frames = read_video(out)
+    frames = read_video(out, 320, 180)
     assert len(frames) == 61 and frames[0].shape == (180, 320, 3)
     assert np.abs(frames[0].astype(np.int16) - frames[-1]).mean() > 1.0
     assert (tmp_path / "still.png").stat().st_size > 1000
