@@ -102,6 +102,21 @@ void bind_env(py::module_& m) {
           },
           py::arg("index"), "The world-space state of environment i (root, frame, target).")
       .def(
+          "observe",
+          [](const PyPlaneVecEnv& s, int i, const py::handle& out) {
+            if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
+            float* o = out_buffer<float>(out, "out", {PlaneVecEnv::kObsDim});
+            s.env.observe(i, o);
+          },
+          py::arg("index"), py::arg("out"), "Writes environment i's current observation into out (float32, 17).")
+      .def(
+          "current_frames",
+          [](const PyPlaneVecEnv& s, const py::handle& out) {
+            int64_t* o = out_buffer<int64_t>(out, "out", {s.env.num_envs()});
+            for (int i = 0; i < s.env.num_envs(); ++i) o[i] = s.env.state(i).frame;
+          },
+          py::arg("out"), "Writes each environment's current database frame into out (int64, N).")
+      .def(
           "set_target",
           [](PyPlaneVecEnv& s, int i, float x, float z) {
             if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");

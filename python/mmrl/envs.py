@@ -178,9 +178,23 @@ class PlaneVectorEnv(VectorEnv):
         """World-space state of environment i: root x, z, yaw, database frame, target."""
         return self._core.state(i)
 
-    def set_target(self, i: int, x: float, z: float) -> None:
-        """Move environment i's target (world meters) and return nothing; the next observation shows it."""
+    def current_frames(self) -> np.ndarray:
+        """Each environment's current database frame (int64, N)."""
+        out = np.empty(self.num_envs, np.int64)
+        self._core.current_frames(out)
+        return out
+
+    def set_target(self, i: int, x: float, z: float) -> np.ndarray:
+        """Move environment i's target (world meters); returns its new observation."""
         self._core.set_target(i, float(x), float(z))
+        return self.observe(i)
+
+    def observe(self, i: int) -> np.ndarray:
+        """Environment i's current observation (17,)."""
+        out = np.empty(_core.PlaneVecEnv.obs_dim, np.float32)
+        self._core.observe(i, out)
+        self._obs[i] = out
+        return out
 
     def render(self):
         from .render import render_topdown

@@ -1,0 +1,176 @@
+"""The paper's policy and value networks (section 5, Figure 3).
+
+Every actor-critic here has the interface ``mmrl.ppo`` relies on:
+
+- ``actor_mean(obs) -> (B, act_dim)``: the mean of the Gaussian policy, with
+  no tanh squashing; the env clips actions to its box.
+- ``value(obs) -> (B,)``: the state value.
+- ``log_std``: a learnable, state-independent log standard deviation per
+  action dimension. The paper does not say; RLlib's default (the authors')
+  makes it a network output, but a free parameter is the common choice for
+  PPO on continuous control, is cheaper, and keeps exploration from collapsing
+  in states the value function has not seen yet.
+- ``init_kwargs``: the constructor arguments, saved in checkpoints so
+  ``mmrl.ppo.load_policy`` can rebuild the network without the env.
+
+Policy and value networks never share weights, as in the paper.
+Observations arrive already normalized by PPO (see ``PPOConfig.obs_norm``).
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+__all__ = ["PlaneActorCritic", "ObstacleActorCritic", "OBSTACLE_DEFAULT_LAYOUT"]
+
+
+def _linear(in_features: int, out_features: int, gain: float = math.sqrt(2)) -> nn.Linear:
+    """A linear layer with orthogonal weights and zero bias (the usual PPO init)."""
+    layer = nn.Linear(in_features, out_features)
+    nn.init.orthogonal_(layer.weight, gain)
+    nn.init.zeros_(layer.bias)
+    return layer
+
+
+def _mlp(in_features: int, hidden: tuple[int, ...], out_features: int, out_gain: float,
+         activation: type[nn.Module]) -> nn.Sequential:
+    layers: list[nn.Module] = []
+    width = in_features
+    for size in hidden:
+        layers += [_linear(width, size), activation()]
+        width = size
+    layers.append(_linear(width, out_features, out_gain))
+    return nn.Sequential(*layers)
+
+
+class PlaneActorCritic(nn.Module):
+    """Plane task: policy MLP 32 x 32 tanh -> action mean; value MLP 32 x 32 tanh -> 1.
+
+    obs = [c_t (15 pose features), g_t (2, target in the character frame, m)],
+    but any flat observation works. The policy's last layer starts near zero
+    (gain 0.01) so the first actions are centred in the action box.
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden: tuple[int, ...] = (32, 32),
+                 init_log_std: float = 0.0):
+        super().__init__()
+        self.init_kwargs = dict(obs_dim=obs_dim, act_dim=act_dim, hidden=tuple(hidden),
+                                init_log_std=init_log_std)
+        self.actor = _mlp(obs_dim, tuple(hidden), act_dim, 0.01, nn.Tanh)
+        self.critic = _mlp(obs_dim, tuple(hidden), 1, 1.0, nn.Tanh)
+        self.log_std = nn.Parameter(torch.full((act_dim,), float(init_log_std)))
+
+    def actor_mean(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.actor(obs)
+
+    def value(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.critic(obs).squeeze(-1)
+
+
+#: Default flat-obs layout of the moving-obstacles task: name and size of each
+#: consecutive segment. "maps" is the two 16 x 16 binary sensor maps as
+#: (channel, row, col) in C order, channel 0 the current map and channel 1 the
+#: previous one; then c_t (15 pose features) and g_t (2, target in meters in the
+#: character frame).
+OBSTACLE_DEFAULT_LAYOUT: tuple[tuple[str, int], ...] = (("maps", 2 * 16 * 16), ("pose", 15), ("goal", 2))
+
+
+class _ObstacleTower(nn.Module):
+    """conv 16@4x4 -> conv 32@3x3 (stride 1, no padding) -> FC 128; concat the
+    vector part; FC 256 -> FC 128 -> head. ReLU throughout (the paper does not
+    name the activation)."""
+
+    def __init__(self, map_shape: tuple[int, int, int], vector_dim: int, out_features: int,
+                 out_gain: float):
+        super().__init__()
+        channels, height, width = map_shape
+        self.conv = nn.Sequential(
+            nn.Conv2d(channels, 16, 4, stride=1), nn.ReLU(),
+            nn.Conv2d(16, 32, 3, stride=1), nn.ReLU(),
+            nn.Flatten(),
+        )
+        conv_out = 32 * (height - 3 - 2) * (width - 3 - 2)
+        for module in self.conv:
+            if isinstance(module, nn.Conv2d):
+                nn.init.orthogonal_(module.weight, math.sqrt(2))
+                nn.init.zeros_(module.bias)
+        self.map_fc = nn.Sequential(_linear(conv_out, 128), nn.ReLU())
+        self.head = nn.Sequential(
+            _linear(128 + vector_dim, 256), nn.ReLU(),
+            _linear(256, 128), nn.ReLU(),
+            _linear(128, out_features, out_gain),
+        )
+
+    def forward(self, maps: torch.Tensor, vector: torch.Tensor) -> torch.Tensor:
+        features = self.map_fc(self.conv(maps))
+        return self.head(torch.cat([features, vector], dim=-1))
+
+
+class ObstacleActorCritic(nn.Module):
+    """Moving-obstacles task: separate CNN towers for policy and value.
+
+    The observation is one flat float vector; ``layout`` names its consecutive
+    segments and sizes (default ``OBSTACLE_DEFAULT_LAYOUT``: 512 map entries,
+    then 15 pose, then 2 goal). The segment named "maps" is reshaped to
+    ``map_shape`` (C, H, W); every other segment is concatenated, in layout
+    order, into the vector that joins after the map's FC 128 layer. Pass the
+    env's layout here if it differs.
+
+    PPO should leave the binary maps unnormalized: pass
+    ``PPOConfig(obs_norm_exclude=ObstacleActorCritic.map_range(layout))``.
+    """
+
+    def __init__(self, act_dim: int, layout: tuple[tuple[str, int], ...] = OBSTACLE_DEFAULT_LAYOUT,
+                 map_shape: tuple[int, int, int] = (2, 16, 16), init_log_std: float = 0.0):
+        super().__init__()
+        layout = tuple((str(name), int(size)) for name, size in layout)
+        names = [name for name, _ in layout]
+        if names.count("maps") != 1:
+            raise ValueError(f"ObstacleActorCritic: layout needs exactly one 'maps' segment, got {names}")
+        map_start, map_stop = self.map_range(layout)
+        if map_stop - map_start != math.prod(map_shape):
+            raise ValueError(f"ObstacleActorCritic: 'maps' segment has {map_stop - map_start} entries "
+                             f"but map_shape {tuple(map_shape)} needs {math.prod(map_shape)}")
+        self.init_kwargs = dict(act_dim=act_dim, layout=layout, map_shape=tuple(map_shape),
+                                init_log_std=init_log_std)
+        self.obs_dim = sum(size for _, size in layout)
+        self.map_shape = tuple(map_shape)
+        self._map_slice = slice(map_start, map_stop)
+        # Vector segments: everything but the maps, in layout order. Usually one
+        # contiguous run after the maps, which makes the split a cheap view.
+        vector_idx = [i for i in range(self.obs_dim) if not map_start <= i < map_stop]
+        self._vector_contiguous = vector_idx == list(range(vector_idx[0], vector_idx[-1] + 1)) if vector_idx else True
+        self._vector_slice = slice(vector_idx[0], vector_idx[-1] + 1) if vector_idx else slice(0, 0)
+        self.register_buffer("_vector_index", torch.tensor(vector_idx, dtype=torch.long), persistent=False)
+        vector_dim = len(vector_idx)
+        self.actor = _ObstacleTower(self.map_shape, vector_dim, act_dim, 0.01)
+        self.critic = _ObstacleTower(self.map_shape, vector_dim, 1, 1.0)
+        self.log_std = nn.Parameter(torch.full((act_dim,), float(init_log_std)))
+
+    @staticmethod
+    def map_range(layout: tuple[tuple[str, int], ...] = OBSTACLE_DEFAULT_LAYOUT) -> tuple[int, int]:
+        """(start, stop) of the "maps" segment in the flat observation."""
+        start = 0
+        for name, size in layout:
+            if name == "maps":
+                return start, start + int(size)
+            start += int(size)
+        raise ValueError(f"layout has no 'maps' segment: {layout}")
+
+    def _split(self, obs: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        if obs.shape[-1] != self.obs_dim:
+            raise ValueError(f"ObstacleActorCritic: expected obs with {self.obs_dim} entries, got {tuple(obs.shape)}")
+        maps = obs[:, self._map_slice].reshape(obs.shape[0], *self.map_shape)
+        if self._vector_contiguous:
+            vector = obs[:, self._vector_slice]
+        else:
+            vector = obs.index_select(1, self._vector_index)
+        return maps, vector
+
+    def actor_mean(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.actor(*self._split(obs))
+
+    def value(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.critic(*self._split(obs)).squeeze(-1)

@@ -1,0 +1,133 @@
+"""Learning-curve and trajectory plots of a training run (the paper's Figure 4), as PNG."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+import re
+from pathlib import Path
+from typing import List, Optional
+
+import numpy as np
+
+
+def read_metrics(run: Path) -> dict:
+    """metrics.csv as a dict of float arrays (missing values are NaN)."""
+    path = Path(run) / "metrics.csv"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no metrics in this run directory")
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        raise ValueError(f"{path}: no rows yet")
+    out = {}
+    for k in rows[0]:
+        vals = []
+        for r in rows:
+            try:
+                vals.append(float(r[k]))
+            except (TypeError, ValueError):
+                vals.append(math.nan)
+        out[k] = np.array(vals)
+    return out
+
+
+def snapshot_paths(run: Path) -> List[tuple]:
+    """(step, path) of RUN/snapshot_<step>.pt files, sorted by step."""
+    snaps = []
+    for p in Path(run).glob("snapshot_*.pt"):
+        m = re.fullmatch(r"snapshot_(\d+)\.pt", p.name)
+        if m:
+            snaps.append((int(m.group(1)), p))
+    return sorted(snaps)
+
+
+def rollout_to_targets(policy, db, targets, seed: int = 0, max_steps: int = 100, config=None):
+    """Drive one character from the same start toward each target in turn (one episode per
+    target, each from the seeded start). Returns a list of (K, 2) root paths (x, z)."""
+    from .envs import PlaneVectorEnv
+
+    paths = []
+    for tx, tz in targets:
+        env = PlaneVectorEnv(1, db=db, config=config, num_threads=1, max_steps=max_steps)
+        env.reset(seed=seed)
+        obs = env.set_target(0, tx, tz)[None]
+        st = env.env_state(0)
+        path = [(st["x"], st["z"])]
+        for _ in range(max_steps):
+            obs, _, term, trunc, info = env.step(policy.act(obs, deterministic=True))
+            if term[0] or trunc[0]:
+                break
+            st = env.env_state(0)
+            path.append((st["x"], st["z"]))
+        if term[0]:
+            path.append((tx, tz))  # reached: the last played frames end within 0.5 m
+        paths.append(np.array(path))
+    return paths
+
+
+def plot_run(run: Path, out_dir: Optional[Path] = None, num_targets: int = 4, seed: int = 0) -> List[Path]:
+    """Write learning.png (return, length and success against steps and wall time) and, when the
+    run has snapshots, trajectories.png (top-down paths of each snapshot toward the same targets)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    run = Path(run)
+    out_dir = Path(out_dir) if out_dir else run / "plots"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    m = read_metrics(run)
+    written = []
+    fig, axes = plt.subplots(2, 3, figsize=(13, 7), constrained_layout=True)
+    series = [("episode_return", "episode return"), ("episode_length", "episode length (steps)"),
+              ("success_rate", "success rate")]
+    snaps = snapshot_paths(run)
+    for row, (xkey, xlabel) in enumerate([("step", "env steps"), ("wall_s", "training wall time (s)")]):
+        for col, (key, label) in enumerate(series):
+            ax = axes[row, col]
+            if key in m:
+                ax.plot(m[xkey], m[key], lw=1.2)
+            ax.set_xlabel(xlabel)
+            ax.set_ylabel(label)
+            ax.grid(alpha=0.3)
+            for k, (step, _) in enumerate(snaps):
+                x = step if xkey == "step" else np.interp(step, m["step"], m["wall_s"])
+                ax.axvline(x, ls="--", lw=0.8, color=f"C{k + 1}")
+    fig.suptitle(f"{run.name}: learning curves")
+    path = out_dir / "learning.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    written.append(path)
+
+    if snaps:
+        from . import ppo
+        from .commands.train import load_database
+
+        cfg = json.loads((run / "config.json").read_text()) if (run / "config.json").exists() else {}
+        if cfg.get("task", "plane") == "plane":
+            db = load_database(cfg.get("data", {"synthetic": True}))
+            rng = np.random.default_rng(seed)
+            angles = np.linspace(0, 2 * np.pi, num_targets, endpoint=False) + rng.uniform(0, np.pi)
+            targets = [(4.0 * np.cos(a), 4.0 * np.sin(a)) for a in angles]
+            fig, ax = plt.subplots(figsize=(6.5, 6.5), constrained_layout=True)
+            for k, (step, p) in enumerate(snaps):
+                policy = ppo.load_policy(p)
+                for j, path_xz in enumerate(rollout_to_targets(policy, db, targets, seed=seed)):
+                    ax.plot(path_xz[:, 0], path_xz[:, 1], color=f"C{k + 1}", lw=1.5,
+                            label=f"{step:,} steps" if j == 0 else None)
+            for tx, tz in targets:
+                ax.add_patch(plt.Circle((tx, tz), 0.5, color="crimson", alpha=0.3))
+                ax.plot(tx, tz, "x", color="crimson")
+            ax.plot(0, 0, "ko")
+            ax.set_aspect("equal")
+            ax.set_xlabel("x (m)")
+            ax.set_ylabel("z (m)")
+            ax.grid(alpha=0.3)
+            ax.legend(loc="upper right", fontsize=8)
+            ax.set_title("top-down paths of checkpoints toward the same targets")
+            path = out_dir / "trajectories.png"
+            fig.savefig(path, dpi=110)
+            plt.close(fig)
+            written.append(path)
+    return written
