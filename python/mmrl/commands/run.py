@@ -76,13 +76,33 @@ def resolve_database(args: argparse.Namespace):
     if args.db or args.data:
         return resolve(db=args.db, data=args.data)
     cfg = _run_config(args.run)
-    # A run's config may name its database file or its BVH data (top level or under "env").
-    for section in (cfg, cfg.get("env", {}) if isinstance(cfg.get("env"), dict) else {}):
-        if section.get("db"):
-            return resolve(db=section["db"])
-        if section.get("data"):
-            return resolve(data=section["data"], mirror=bool(section.get("mirror", False)))
+    # 'mmrl train' writes {"data": {"db": FILE} | {"data": [PATHS], "mirror": bool} | {}}.
+    spec = cfg.get("data")
+    if isinstance(spec, (str, list)):
+        spec = {"data": spec}
+    spec = spec if isinstance(spec, dict) else {}
+    if spec.get("db"):
+        return resolve(db=spec["db"])
+    if spec.get("data"):
+        return resolve(data=spec["data"], mirror=bool(spec.get("mirror", False)))
     return resolve()
+
+
+def resolve_task_config(args: argparse.Namespace):
+    """The plane task's numbers: the run's own (config.json "task_config") when given, else the defaults."""
+    from dataclasses import fields
+
+    from ..envs import PlaneConfig
+
+    cfg = PlaneConfig()
+    saved = _run_config(args.run)
+    if saved.get("task", "plane") != "plane":
+        raise ValueError(f"{args.run} is a '{saved.get('task')}' run; only --env plane is evaluated so far")
+    names = {f.name for f in fields(PlaneConfig)}
+    for k, v in (saved.get("task_config") or {}).items():
+        if k in names:
+            setattr(cfg, k, v)
+    return cfg
 
 
 def resolve_policy(args: argparse.Namespace, db):
@@ -117,7 +137,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     db = resolve_database(args)
     policy, name = resolve_policy(args, db)
     t0 = time.perf_counter()
-    res = evaluate_plane(db, policy, episodes=args.episodes, seed=args.seed, **_options(args))
+    res = evaluate_plane(db, policy, episodes=args.episodes, seed=args.seed, config=resolve_task_config(args),
+                         **_options(args))
     res.update({"policy": name, "env": args.env, "seed": args.seed, "ik": not args.no_ik,
                 "inertialization": not args.no_inertialization, "wall_time_s": time.perf_counter() - t0})
     if args.json:
@@ -139,7 +160,8 @@ def _follow(args):
         raise ValueError("--seconds must be positive")
     db = resolve_database(args)
     policy, _ = resolve_policy(args, db)
-    return db, follow_targets(db, policy, seconds=args.seconds, seed=args.seed, **_options(args))
+    return db, follow_targets(db, policy, seconds=args.seconds, seed=args.seed, config=resolve_task_config(args),
+                              **_options(args))
 
 
 def cmd_render(args: argparse.Namespace) -> int:
