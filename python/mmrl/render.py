@@ -274,6 +274,26 @@ def render_frame(positions: np.ndarray, parents: Sequence[int], *, body_joints=N
                   obstacles=obstacles, text=text, snap_camera=True)
 
 
+def render_state(db, state: dict, *, width: int = 640, height: int = 360) -> np.ndarray:
+    """An env state (``env_state()``: root x, z, yaw, database frame, target) as one RGB image.
+
+    The database pose of the frame is placed at the root by the map from the frame's
+    character frame to the world root (no inertialization or IK: the env's fast path keeps no
+    pose history).
+    """
+    from . import _core
+    from .metrics import body_joints
+
+    f = int(state["frame"])
+    q = _core.database_global_positions(db._db, np.array([f], np.int64))[0].astype(np.float64)
+    a = float(state["yaw"]) - float(db.root_yaws[f])
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    p = (q - db.root_positions[f]) @ rot.T + np.array([state["x"], 0.0, state["z"]])
+    return render_frame(p, db.parents, body_joints=body_joints(db), joint_names=db.joint_names,
+                        targets=state.get("target"), obstacles=state.get("obstacles"), width=width, height=height,
+                        text=f"step {state.get('steps', 0)}")
+
+
 def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray], db, *, obstacles=None,
                  width: int = 640, height: int = 360, fps: Optional[float] = None,
                  success_radius: float = 0.5) -> int:
