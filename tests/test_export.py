@@ -75,3 +75,23 @@ def test_run_directory_without_ppo_or_policy(tmp_path, capsys):
     assert main(["eval", str(tmp_path), "--episodes", "1", "--policy", "joystick-run", "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["policy"] == "joystick-run"
     assert main(["eval", str(tmp_path / "missing"), "--episodes", "1"]) == 2
+
+
+def test_pose_bindings_refuse_bad_input():
+    from mmrl import _core
+    from mmrl.envs import default_database
+
+    db = default_database()
+    J = db.num_joints
+    t, r = np.zeros((2, J, 3), np.float32), np.tile(np.array([1, 0, 0, 0], np.float32), (2, J, 1))
+    assert _core.motion_from_pose(db._db, t, r).num_frames == 2
+    with pytest.raises(TypeError, match="float32"):
+        _core.motion_from_pose(db._db, t.astype(np.float64), r)
+    with pytest.raises(ValueError, match="dimension 0"):
+        _core.motion_from_pose(db._db, t, r[:1])
+    with pytest.raises(ValueError, match="NaN"):
+        _core.motion_from_pose(db._db, t, np.full_like(r, np.nan))
+    with pytest.raises(TypeError, match="int64"):
+        _core.database_global_positions(db._db, np.zeros(3, np.int32))
+    with pytest.raises(IndexError):
+        _core.database_global_positions(db._db, np.array([db.num_frames], np.int64))
