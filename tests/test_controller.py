@@ -6,7 +6,7 @@ import pytest
 import mmrl
 from mmrl import _core
 from mmrl.envs import PlaneConfig, default_database
-from mmrl.evaluation import evaluate_plane
+from mmrl.rollouts import evaluate_full_path
 from mmrl.policies import JoystickPolicy
 
 
@@ -151,7 +151,7 @@ def test_contacts_are_saved_and_old_files_refused(synth_db, tmp_path):
 
 # ---------------------------------------------------------------- acceptance on the shared data
 def test_joystick_reaches_targets_5m_away(normal_db):
-    res = evaluate_plane(normal_db, JoystickPolicy.preset(normal_db, "joystick"), episodes=20, seed=0,
+    res = evaluate_full_path(normal_db, JoystickPolicy.preset(normal_db, "joystick"), episodes=20, seed=0,
                          target_distance=5.0)
     # The decision rule has no exclusion window around the current frame, so a target right
     # behind the character can trap it replaying one 6-frame loop (about 3% of episodes on one
@@ -162,16 +162,16 @@ def test_joystick_reaches_targets_5m_away(normal_db):
 
 def test_ik_halves_foot_sliding(normal_db):
     pol = JoystickPolicy.preset(normal_db, "joystick")
-    on = evaluate_plane(normal_db, pol, episodes=10, seed=1)["foot_sliding_cm_per_s"]
-    off = evaluate_plane(normal_db, pol, episodes=10, seed=1, ik=False, foot_locking=False)["foot_sliding_cm_per_s"]
+    on = evaluate_full_path(normal_db, pol, episodes=10, seed=1)["foot_sliding_cm_per_s"]
+    off = evaluate_full_path(normal_db, pol, episodes=10, seed=1, ik=False, foot_locking=False)["foot_sliding_cm_per_s"]
     assert on <= 0.5 * off
 
 
 def test_inertialization_lowers_the_largest_pose_jump(normal_db):
     pol = JoystickPolicy.preset(normal_db, "joystick")
     kw = dict(episodes=10, seed=2, ik=False, foot_locking=False)
-    soft = evaluate_plane(normal_db, pol, inertialization_halflife=0.1, **kw)["max_pose_jump_cm"]
-    hard = evaluate_plane(normal_db, pol, inertialization_halflife=0.0, **kw)["max_pose_jump_cm"]
+    soft = evaluate_full_path(normal_db, pol, inertialization_halflife=0.1, **kw)["max_pose_jump_cm"]
+    hard = evaluate_full_path(normal_db, pol, inertialization_halflife=0.0, **kw)["max_pose_jump_cm"]
     assert soft < hard
 
 

@@ -154,6 +154,18 @@ class PPOConfig:
     """Clip scaled rewards to [-reward_clip, reward_clip]; None keeps the bonus
     intact (clipping at the common 10 would flatten a +1000 bonus)."""
 
+    init_log_std: float = 0.0
+    """Initial log standard deviation of the Gaussian policy (in the policy's action units;
+    with ``rescale_actions`` 0 means one box half-width). Used by the default network."""
+
+    rescale_actions: bool = True
+    """When the env's action Box is finite, the policy acts in standardized units:
+    env action = center + half_width * a, so a = +-1 reaches the box's faces and the
+    initial exploration (std 1) spans the box in every dimension, however different the
+    dimensions' ranges. The mmrl tasks' boxes (normalized trajectory features, +-3 std per
+    dimension) differ by 10x between dimensions; without this, exploration is far too wide
+    in the narrow ones. Saved in checkpoints and applied by ``load_policy``."""
+
     device: str = "auto"
     """"auto" = CUDA if available, else CPU; or any torch device string."""
 
@@ -440,10 +452,13 @@ class Policy:
     """A trained policy for evaluation and rendering: applies the saved
     observation normalization, then the Gaussian mean (deterministic) or a sample."""
 
-    def __init__(self, model: nn.Module, obs_normalizer: ObsNormalizer, device: torch.device):
+    def __init__(self, model: nn.Module, obs_normalizer: ObsNormalizer, device: torch.device,
+                 action_center: Optional[np.ndarray] = None, action_half: Optional[np.ndarray] = None):
         self.model = model.eval()
         self.obs_normalizer = obs_normalizer
         self.device = device
+        self.action_center = action_center
+        self.action_half = action_half
 
     @torch.inference_mode()
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
@@ -457,6 +472,8 @@ class Policy:
         if not deterministic:
             mean = mean + self.model.log_std.exp() * torch.randn_like(mean)
         actions = mean.float().cpu().numpy()
+        if self.action_center is not None:
+            actions = (self.action_center + self.action_half * actions).astype(np.float32)
         return actions[0] if single else actions
 
 
@@ -472,7 +489,10 @@ def load_policy(path: str | os.PathLike, device: str = "cpu") -> Policy:
     obs_dim = state["obs_normalizer"]["rms"]["mean"].shape[0]
     normalizer = ObsNormalizer(obs_dim, True, None, 10.0, device_t)
     normalizer.load_state_dict(state["obs_normalizer"])
-    return Policy(model, normalizer, device_t)
+    center, half = state.get("action_center"), state.get("action_half")
+    return Policy(model, normalizer, device_t,
+                  None if center is None else np.asarray(center, np.float32),
+                  None if half is None else np.asarray(half, np.float32))
 
 
 # ----------------------------------------------------------------------------- training
@@ -483,9 +503,9 @@ def _resolve_device(device: str) -> torch.device:
     return torch.device(device)
 
 
-def _default_policy_factory(obs_dim: int, act_dim: int) -> nn.Module:
+def _default_policy_factory(obs_dim: int, act_dim: int, init_log_std: float = 0.0) -> nn.Module:
     from .networks import PlaneActorCritic
-    return PlaneActorCritic(obs_dim, act_dim)
+    return PlaneActorCritic(obs_dim, act_dim, init_log_std=init_log_std)
 
 
 def _check_env(envs: gym.vector.VectorEnv) -> tuple[int, int]:
@@ -587,6 +607,11 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
     if not resume and latest_path.exists():
         raise FileExistsError(f"{out_dir} already holds a run ({latest_path}); pass resume=True or use a new directory")
     obs_dim, act_dim = _check_env(envs)
+    action_center = action_half = None
+    space = envs.single_action_space
+    if cfg.rescale_actions and np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high)):
+        action_center = ((space.high + space.low) / 2).astype(np.float32)
+        action_half = ((space.high - space.low) / 2).astype(np.float32)
     num_envs, T = envs.num_envs, cfg.num_steps
     batch_size = T * num_envs
     minibatch_size = max(1, batch_size // cfg.num_minibatches)
@@ -600,7 +625,10 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
     torch.manual_seed(cfg.seed)
     generator = torch.Generator().manual_seed(cfg.seed)
 
-    model = (policy_factory or _default_policy_factory)(obs_dim, act_dim).to(device)
+    if policy_factory is None:
+        model = _default_policy_factory(obs_dim, act_dim, cfg.init_log_std).to(device)
+    else:
+        model = policy_factory(obs_dim, act_dim).to(device)
     # The fused Adam kernel (CPU and CUDA, torch >= 2.4) is ~7x cheaper per step
     # than the default for-loop on these tiny networks.
     try:
@@ -640,6 +668,8 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
             "return_rms": return_rms.state_dict(), "global_step": global_step, "wall_s": wall_s,
             "iteration": iteration, "snapshots": sorted(saved_snapshots), "rng": rng,
             "config": dataclasses.asdict(cfg),
+            "action_center": None if action_center is None else action_center.tolist(),
+            "action_half": None if action_half is None else action_half.tolist(),
             "callbacks": {i: cb.state_dict() for i, cb in enumerate(callbacks) if hasattr(cb, "state_dict")},
         }
 
@@ -695,6 +725,8 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
                     if not np.isfinite(action_np).all():
                         raise NonFiniteError(f"train: the policy produced NaN/inf actions at step {global_step}")
                     env_start = time.perf_counter()
+                    if action_center is not None:
+                        action_np = action_center + action_half * action_np
                     obs, reward, terminated, truncated, infos = envs.step(action_np)
                     env_seconds += time.perf_counter() - env_start
                     if not np.isfinite(obs).all() or not np.isfinite(reward).all():

@@ -10,7 +10,7 @@ their facing directions.
 
 - :func:`render_frame`: one RGB image (gymnasium ``render()``);
 - :func:`render_video`: MP4 (imageio-ffmpeg) or GIF from a recording (see
-  :func:`mmrl.evaluation.follow_targets`);
+  :func:`mmrl.rollouts.follow_targets`);
 - :func:`render_topdown`: the older top-down overview of many environments.
 """
 from __future__ import annotations
@@ -297,7 +297,7 @@ def render_state(db, state: dict, *, width: int = 640, height: int = 360) -> np.
 def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray], db, *, obstacles=None,
                  width: int = 640, height: int = 360, fps: Optional[float] = None,
                  success_radius: float = 0.5) -> int:
-    """Write a recording (see :func:`mmrl.evaluation.follow_targets`) as ``.mp4`` or ``.gif``.
+    """Write a recording (see :func:`mmrl.rollouts.follow_targets`) as ``.mp4`` or ``.gif``.
 
     Returns the number of frames written.
     """

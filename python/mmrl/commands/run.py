@@ -130,14 +130,14 @@ def _options(args):
 
 # ---------------------------------------------------------------------- commands
 def cmd_eval(args: argparse.Namespace) -> int:
-    from ..evaluation import evaluate_plane
+    from ..rollouts import evaluate_full_path
 
     if args.episodes < 1:
         raise ValueError("--episodes must be >= 1")
     db = resolve_database(args)
     policy, name = resolve_policy(args, db)
     t0 = time.perf_counter()
-    res = evaluate_plane(db, policy, episodes=args.episodes, seed=args.seed, config=resolve_task_config(args),
+    res = evaluate_full_path(db, policy, episodes=args.episodes, seed=args.seed, config=resolve_task_config(args),
                          **_options(args))
     res.update({"policy": name, "env": args.env, "seed": args.seed, "ik": not args.no_ik,
                 "inertialization": not args.no_inertialization, "wall_time_s": time.perf_counter() - t0})
@@ -154,7 +154,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def _follow(args):
-    from ..evaluation import follow_targets
+    from ..rollouts import follow_targets
 
     if not args.seconds > 0:
         raise ValueError("--seconds must be positive")

@@ -1,0 +1,298 @@
+// Bindings of the moving-obstacles task core (obstacles_env.hpp, grid.hpp): checks, GIL
+// release, writes into caller-owned numpy buffers. No logic.
+#include "bindings.hpp"
+#include "mmrl/obstacles_env.hpp"
+#include "py_matcher.hpp"
+
+namespace mmrl {
+
+namespace {
+
+struct PyObstacleVecEnv {
+  ObstacleVecEnv env;
+};
+
+template <class T>
+T* writable(const py::handle& obj, const char* name, std::initializer_list<py::ssize_t> shape) {
+  auto a = check_array<T>(obj, name, shape);
+  if (!a.writeable()) throw py::value_error(std::string(name) + ": array is read-only");
+  return a.mutable_data();
+}
+
+int checked_index(const PyObstacleVecEnv& s, int i) {
+  if (i < 0 || i >= s.env.num_envs())
+    throw py::index_error("env index " + std::to_string(i) + " out of range [0, " + std::to_string(s.env.num_envs()) +
+                          ")");
+  return i;
+}
+
+py::array_t<uint8_t> map_copy(const uint8_t* map) {
+  py::array_t<uint8_t> out({kMapSide, kMapSide});
+  std::copy(map, map + kMapCells, out.mutable_data());
+  return out;
+}
+
+}  // namespace
+
+void bind_obstacles(py::module_& m) {
+  m.attr("OBSTACLE_MAP_SIDE") = kMapSide;
+  py::class_<ObstacleTaskConfig>(m, "ObstacleTaskConfig", "Numbers of the moving-obstacles task (obstacles_env.hpp).")
+      .def(py::init<>())
+      .def_readwrite("frames_per_step", &ObstacleTaskConfig::frames_per_step)
+      .def_readwrite("target_half_extent", &ObstacleTaskConfig::target_half_extent)
+      .def_readwrite("obstacle_max_speed", &ObstacleTaskConfig::obstacle_max_speed)
+      .def_readwrite("speed_cap", &ObstacleTaskConfig::speed_cap)
+      .def_readwrite("min_target_distance", &ObstacleTaskConfig::min_target_distance)
+      .def_readwrite("success_radius", &ObstacleTaskConfig::success_radius)
+      .def_readwrite("success_bonus", &ObstacleTaskConfig::success_bonus)
+      .def_readwrite("hit_reward", &ObstacleTaskConfig::hit_reward)
+      .def_readwrite("max_steps", &ObstacleTaskConfig::max_steps)
+      .def_readwrite("action_limit_std", &ObstacleTaskConfig::action_limit_std)
+      .def_readwrite("random_heading", &ObstacleTaskConfig::random_heading)
+      .def_readwrite("num_obstacles", &ObstacleTaskConfig::num_obstacles)
+      .def_readwrite("obstacle_square_half", &ObstacleTaskConfig::obstacle_square_half)
+      .def_readwrite("obstacle_min_side", &ObstacleTaskConfig::obstacle_min_side)
+      .def_readwrite("obstacle_max_side", &ObstacleTaskConfig::obstacle_max_side)
+      .def_readwrite("body_radius", &ObstacleTaskConfig::body_radius)
+      .def_readwrite("start_clearance", &ObstacleTaskConfig::start_clearance)
+      .def_readwrite("target_clearance", &ObstacleTaskConfig::target_clearance)
+      .def_readwrite("sensor_size", &ObstacleTaskConfig::sensor_size)
+      .def_readwrite("sensor_forward", &ObstacleTaskConfig::sensor_forward)
+      .def_readwrite("grid_cell_size", &ObstacleTaskConfig::grid_cell_size);
+
+  using E = ObstacleVecEnv;
+  py::class_<PyObstacleVecEnv>(m, "ObstacleVecEnv", "Batched moving-obstacles environments (C++ core of mmrl.obstacles).")
+      .def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const ObstacleTaskConfig& config,
+                       int num_threads) {
+             if (num_threads < 0) throw py::value_error("num_threads: must be >= 0 (0 = all cores)");
+             if (num_envs < 1) throw py::value_error("num_envs: must be >= 1");
+             try {
+               return new PyObstacleVecEnv{ObstacleVecEnv(db, matcher.matcher, num_envs, config, num_threads)};
+             } catch (const std::invalid_argument& e) {
+               throw py::value_error(e.what());
+             }
+           }),
+           py::arg("db"), py::arg("matcher"), py::arg("num_envs"), py::arg("config"), py::arg("num_threads") = 0,
+           py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
+      .def_property_readonly("num_envs", [](const PyObstacleVecEnv& s) { return s.env.num_envs(); })
+      .def_property_readonly_static("obs_dim", [](py::object) { return E::kObsDim; })
+      .def_property_readonly_static("action_dim", [](py::object) { return E::kActionDim; })
+      .def_property_readonly_static("layout", [](py::object) {
+        return py::make_tuple(py::make_tuple("maps", 2 * kMapCells), py::make_tuple("pose", kPoseDim),
+                              py::make_tuple("goal", 2));
+      })
+      .def_property_readonly("action_low",
+                             [](const PyObstacleVecEnv& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_low()); })
+      .def_property_readonly("action_high",
+                             [](const PyObstacleVecEnv& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_high()); })
+      .def(
+          "set_stage",
+          [](PyObstacleVecEnv& s, float max_speed, float target_half_extent) {
+            try {
+              s.env.set_stage(max_speed, target_half_extent);
+            } catch (const std::invalid_argument& e) {
+              throw py::value_error(e.what());
+            }
+          },
+          py::arg("max_speed"), py::arg("target_half_extent"),
+          "The stage (obstacle max speed m/s, target square half-extent m) for every env's next reset.")
+      .def_property_readonly("stage", [](const PyObstacleVecEnv& s) {
+        return py::make_tuple(s.env.stage_max_speed(), s.env.stage_target_half_extent());
+      })
+      .def(
+          "reset",
+          [](PyObstacleVecEnv& s, uint64_t seed, const py::handle& obs) {
+            float* o = writable<float>(obs, "obs", {s.env.num_envs(), E::kObsDim});
+            py::gil_scoped_release release;
+            s.env.reset(seed, o);
+          },
+          py::arg("seed"), py::arg("obs"))
+      .def(
+          "reset_env",
+          [](PyObstacleVecEnv& s, int i, const py::handle& obs) {
+            checked_index(s, i);
+            float* o = writable<float>(obs, "obs", {s.env.num_envs(), E::kObsDim});
+            s.env.reset_env(i, o + static_cast<size_t>(i) * E::kObsDim);
+          },
+          py::arg("index"), py::arg("obs"))
+      .def(
+          "step",
+          [](PyObstacleVecEnv& s, const py::handle& actions, const py::handle& obs, const py::handle& rewards,
+             const py::handle& terminated, const py::handle& truncated, const py::handle& success,
+             const py::handle& collision, const py::handle& hits, const py::handle& final_obs,
+             const py::handle& episode_return, const py::handle& episode_length) {
+            const py::ssize_t n = s.env.num_envs();
+            auto a = check_array<float>(actions, "actions", {n, E::kActionDim});
+            check_finite(a.data(), a.size(), "actions");
+            float* o = writable<float>(obs, "obs", {n, E::kObsDim});
+            float* r = writable<float>(rewards, "rewards", {n});
+            uint8_t* te = writable<uint8_t>(terminated, "terminated", {n});
+            uint8_t* tr = writable<uint8_t>(truncated, "truncated", {n});
+            uint8_t* su = writable<uint8_t>(success, "success", {n});
+            uint8_t* co = writable<uint8_t>(collision, "collision", {n});
+            int32_t* hi = writable<int32_t>(hits, "hits", {n});
+            float* fo = writable<float>(final_obs, "final_obs", {n, E::kObsDim});
+            float* er = writable<float>(episode_return, "episode_return", {n});
+            int32_t* el = writable<int32_t>(episode_length, "episode_length", {n});
+            py::gil_scoped_release release;
+            s.env.step(a.data(), o, r, te, tr, su, co, hi, fo, er, el);
+          },
+          py::arg("actions"), py::arg("obs"), py::arg("rewards"), py::arg("terminated"), py::arg("truncated"),
+          py::arg("success"), py::arg("collision"), py::arg("hits"), py::arg("final_obs"), py::arg("episode_return"),
+          py::arg("episode_length"))
+      .def(
+          "observe",
+          [](const PyObstacleVecEnv& s, int i) {
+            checked_index(s, i);
+            py::array_t<float> out(E::kObsDim);
+            s.env.observe(i, out.mutable_data());
+            return out;
+          },
+          py::arg("index"), "A fresh observation row of env i.")
+      .def(
+          "state",
+          [](const PyObstacleVecEnv& s, int i) {
+            const ObstacleEnvState& st = s.env.state(checked_index(s, i));
+            py::dict d;
+            d["x"] = st.root.x;
+            d["z"] = st.root.z;
+            d["yaw"] = st.root.yaw;
+            d["frame"] = st.frame;
+            d["target"] = py::make_tuple(st.target_x, st.target_z);
+            d["steps"] = st.steps;
+            d["last_match"] = st.last_match;
+            d["last_transition"] = st.last_transition;
+            d["max_speed"] = st.max_speed;
+            d["target_half_extent"] = st.target_half_extent;
+            d["last_hits"] = st.last_hits;
+            py::array_t<float> pts({3, 2});
+            std::copy(st.hit_points, st.hit_points + 6, pts.mutable_data());
+            d["hit_points"] = pts;
+            d["hit_inside"] = py::make_tuple(bool(st.hit_inside[0]), bool(st.hit_inside[1]), bool(st.hit_inside[2]));
+            d["collided"] = st.collided;
+            return d;
+          },
+          py::arg("index"), "World-space state of env i: root, frame, target, stage, last action's hit points.")
+      .def(
+          "obstacles",
+          [](const PyObstacleVecEnv& s, int i) {
+            checked_index(s, i);
+            const ObstacleField& f = s.env.field();
+            const py::ssize_t n = f.count(i);
+            py::array_t<float> c({n, py::ssize_t{2}}), h({n, py::ssize_t{2}}), a(n), v({n, py::ssize_t{2}});
+            for (int k = 0; k < n; ++k) {
+              c.mutable_at(k, 0) = f.centre(i, k).x(), c.mutable_at(k, 1) = f.centre(i, k).y();
+              h.mutable_at(k, 0) = f.half_size(i, k).x(), h.mutable_at(k, 1) = f.half_size(i, k).y();
+              a.mutable_at(k) = f.angle(i, k);
+              v.mutable_at(k, 0) = f.velocity(i, k).x(), v.mutable_at(k, 1) = f.velocity(i, k).y();
+            }
+            py::dict d;
+            d["centres"] = c;
+            d["half_sizes"] = h;
+            d["angles"] = a;
+            d["velocities"] = v;
+            return d;
+          },
+          py::arg("index"),
+          "Obstacles of env i (world meters): centres (n,2) as (x,z), half_sizes (n,2) along the obstacle's own X/Z, "
+          "angles (n) in radians (yaw convention), velocities (n,2) m/s.")
+      .def(
+          "set_obstacles",
+          [](PyObstacleVecEnv& s, int i, const py::handle& centres, const py::handle& half_sizes,
+             const py::handle& angles, const py::handle& velocities) {
+            checked_index(s, i);
+            auto c = check_array<float>(centres, "centres", {-1, 2});
+            const py::ssize_t n = c.shape(0);
+            if (n > s.env.config().num_obstacles)
+              throw py::value_error("centres: at most num_obstacles = " + std::to_string(s.env.config().num_obstacles) +
+                                    " obstacles, got " + std::to_string(n));
+            auto h = check_array<float>(half_sizes, "half_sizes", {n, 2});
+            auto a = check_array<float>(angles, "angles", {n});
+            auto v = check_array<float>(velocities, "velocities", {n, 2});
+            check_finite(c.data(), c.size(), "centres");
+            check_finite(h.data(), h.size(), "half_sizes");
+            check_finite(a.data(), a.size(), "angles");
+            check_finite(v.data(), v.size(), "velocities");
+            for (py::ssize_t k = 0; k < h.size(); ++k)
+              if (!(h.data()[k] >= 0)) throw py::value_error("half_sizes: must be >= 0");
+            try {
+              s.env.set_obstacles(i, static_cast<int>(n), c.data(), h.data(), a.data(), v.data());
+            } catch (const std::invalid_argument& e) {
+              throw py::value_error(e.what());
+            }
+          },
+          py::arg("index"), py::arg("centres"), py::arg("half_sizes"), py::arg("angles"), py::arg("velocities"),
+          "Replace env i's obstacles (float32 arrays); refreshes its grid and current sensor map.")
+      .def(
+          "sensor_map",
+          [](const PyObstacleVecEnv& s, int i, bool previous) {
+            checked_index(s, i);
+            return map_copy(previous ? s.env.previous_sensor_map(i) : s.env.sensor_map(i));
+          },
+          py::arg("index"), py::arg("previous") = false, "Env i's current (or previous) 16 x 16 map, uint8 [row][col].")
+      .def(
+          "sensor_map_bruteforce",
+          [](const PyObstacleVecEnv& s, int i) {
+            checked_index(s, i);
+            const ObstacleEnvState& st = s.env.state(i);
+            py::array_t<uint8_t> out({kMapSide, kMapSide});
+            s.env.field().sensor_map_bruteforce(i, st.root.x, st.root.z, st.root.yaw, out.mutable_data());
+            return out;
+          },
+          py::arg("index"), "Env i's map now, every sensor tested against every obstacle (reference).")
+      .def(
+          "sensor_positions",
+          [](const PyObstacleVecEnv& s, int i) {
+            checked_index(s, i);
+            const ObstacleEnvState& st = s.env.state(i);
+            py::array_t<float> out({kMapSide, kMapSide, 2});
+            for (int r = 0; r < kMapSide; ++r)
+              for (int c = 0; c < kMapSide; ++c) {
+                const Vec2 p = s.env.field().sensor_position(st.root.x, st.root.z, st.root.yaw, r, c);
+                out.mutable_at(r, c, 0) = p.x();
+                out.mutable_at(r, c, 1) = p.y();
+              }
+            return out;
+          },
+          py::arg("index"), "World (x, z) of env i's sensors, (16, 16, 2) [row][col].")
+      .def(
+          "action_hits",
+          [](const PyObstacleVecEnv& s, int i, const py::handle& action) {
+            checked_index(s, i);
+            auto a = check_array<float>(action, "action", {E::kActionDim});
+            check_finite(a.data(), a.size(), "action");
+            py::array_t<float> pts({3, 2});
+            uint8_t inside[3];
+            const int hits = s.env.action_hits(i, a.data(), pts.mutable_data(), inside);
+            return py::make_tuple(hits, pts, py::make_tuple(bool(inside[0]), bool(inside[1]), bool(inside[2])));
+          },
+          py::arg("index"), py::arg("action"),
+          "(hits, world points (3,2), inside flags) of a normalized action for env i's current state.")
+      .def(
+          "collides",
+          [](const PyObstacleVecEnv& s, int i, float x, float z) {
+            checked_index(s, i);
+            if (!std::isfinite(x) || !std::isfinite(z)) throw py::value_error("position must be finite");
+            return s.env.field().disc_overlaps_any(i, x, z, s.env.config().body_radius);
+          },
+          py::arg("index"), py::arg("x"), py::arg("z"), "Whether the body disc at world (x, z) overlaps an obstacle.")
+      .def(
+          "set_target",
+          [](PyObstacleVecEnv& s, int i, float x, float z) {
+            checked_index(s, i);
+            if (!std::isfinite(x) || !std::isfinite(z)) throw py::value_error("target must be finite");
+            s.env.set_target(i, x, z);
+          },
+          py::arg("index"), py::arg("x"), py::arg("z"))
+      .def(
+          "set_root",
+          [](PyObstacleVecEnv& s, int i, float x, float z, float yaw) {
+            checked_index(s, i);
+            if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw))
+              throw py::value_error("root must be finite");
+            s.env.set_root(i, x, z, yaw);
+          },
+          py::arg("index"), py::arg("x"), py::arg("z"), py::arg("yaw"));
+}
+
+}  // namespace mmrl

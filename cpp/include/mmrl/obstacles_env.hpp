@@ -1,0 +1,162 @@
+// The moving-obstacles task (paper, sections 4 and 5) as a batched C++ core with the same
+// step / reset / SAME_STEP autoreset contract as PlaneVecEnv (vecenv.hpp).
+//
+// observation (kObsDim = 529 floats, flat):
+//   [0, 256)    current sensor map, row-major [row][col] (grid.hpp: row along the
+//               character's Z / forward, col along X / left), 0 or 1
+//   [256, 512)  the previous RL step's map (at reset: a copy of the current map)
+//   [512, 527)  c_t: normalized pose features of the current frame
+//   [527, 529)  g_t: target (x, z) in the character frame, meters
+//   i.e. maps as (channel, row, col) with channel 0 current, 1 previous.
+// action       12-d trajectory feature in normalized units, clipped to the box of
+//              mean +- action_limit_std * std (as the plane task)
+// reward       exp(-|g_t|) after the step
+//              + exp(-hits) if hit_reward (hits: how many of the clipped action's three
+//                positions, denormalized and placed in the world through the character
+//                frame at the step's start, lie inside an obstacle at the step's start)
+//              + success_bonus on success. The paper says both "10 rewards" on success
+//                (section 4) and "no extra rewards" (section 5); the default is 10.
+// terminated   success (root within success_radius of the target) or collision (the body
+//              disc of body_radius around the root overlaps an obstacle), both tested on
+//              every played frame after the obstacles and the root have moved one frame;
+//              the first event ends the step; collision wins a tie.
+// truncated    max_steps steps (the paper has no step limit; this cap only stops runaway
+//              episodes: 1500 steps = 300 s, far longer than any reasonable path).
+// Obstacles move every played frame (1 / fps s). The sensor square sits 1.5 m ahead by
+// default (sensor_forward): the character moves forward almost always (the data has almost
+// no turning in place or walking backwards), so 4.5 m ahead and 1.5 m behind (still
+// covering the body and the sides during a turn) is worth more than 3 m behind.
+//
+// Broadphase: the grid (grid.hpp) is rebuilt every rebuild_interval() steps, with a margin
+// covering the obstacles' motion over that many steps (about 0.4 m), never for static
+// obstacles; every query is exact on the current positions.
+//
+// Curriculum: set_stage(max_speed, target_half_extent) stores the stage; each environment
+// picks it up at its next reset (episodes in flight keep theirs).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "mmrl/controller.hpp"
+#include "mmrl/grid.hpp"
+#include "mmrl/rng.hpp"
+#include "mmrl/threadpool.hpp"
+
+namespace mmrl {
+
+struct ObstacleTaskConfig {
+  int frames_per_step = 6;           // frames played per RL step (0.2 s at 30 fps)
+  float target_half_extent = 5.0f;   // initial stage: targets uniform in a (2h x 2h) m square
+  float obstacle_max_speed = 0.5f;   // initial stage: obstacle speeds uniform in [0, this] m/s
+  float speed_cap = 2.0f;            // the largest max_speed set_stage accepts (sizes the grid)
+  float min_target_distance = 0.6f;  // targets closer than this to the start are redrawn
+  float success_radius = 0.5f;       // meters
+  float success_bonus = 10.0f;
+  bool hit_reward = true;            // add exp(-hits(a_t)) to the reward
+  int max_steps = 1500;              // safety cap (truncation), 300 s at 6 frames per step
+  float action_limit_std = 3.0f;     // action box half-width, in standard deviations
+  bool random_heading = true;        // start heading uniform in [-pi, pi)
+  int num_obstacles = 100;
+  float obstacle_square_half = 10.0f;  // obstacle centres in a 20 x 20 m square around the start
+  float obstacle_min_side = 0.25f;     // rectangle sides uniform in [min, max] meters
+  float obstacle_max_side = 3.0f;
+  float body_radius = 0.25f;           // collision disc around the root (meters)
+  float start_clearance = 0.5f;        // no obstacle starts within body_radius + this of the root
+  float target_clearance = 0.5f;       // no obstacle starts within this of the target
+  float sensor_size = 6.0f;            // sensor square side (meters)
+  float sensor_forward = 1.5f;         // sensor square centre ahead of the root (meters; 0 = centred)
+  float grid_cell_size = 1.5f;         // broadphase cell side (meters)
+};
+
+struct ObstacleEnvState {
+  RootState root;
+  int64_t frame = 0;
+  float target_x = 0, target_z = 0;
+  int steps = 0;
+  double episode_return = 0;
+  int64_t last_match = -1;
+  bool last_transition = false;
+  // The stage this episode runs with.
+  float max_speed = 0, target_half_extent = 0;
+  // The last action's hits: its three trajectory positions in world (x, z) and which were inside.
+  int last_hits = 0;
+  float hit_points[6] = {0, 0, 0, 0, 0, 0};
+  uint8_t hit_inside[3] = {0, 0, 0};
+  bool collided = false;
+  int grid_age = 0;  // RL steps since env's grid was rebuilt
+  Rng rng;
+};
+
+class ObstacleVecEnv {
+ public:
+  static constexpr int kMapOffset = 0;
+  static constexpr int kPrevMapOffset = kMapCells;
+  static constexpr int kPoseOffset = 2 * kMapCells;
+  static constexpr int kGoalOffset = kPoseOffset + kPoseDim;
+  static constexpr int kObsDim = kGoalOffset + 2;
+  static constexpr int kActionDim = kTrajectoryDim;
+
+  // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
+  ObstacleVecEnv(const Database& db, const Matcher& matcher, int num_envs, const ObstacleTaskConfig& config,
+                 int num_threads = 0);
+
+  int num_envs() const { return static_cast<int>(envs_.size()); }
+  const ObstacleTaskConfig& config() const { return config_; }
+  const float* action_low() const { return low_; }
+  const float* action_high() const { return high_; }
+
+  // The stage for every environment's next reset. 0 <= max_speed <= speed_cap,
+  // target_half_extent > min_target_distance.
+  void set_stage(float max_speed, float target_half_extent);
+  float stage_max_speed() const { return stage_max_speed_; }
+  float stage_target_half_extent() const { return stage_half_extent_; }
+
+  void reset(uint64_t seed, float* obs);
+  void reset_env(int i, float* obs_row);
+  // actions: N x 12 (finite; checked by the caller). final_obs, episode_return and
+  // episode_length rows are written only where an episode ended.
+  void step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
+            uint8_t* success, uint8_t* collision, int32_t* hits, float* final_obs, float* episode_return,
+            int32_t* episode_length);
+
+  const ObstacleEnvState& state(int i) const { return envs_[i]; }
+  const ObstacleField& field() const { return field_; }
+  const uint8_t* sensor_map(int i) const { return &maps_[static_cast<size_t>(i) * 2 * kMapCells]; }
+  const uint8_t* previous_sensor_map(int i) const { return sensor_map(i) + kMapCells; }
+  void observe(int i, float* obs_row) const;
+  // Counts hits of an action (12 normalized floats, clipped like a step's) for env i's
+  // current state; writes the three world points and inside flags if given.
+  int action_hits(int i, const float* action, float* points = nullptr, uint8_t* inside = nullptr) const;
+
+  // Scene editing (tests, evaluation, rendering). Each refreshes the grid and the current
+  // sensor map (the previous map is kept).
+  void set_target(int i, float x, float z);
+  void set_root(int i, float x, float z, float yaw);
+  void set_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
+                     const float* velocities);
+
+ private:
+  bool advance(int i, const float* action, float* reward, bool* terminated, bool* truncated, bool* collided,
+               int* hits);
+  // Steps between grid rebuilds for env i, and the margin that keeps the grid exact over them.
+  int rebuild_interval(int i) const;
+  float margin(int i) const;
+  // Rebuilds the grid if forced or due, then recomputes the sensor map (keep_previous: the
+  // old current map becomes the previous one; else both are the new map).
+  void refresh(int i, bool keep_previous, bool force_rebuild);
+
+  const Database& db_;
+  const Matcher& matcher_;
+  ObstacleTaskConfig config_;
+  std::vector<ObstacleEnvState> envs_;
+  ObstacleField field_;
+  std::vector<uint8_t> maps_;  // per env: current map, previous map
+  std::vector<int64_t> valid_frames_;
+  float low_[kTrajectoryDim], high_[kTrajectoryDim];
+  float stage_max_speed_, stage_half_extent_;
+  float frame_dt_;
+  ThreadPool pool_;
+};
+
+}  // namespace mmrl

@@ -1,0 +1,256 @@
+#include "mmrl/obstacles_env.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+namespace mmrl {
+
+namespace {
+
+// How far (meters) obstacles may travel between grid rebuilds (at least one step's travel).
+constexpr float kRebuildTravel = 0.4f;
+constexpr int kMaxRebuildInterval = 16;
+
+// Validates the task config and derives the obstacle field's config from it.
+ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c) {
+  auto finite = [](float v) { return std::isfinite(v); };
+  if (c.frames_per_step < 1 || c.frames_per_step > kTrajectoryOffsets[2])
+    throw std::invalid_argument("frames_per_step must be between 1 and 30");
+  if (!(c.success_radius > 0) || c.max_steps < 1 || !(c.action_limit_std > 0) || !finite(c.action_limit_std))
+    throw std::invalid_argument("success_radius, max_steps and action_limit_std must be positive");
+  if (!(c.target_half_extent > c.min_target_distance) || !(c.min_target_distance >= 0) ||
+      !finite(c.target_half_extent))
+    throw std::invalid_argument("target_half_extent must be finite and larger than min_target_distance >= 0");
+  if (!(c.speed_cap >= 0) || !finite(c.speed_cap) || !(c.obstacle_max_speed >= 0) ||
+      !(c.obstacle_max_speed <= c.speed_cap))
+    throw std::invalid_argument("obstacle_max_speed must be in [0, speed_cap]");
+  if (!finite(c.success_bonus)) throw std::invalid_argument("success_bonus must be finite");
+  if (!(c.body_radius >= 0) || !(c.start_clearance >= 0) || !(c.target_clearance >= 0) || !finite(c.body_radius) ||
+      !finite(c.start_clearance) || !finite(c.target_clearance))
+    throw std::invalid_argument("body_radius, start_clearance and target_clearance must be finite and >= 0");
+  if (!(db.fps > 0)) throw std::invalid_argument("database fps must be positive");
+  ObstacleFieldConfig f;
+  f.num_obstacles = c.num_obstacles;
+  f.square_half = c.obstacle_square_half;
+  f.min_side = c.obstacle_min_side;
+  f.max_side = c.obstacle_max_side;
+  f.cell_size = c.grid_cell_size;
+  f.max_margin = c.body_radius + std::max(kRebuildTravel, c.speed_cap * static_cast<float>(c.frames_per_step) / db.fps) +
+                 0.01f;
+  f.sensor_size = c.sensor_size;
+  f.sensor_forward = c.sensor_forward;
+  return f;
+}
+
+}  // namespace
+
+ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int num_envs,
+                               const ObstacleTaskConfig& config, int num_threads)
+    : db_(db),
+      matcher_(matcher),
+      config_(config),
+      envs_(static_cast<size_t>(std::max(1, num_envs))),
+      field_(num_envs, field_config(db, config)),
+      maps_(static_cast<size_t>(std::max(1, num_envs)) * 2 * kMapCells, 0),
+      stage_max_speed_(config.obstacle_max_speed),
+      stage_half_extent_(config.target_half_extent),
+      frame_dt_(1.0f / db.fps),
+      pool_(num_threads) {
+  if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("matcher was not built over this database");
+  for (int64_t i = 0; i < db.num_frames; ++i)
+    if (db.valid[i]) valid_frames_.push_back(i);
+  if (valid_frames_.empty())
+    throw std::invalid_argument("the database has no valid frames (every clip is shorter than 31 frames)");
+  trajectory_action_box(db, config.action_limit_std, low_, high_);
+  for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
+}
+
+void ObstacleVecEnv::set_stage(float max_speed, float target_half_extent) {
+  if (!(max_speed >= 0) || !(max_speed <= config_.speed_cap))
+    throw std::invalid_argument("max_speed must be in [0, speed_cap = " + std::to_string(config_.speed_cap) + "]");
+  if (!(target_half_extent > config_.min_target_distance) || !std::isfinite(target_half_extent))
+    throw std::invalid_argument("target_half_extent must be finite and larger than min_target_distance");
+  stage_max_speed_ = max_speed;
+  stage_half_extent_ = target_half_extent;
+}
+
+int ObstacleVecEnv::rebuild_interval(int i) const {
+  const float step_travel = envs_[i].max_speed * static_cast<float>(config_.frames_per_step) * frame_dt_;
+  if (!(step_travel > 0)) return 1 << 30;  // static obstacles: the reset's grid stays exact
+  return std::max(1, std::min(kMaxRebuildInterval, static_cast<int>(kRebuildTravel / step_travel)));
+}
+
+float ObstacleVecEnv::margin(int i) const {
+  const float step_travel = envs_[i].max_speed * static_cast<float>(config_.frames_per_step) * frame_dt_;
+  const int interval = rebuild_interval(i);
+  return config_.body_radius + (step_travel > 0 ? step_travel * static_cast<float>(interval) : 0.0f) + 0.005f;
+}
+
+void ObstacleVecEnv::refresh(int i, bool keep_previous, bool force_rebuild) {
+  ObstacleEnvState& st = envs_[i];
+  if (force_rebuild || st.grid_age >= rebuild_interval(i)) {
+    field_.rebuild(i, margin(i));
+    st.grid_age = 0;
+  }
+  uint8_t* cur = &maps_[static_cast<size_t>(i) * 2 * kMapCells];
+  if (keep_previous) std::copy(cur, cur + kMapCells, cur + kMapCells);
+  const ObstacleEnvState& s = envs_[i];
+  field_.sensor_map(i, s.root.x, s.root.z, s.root.yaw, cur);
+  if (!keep_previous) std::copy(cur, cur + kMapCells, cur + kMapCells);
+}
+
+void ObstacleVecEnv::observe(int i, float* obs) const {
+  const ObstacleEnvState& s = envs_[i];
+  const uint8_t* maps = &maps_[static_cast<size_t>(i) * 2 * kMapCells];
+  for (int k = 0; k < 2 * kMapCells; ++k) obs[kMapOffset + k] = maps[k];
+  const float* pose = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
+  for (int k = 0; k < kPoseDim; ++k) obs[kPoseOffset + k] = pose[k];
+  const Vec2 g = world_to_local_xz(s.target_x - s.root.x, s.target_z - s.root.z, s.root.yaw);
+  obs[kGoalOffset] = g.x();
+  obs[kGoalOffset + 1] = g.y();
+}
+
+void ObstacleVecEnv::reset_env(int i, float* obs_row) {
+  ObstacleEnvState& s = envs_[i];
+  s.max_speed = stage_max_speed_;
+  s.target_half_extent = stage_half_extent_;
+  s.frame = valid_frames_[s.rng.below(valid_frames_.size())];
+  s.root = RootState{};
+  s.root.yaw = config_.random_heading ? s.rng.uniform(-kPi, kPi) : 0.0f;
+  const float h = s.target_half_extent;
+  do {
+    s.target_x = s.rng.uniform(-h, h);
+    s.target_z = s.rng.uniform(-h, h);
+  } while (std::hypot(s.target_x, s.target_z) < config_.min_target_distance);
+  const ClearDisc clear[2] = {{0.0f, 0.0f, config_.body_radius + config_.start_clearance},
+                              {s.target_x, s.target_z, config_.target_clearance}};
+  field_.spawn(i, s.rng, s.max_speed, clear, 2);
+  s.steps = 0;
+  s.episode_return = 0;
+  s.last_match = -1;
+  s.last_transition = false;
+  s.last_hits = 0;
+  std::fill(s.hit_points, s.hit_points + 6, 0.0f);
+  std::fill(s.hit_inside, s.hit_inside + 3, uint8_t{0});
+  s.collided = false;
+  refresh(i, false, true);
+  if (obs_row) observe(i, obs_row);
+}
+
+void ObstacleVecEnv::reset(uint64_t seed, float* obs) {
+  for (int i = 0; i < num_envs(); ++i) envs_[i].rng = Rng(seed, static_cast<uint64_t>(i));
+  pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
+    for (int64_t i = b; i < e; ++i) reset_env(static_cast<int>(i), obs ? obs + i * kObsDim : nullptr);
+  });
+}
+
+int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8_t* inside) const {
+  const ObstacleEnvState& s = envs_[i];
+  float clipped[kTrajectoryDim], raw[kTrajectoryDim];
+  for (int k = 0; k < kTrajectoryDim; ++k) clipped[k] = std::min(high_[k], std::max(low_[k], action[k]));
+  trajectory_denormalize(db_, clipped, raw);
+  int hits = 0;
+  for (int k = 0; k < 3; ++k) {
+    // Layout (features.hpp): per horizon, position (x, z) then direction (x, z).
+    const Vec2 w = local_to_world_xz(raw[4 * k], raw[4 * k + 1], s.root.yaw);
+    const float x = s.root.x + w.x(), z = s.root.z + w.y();
+    const bool in = field_.point_inside_any(i, x, z);
+    hits += in;
+    if (points) points[2 * k] = x, points[2 * k + 1] = z;
+    if (inside) inside[k] = in;
+  }
+  return hits;
+}
+
+bool ObstacleVecEnv::advance(int i, const float* action, float* reward, bool* terminated, bool* truncated,
+                             bool* collided, int* hits) {
+  ObstacleEnvState& s = envs_[i];
+  s.last_hits = action_hits(i, action, s.hit_points, s.hit_inside);
+  *hits = s.last_hits;
+  float query[kFeatureDim], traj[kTrajectoryDim];
+  for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high_[k], std::max(low_[k], action[k]));
+  controller_query(db_, s.frame, traj, query);
+  const int64_t j = controller_match(db_, matcher_, s.frame, query);
+  s.last_transition = (j != s.frame);
+  s.last_match = j;
+  const float r2 = config_.success_radius * config_.success_radius;
+  const bool moving = s.max_speed > 0;
+  bool success = false, collision = false;
+  for (int k = 0; k < config_.frames_per_step && !success && !collision; ++k) {
+    if (moving) field_.move(i, frame_dt_);
+    root_advance(s.root, &db_.root_deltas[static_cast<size_t>(j + k) * 3]);
+    collision = field_.disc_overlaps_any(i, s.root.x, s.root.z, config_.body_radius);
+    const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
+    success = !collision && dx * dx + dz * dz <= r2;
+  }
+  s.frame = j + config_.frames_per_step;
+  s.steps += 1;
+  s.collided = collision;
+  const float dist = std::hypot(s.target_x - s.root.x, s.target_z - s.root.z);
+  float r = std::exp(-dist);
+  if (config_.hit_reward) r += std::exp(-static_cast<float>(s.last_hits));
+  if (success) r += config_.success_bonus;
+  *reward = r;
+  *terminated = success || collision;
+  *truncated = !*terminated && s.steps >= config_.max_steps;
+  *collided = collision;
+  s.episode_return += r;
+  return success;
+}
+
+void ObstacleVecEnv::step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
+                          uint8_t* success, uint8_t* collision, int32_t* hits, float* final_obs,
+                          float* episode_return, int32_t* episode_length) {
+  pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
+    for (int64_t i = b; i < e; ++i) {
+      const int env = static_cast<int>(i);
+      bool term = false, trunc = false, coll = false;
+      int h = 0;
+      const bool ok = advance(env, actions + i * kActionDim, &rewards[i], &term, &trunc, &coll, &h);
+      terminated[i] = term;
+      truncated[i] = trunc;
+      success[i] = ok;
+      collision[i] = coll;
+      hits[i] = h;
+      float* row = obs + i * kObsDim;
+      envs_[i].grid_age += 1;
+      if (term || trunc) {
+        refresh(env, true, false);
+        observe(env, final_obs + i * kObsDim);
+        episode_return[i] = static_cast<float>(envs_[i].episode_return);
+        episode_length[i] = envs_[i].steps;
+        reset_env(env, row);
+      } else {
+        refresh(env, true, false);
+        observe(env, row);
+      }
+    }
+  }, 2);
+}
+
+void ObstacleVecEnv::set_target(int i, float x, float z) {
+  envs_[i].target_x = x;
+  envs_[i].target_z = z;
+}
+
+void ObstacleVecEnv::set_root(int i, float x, float z, float yaw) {
+  envs_[i].root.x = x;
+  envs_[i].root.z = z;
+  envs_[i].root.yaw = wrap_angle(yaw);
+  refresh(i, false, true);
+}
+
+void ObstacleVecEnv::set_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
+                                   const float* velocities) {
+  // The margin follows the fastest given obstacle, so moving hand-built scenes stay exact.
+  float fastest = 0;
+  for (int k = 0; k < n; ++k) fastest = std::max(fastest, std::hypot(velocities[2 * k], velocities[2 * k + 1]));
+  if (fastest > config_.speed_cap) throw std::invalid_argument("obstacle speed exceeds speed_cap");
+  field_.set(i, n, centres, half_sizes, angles, velocities);
+  envs_[i].max_speed = fastest;
+  refresh(i, false, true);
+}
+
+}  // namespace mmrl
