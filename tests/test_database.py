@@ -171,7 +171,7 @@ def test_load_corrupt_or_foreign(tmp_path, clip_text):
     np.savez(tmp_path / "future.npz", **arrays)
     with pytest.raises(mmrl.DatabaseFileError, match="version 99"):
         mmrl.Database.load(tmp_path / "future.npz")
-    arrays["version"] = np.array(1, np.int32)
+    arrays["version"] = np.array(mmrl.database.FILE_VERSION, np.int32)
     arrays["features"] = arrays["features"][:-5]
     np.savez(tmp_path / "short.npz", **arrays)
     with pytest.raises(mmrl.DatabaseFileError, match="features"):

@@ -52,6 +52,7 @@ py::dict database_state(py::object self) {
   s["root_yaws"] = make_view(db.root_yaws.data(), {N}, self);
   s["root_deltas"] = make_view(db.root_deltas.data(), {N, 3}, self);
   s["features"] = make_view(db.features.data(), {N, kFeatureDim}, self);
+  s["contacts"] = make_view(db.contacts.data(), {N, 2}, self);
   s["feature_mean"] = make_view(db.normalization.mean.data(), {kFeatureDim}, self);
   s["block_scale"] = make_view(db.normalization.block_scale.data(), {kNumBlocks}, self);
   s["weights"] = make_view(db.normalization.weights.data(), {kNumBlocks}, self);
@@ -114,6 +115,7 @@ Database database_from_state(const py::dict& s) {
   db.root_yaws = take<float>(s, "root_yaws", {N});
   db.root_deltas = take<float>(s, "root_deltas", {N, 3});
   db.features = take<float>(s, "features", {N, kFeatureDim});
+  db.contacts = take<uint8_t>(s, "contacts", {N, 2});
   auto mean = take<float>(s, "feature_mean", {kFeatureDim});
   auto bs = take<float>(s, "block_scale", {kNumBlocks});
   std::copy(mean.begin(), mean.end(), db.normalization.mean.begin());
@@ -171,6 +173,11 @@ void bind_database(py::module_& m) {
                              [](py::object self) {
                                const Database& db = self.cast<const Database&>();
                                return make_view(db.frame_clip.data(), {db.num_frames}, self);
+                             })
+      .def_property_readonly("contacts",
+                             [](py::object self) {
+                               const Database& db = self.cast<const Database&>();
+                               return make_view(db.contacts.data(), {db.num_frames, 2}, self);
                              })
       .def_property_readonly("feature_scale",
                              [](const Database& db) {

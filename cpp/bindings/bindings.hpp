@@ -18,6 +18,7 @@ void bind_bvh(py::module_& m);
 void bind_database(py::module_& m);
 void bind_search(py::module_& m);
 void bind_env(py::module_& m);
+void bind_character(py::module_& m);
 void bind_obstacles(py::module_& m);
 
 template <class T>

@@ -8,5 +8,6 @@ PYBIND11_MODULE(_core, m) {
   mmrl::bind_database(m);
   mmrl::bind_search(m);
   mmrl::bind_env(m);
+  mmrl::bind_character(m);
   mmrl::bind_obstacles(m);
 }

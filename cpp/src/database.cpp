@@ -1,5 +1,6 @@
 #include "mmrl/database.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
@@ -91,10 +92,67 @@ void Database::validate() const {
     prev = e;
   }
   if (prev != num_frames) throw std::invalid_argument("database clip_ranges do not cover all frames");
+  need(contacts.size(), N * 2, "contacts");
   for (float v : features)
     if (!std::isfinite(v)) throw std::invalid_argument("database features contain NaN or inf");
   for (int p : skeleton.parents)
     if (p >= num_joints) throw std::invalid_argument("database skeleton parent index out of range");
+}
+
+void database_compute_contacts(Database& db, const ContactOptions& opt) {
+  const int N = db.num_frames, J = db.num_joints;
+  const int C = static_cast<int>(db.clip_ranges.size() / 2);
+  // Global positions of the two toes and two ankles (N x 4 x 3), one FK per frame.
+  const int joints[4] = {db.roles.toe[0], db.roles.toe[1], db.roles.foot[0], db.roles.foot[1]};
+  std::vector<float> track(static_cast<size_t>(N) * 4 * 3);
+  std::vector<float> gp(static_cast<size_t>(J) * 3), gr(static_cast<size_t>(J) * 4);
+  for (int f = 0; f < N; ++f) {
+    const size_t o = static_cast<size_t>(f) * J;
+    pose_forward_kinematics(db.skeleton.parents, &db.bone_translations[o * 3], &db.bone_rotations[o * 4], gp.data(),
+                            gr.data());
+    for (int k = 0; k < 4; ++k)
+      for (int c = 0; c < 3; ++c) track[(static_cast<size_t>(f) * 4 + k) * 3 + c] = gp[joints[k] * 3 + c];
+  }
+  // Ground height of each tracked joint: a low percentile of its height.
+  float ground[4];
+  std::vector<float> h(N);
+  for (int k = 0; k < 4; ++k) {
+    for (int f = 0; f < N; ++f) h[f] = track[(static_cast<size_t>(f) * 4 + k) * 3 + 1];
+    const size_t q = std::min<size_t>(N - 1, static_cast<size_t>(opt.ground_percentile / 100.0f * (N - 1)));
+    std::nth_element(h.begin(), h.begin() + q, h.end());
+    ground[k] = N ? h[q] : 0.0f;
+  }
+  std::vector<uint8_t> raw(static_cast<size_t>(N) * 2, 0);
+  for (int c = 0; c < C; ++c) {
+    const int b = db.clip_ranges[c * 2], e = db.clip_ranges[c * 2 + 1];
+    for (int f = b; f < e; ++f) {
+      const int f0 = std::max(b, f - 1), f1 = std::min(e - 1, f + 1);
+      const float dt = (f1 - f0) / db.fps;
+      for (int side = 0; side < 2; ++side) {
+        bool planted = false;
+        for (int k : {side, side + 2}) {  // toe, then ankle
+          const float* p0 = &track[(static_cast<size_t>(f0) * 4 + k) * 3];
+          const float* p1 = &track[(static_cast<size_t>(f1) * 4 + k) * 3];
+          const float speed = dt > 0 ? std::hypot(p1[0] - p0[0], p1[2] - p0[2]) / dt : 0.0f;
+          const float height = track[(static_cast<size_t>(f) * 4 + k) * 3 + 1];
+          if (height < ground[k] + opt.height_tolerance && speed < opt.max_speed) planted = true;
+        }
+        raw[static_cast<size_t>(f) * 2 + side] = planted;
+      }
+    }
+  }
+  // Median (majority) filter within each clip.
+  db.contacts.assign(static_cast<size_t>(N) * 2, 0);
+  const int half = std::max(0, opt.median_window / 2);
+  for (int c = 0; c < C; ++c) {
+    const int b = db.clip_ranges[c * 2], e = db.clip_ranges[c * 2 + 1];
+    for (int f = b; f < e; ++f)
+      for (int side = 0; side < 2; ++side) {
+        int on = 0, n = 0;
+        for (int g = std::max(b, f - half); g <= std::min(e - 1, f + half); ++g, ++n) on += raw[static_cast<size_t>(g) * 2 + side];
+        db.contacts[static_cast<size_t>(f) * 2 + side] = (2 * on > n) ? 1 : 0;
+      }
+  }
 }
 
 Database database_build(const std::vector<Motion>& clips, const DatabaseOptions& opt) {
@@ -189,6 +247,7 @@ Database database_build(const std::vector<const Motion*>& clips_in, const Databa
   }
   db.index_clips();
   db.refit_normalization();
+  database_compute_contacts(db);
   return db;
 }
 

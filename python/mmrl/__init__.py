@@ -9,6 +9,8 @@ from .bvh import BVHError, JointRoleError, Motion, load_bvh, parse_bvh
 from .database import Database, DatabaseFileError
 from .search import KDTree
 from .ppo import CheckpointError, NonFiniteError, PPOConfig, TrainResult, load_policy, train
+from .controller import Controller, StepResult
+from . import metrics, policies  # noqa: F401
 from . import synth, data  # noqa: F401
 from .envs import register_envs as _register_envs
 
@@ -22,4 +24,4 @@ except PackageNotFoundError:  # running from a source tree without installing
 
 __all__ = ["__version__", "BVHError", "JointRoleError", "Motion", "load_bvh", "parse_bvh", "Database",
            "DatabaseFileError", "KDTree", "PPOConfig", "TrainResult", "train",
-           "load_policy", "CheckpointError", "NonFiniteError"]
+           "load_policy", "CheckpointError", "NonFiniteError", "Controller", "StepResult", "metrics", "policies"]

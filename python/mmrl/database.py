@@ -28,7 +28,7 @@ BLOCK_NAMES: List[str] = [b[0] for b in FEATURE_BLOCKS]
 DEFAULT_WEIGHTS: Dict[str, float] = {b[0]: b[2] for b in FEATURE_BLOCKS}
 
 FILE_FORMAT = "mmrl.database"
-FILE_VERSION = 1
+FILE_VERSION = 2
 
 
 class DatabaseFileError(ValueError):
@@ -84,7 +84,9 @@ class Database:
     - ``valid_mask`` (N,) bool: frames whose +30 future stays inside their clip;
     - ``root_positions`` (N, 3) and ``root_yaws`` (N,): the character frame in world space;
     - ``root_deltas`` (N, 3): (dx, dz, dyaw) from frame i to i+1 in frame i's character frame;
-    - ``bone_translations`` (N, J, 3), ``bone_rotations`` (N, J, 4) local pose (w, x, y, z).
+    - ``bone_translations`` (N, J, 3), ``bone_rotations`` (N, J, 4) local pose (w, x, y, z);
+    - ``contacts`` (N, 2) bool: left/right foot planted (toe or ankle near the ground and
+      slower than 0.15 m/s horizontally, median-filtered over 5 frames).
     """
 
     def __init__(self, core: "_core.Database"):
@@ -155,6 +157,7 @@ class Database:
     normalized_features = property(lambda self: self._db.normalized_features)
     valid_mask = property(lambda self: self._db.valid_mask.view(np.bool_))
     frame_clip = property(lambda self: self._db.frame_clip, doc="Clip index of each frame.")
+    contacts = property(lambda self: self._db.contacts.view(np.bool_), doc="(N, 2) left/right foot contacts.")
     feature_mean = property(lambda self: self._state()["feature_mean"])
     feature_scale = property(lambda self: self._db.feature_scale,
                              doc="Per-column divisor: normalized = (features - mean) / scale.")

@@ -239,9 +239,9 @@ class PlaneEnv(gym.Env):
         return self._vec.env_state(0)
 
     def render(self):
-        from .render import render_topdown
+        from .render import render_state
 
-        return render_topdown([self._vec.env_state(0)])
+        return render_state(self.db, self._vec.env_state(0))
 
 
 def register_envs() -> None:

@@ -1,14 +1,351 @@
-"""Rendering (placeholder top-down view until the full renderer lands)."""
+"""Video and still images of characters: a shaded stick figure on a ground grid.
+
+A small perspective camera (numpy) projects everything; matplotlib's Agg canvas only draws
+2-d collections, whose data is replaced every frame (no figure rebuilds), so a frame costs a
+few milliseconds. The camera looks at the character from a fixed direction and follows it
+with some lag. Shown: the figure (bones as shaded capsules, depth-sorted, with a ground
+shadow), the ground grid, the target(s) (discs of the success radius), obstacles (a list of
+rectangles, drawn as 1 m high boxes) and each query's three future trajectory points with
+their facing directions.
+
+- :func:`render_frame`: one RGB image (gymnasium ``render()``);
+- :func:`render_video`: MP4 (imageio-ffmpeg) or GIF from a recording (see
+  :func:`mmrl.rollouts.follow_targets`);
+- :func:`render_topdown`: the older top-down overview of many environments.
+"""
 from __future__ import annotations
 
+import os
+from pathlib import Path
+from typing import Dict, Optional, Sequence
+
 import numpy as np
+
+SKY = (0.86, 0.90, 0.95)
+GROUND = (0.80, 0.80, 0.77)
+GRID = (0.62, 0.62, 0.60)
+LEFT, RIGHT, CENTER = np.array([0.25, 0.45, 0.85]), np.array([0.90, 0.50, 0.20]), np.array([0.70, 0.70, 0.72])
+
+
+def _rectangle_corners(rect) -> np.ndarray:
+    """(4, 2) world (x, z) corners of an obstacle: (x_min, z_min, x_max, z_max) or 4 corners."""
+    r = np.asarray(rect, np.float64)
+    if r.shape == (4,):
+        x0, z0, x1, z1 = r
+        return np.array([[x0, z0], [x1, z0], [x1, z1], [x0, z1]])
+    if r.shape == (4, 2):
+        return r
+    raise ValueError(f"an obstacle is (x_min, z_min, x_max, z_max) or (4, 2) corners, got shape {r.shape}")
+
+
+class Camera:
+    """A pinhole camera looking at ``focus`` from ``distance`` meters away at a fixed azimuth."""
+
+    def __init__(self, width: int = 640, height: int = 360, fov_deg: float = 45.0, distance: float = 5.5,
+                 elevation_deg: float = 22.0, azimuth_deg: float = 35.0):
+        self.width, self.height = int(width), int(height)
+        self.focal = 0.5 * self.height / np.tan(np.radians(fov_deg) / 2)
+        el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
+        self.offset = distance * np.array([np.cos(el) * np.sin(az), np.sin(el), -np.cos(el) * np.cos(az)])
+        self.near = 0.1
+        self.look_at(np.zeros(3))
+
+    def look_at(self, focus) -> None:
+        self.focus = np.asarray(focus, np.float64)
+        self.eye = self.focus + self.offset
+        f = self.focus - self.eye
+        f /= np.linalg.norm(f)
+        r = np.cross(f, [0.0, 1.0, 0.0])
+        r /= np.linalg.norm(r)
+        u = np.cross(r, f)
+        self.rotation = np.stack([r, u, f])  # rows: camera x (right), y (up), z (forward)
+
+    def to_camera(self, p: np.ndarray) -> np.ndarray:
+        return (np.asarray(p, np.float64) - self.eye) @ self.rotation.T
+
+    def project(self, pc: np.ndarray) -> np.ndarray:
+        """Camera-space points (..., 3) with z > 0 -> pixels (..., 2), origin bottom-left."""
+        z = np.maximum(pc[..., 2], 1e-6)
+        return np.stack([0.5 * self.width + self.focal * pc[..., 0] / z,
+                         0.5 * self.height + self.focal * pc[..., 1] / z], axis=-1)
+
+    def segments(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """World segments (n, 3) -> pixel segments (m, 2, 2), clipped at the near plane."""
+        ca, cb = self.to_camera(a), self.to_camera(b)
+        za, zb = ca[:, 2], cb[:, 2]
+        keep = (za > self.near) | (zb > self.near)
+        ca, cb, za, zb = ca[keep], cb[keep], za[keep], zb[keep]
+        # Where z = near along a -> b; at most one end is behind the plane.
+        t = ((self.near - za) / np.where(np.abs(zb - za) > 1e-9, zb - za, 1e-9))[:, None]
+        cut = ca + (cb - ca) * t
+        ca = np.where((za < self.near)[:, None], cut, ca)
+        cb = np.where((zb < self.near)[:, None], cut, cb)
+        return np.stack([self.project(ca), self.project(cb)], axis=1)
+
+    def polygon(self, pts: np.ndarray) -> Optional[np.ndarray]:
+        """A world polygon (n, 3) -> pixel polygon clipped at the near plane (None if hidden)."""
+        c = self.to_camera(pts)
+        out = []
+        n = len(c)
+        for i in range(n):
+            p, q = c[i], c[(i + 1) % n]
+            pin, qin = p[2] > self.near, q[2] > self.near
+            if pin:
+                out.append(p)
+            if pin != qin:
+                t = (self.near - p[2]) / (q[2] - p[2])
+                out.append(p + (q - p) * t)
+        if len(out) < 3:
+            return None
+        return self.project(np.array(out))
+
+
+class Renderer:
+    """Draws frames of one or more characters on a reusable matplotlib Agg canvas."""
+
+    def __init__(self, parents: Sequence[int], *, body_joints: Optional[Sequence[int]] = None,
+                 joint_names: Optional[Sequence[str]] = None, width: int = 640, height: int = 360,
+                 follow_lag: float = 0.9, success_radius: float = 0.5):
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.collections import LineCollection, PolyCollection
+        from matplotlib.figure import Figure
+
+        self.parents = np.asarray(parents, np.int64)
+        J = len(self.parents)
+        body = np.arange(J) if body_joints is None else np.asarray(body_joints, np.int64)
+        in_body = np.zeros(J, bool)
+        in_body[body] = True
+        self.bones = np.array([(j, p) for j, p in enumerate(self.parents) if p >= 0 and in_body[j] and in_body[p]],
+                              np.int64).reshape(-1, 2)
+        self.body = body
+        names = [n.lower() for n in (joint_names or [""] * J)]
+        side = np.zeros(J, np.int64)  # 0 center, 1 left, 2 right
+        for j, n in enumerate(names):
+            if n.endswith(("_l", ".l", "left")) or n.startswith(("left", "l_")):
+                side[j] = 1
+            elif n.endswith(("_r", ".r", "right")) or n.startswith(("right", "r_")):
+                side[j] = 2
+        self.bone_color = np.array([[CENTER, LEFT, RIGHT][side[j]] for j, _ in self.bones]).reshape(-1, 3)
+        self.head = next((j for j, n in enumerate(names) if "head" in n), None)
+        self.camera = Camera(width, height)
+        self.follow_lag = follow_lag
+        self.success_radius = success_radius
+        self._focus = None
+
+        dpi = 100
+        self.fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi, facecolor=SKY)
+        self.canvas = FigureCanvasAgg(self.fig)
+        ax = self.fig.add_axes((0, 0, 1, 1))
+        ax.set_xlim(0, width)
+        ax.set_ylim(0, height)
+        ax.set_axis_off()
+        ax.set_facecolor(SKY)
+        self.ax = ax
+        self.ground = PolyCollection([], facecolors=[GROUND], edgecolors="none", zorder=0)
+        self.grid = LineCollection([], colors=[GRID], linewidths=0.8, zorder=1)
+        self.targets = PolyCollection([], facecolors=[(0.85, 0.2, 0.2, 0.55)], edgecolors=[(0.6, 0.1, 0.1)],
+                                      linewidths=1.0, zorder=2)
+        self.shadow = LineCollection([], colors=[(0.3, 0.3, 0.3, 0.35)], capstyle="round", zorder=3)
+        self.query = LineCollection([], colors=[(0.1, 0.6, 0.2)], linewidths=2.0, zorder=4)
+        self.query_pts = ax.scatter([], [], s=30, c=[(0.1, 0.6, 0.2)], zorder=4)
+        self.obstacles = PolyCollection([], facecolors=[(0.45, 0.42, 0.5)], edgecolors=[(0.2, 0.2, 0.25)],
+                                        linewidths=0.8, zorder=5)
+        self.outline = LineCollection([], colors=[(0.15, 0.15, 0.2)], capstyle="round", zorder=6)
+        self.limbs = LineCollection([], capstyle="round", zorder=7)
+        self.head_patch = ax.scatter([], [], s=1, c=[CENTER], edgecolors=[(0.15, 0.15, 0.2)], zorder=8)
+        self.text = ax.text(8, height - 8, "", va="top", ha="left", fontsize=9, color=(0.2, 0.2, 0.25), zorder=9)
+        for a in (self.ground, self.grid, self.targets, self.shadow, self.query, self.obstacles, self.outline,
+                  self.limbs):
+            ax.add_collection(a)
+
+    # ------------------------------------------------------------------ drawing
+    def _circle(self, center_xz, radius, y=0.01, n=28) -> np.ndarray:
+        a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+        return np.stack([center_xz[0] + radius * np.cos(a), np.full(n, y), center_xz[1] + radius * np.sin(a)], 1)
+
+    def draw(self, positions: np.ndarray, *, targets=None, query_points=None, query_directions=None,
+             obstacles=None, text: str = "", snap_camera: bool = False) -> np.ndarray:
+        """One frame: positions (J, 3) world meters; returns (H, W, 3) uint8."""
+        cam = self.camera
+        p = np.asarray(positions, np.float64)
+        body = p[self.body]
+        root = np.array([body[:, 0].mean(), 0.0, body[:, 2].mean()])
+        focus = root + np.array([0.0, 0.9, 0.0])
+        if self._focus is None or snap_camera:
+            self._focus = focus
+        else:
+            self._focus = self.follow_lag * self._focus + (1 - self.follow_lag) * focus
+        cam.look_at(self._focus)
+
+        # Ground and grid: a 40 m square around the focus, lines every meter.
+        cx, cz = np.round(self._focus[[0, 2]])
+        R = 20.0
+        quad = np.array([[cx - R, 0, cz - R], [cx + R, 0, cz - R], [cx + R, 0, cz + R], [cx - R, 0, cz + R]])
+        poly = cam.polygon(quad)
+        self.ground.set_verts([] if poly is None else [poly])
+        k = np.arange(-R, R + 1)
+        a = np.concatenate([np.stack([cx + k, np.zeros_like(k), np.full_like(k, cz - R)], 1),
+                            np.stack([np.full_like(k, cx - R), np.zeros_like(k), cz + k], 1)])
+        b = np.concatenate([np.stack([cx + k, np.zeros_like(k), np.full_like(k, cz + R)], 1),
+                            np.stack([np.full_like(k, cx + R), np.zeros_like(k), cz + k], 1)])
+        self.grid.set_segments(cam.segments(a, b))
+
+        # Targets.
+        polys = []
+        for t in ([] if targets is None else np.asarray(targets, np.float64).reshape(-1, 2)):
+            pp = cam.polygon(self._circle(t, self.success_radius))
+            if pp is not None:
+                polys.append(pp)
+        self.targets.set_verts(polys)
+
+        # Obstacles: boxes 1 m high, faces depth-sorted far to near.
+        faces, depth = [], []
+        for rect in obstacles or []:
+            c = _rectangle_corners(rect)
+            lo = np.column_stack([c[:, 0], np.zeros(4), c[:, 1]])
+            hi = lo + np.array([0, 1.0, 0])
+            for i in range(4):
+                f = np.array([lo[i], lo[(i + 1) % 4], hi[(i + 1) % 4], hi[i]])
+                faces.append(f)
+            faces.append(hi)
+        for f in faces:
+            depth.append(cam.to_camera(f)[:, 2].mean())
+        order = np.argsort(depth)[::-1]
+        opolys = [cam.polygon(faces[i]) for i in order]
+        self.obstacles.set_verts([q for q in opolys if q is not None])
+
+        # Queries: three future points and their facing directions.
+        if query_points is not None:
+            qp = np.asarray(query_points, np.float64).reshape(-1, 2)
+            q3 = np.column_stack([qp[:, 0], np.full(len(qp), 0.02), qp[:, 1]])
+            qc = cam.to_camera(q3)
+            vis = qc[:, 2] > cam.near
+            self.query_pts.set_offsets(cam.project(qc[vis]) if vis.any() else np.zeros((0, 2)))
+            if query_directions is not None:
+                qd = np.asarray(query_directions, np.float64).reshape(-1, 2)
+                tips = q3 + 0.35 * np.column_stack([qd[:, 0], np.zeros(len(qd)), qd[:, 1]])
+                self.query.set_segments(cam.segments(q3, tips))
+        else:
+            self.query_pts.set_offsets(np.zeros((0, 2)))
+            self.query.set_segments([])
+
+        # Figure: shadow, then bones far to near, outline under fill; widths by perspective.
+        bones = self.bones
+        pa, pb = p[bones[:, 0]], p[bones[:, 1]]
+        shadow_a, shadow_b = pa * [1, 0, 1] + [0, 0.005, 0], pb * [1, 0, 1] + [0, 0.005, 0]
+        self.shadow.set_segments(cam.segments(shadow_a, shadow_b))
+        ca, cb = cam.to_camera(pa), cam.to_camera(pb)
+        depth = 0.5 * (ca[:, 2] + cb[:, 2])
+        order = np.argsort(depth)[::-1]
+        width = np.clip(cam.focal * 0.07 / np.maximum(depth, cam.near), 1.0, 40.0)
+        self.shadow.set_linewidths(width * 0.8)
+        segs = np.stack([cam.project(ca), cam.project(cb)], 1)[order]
+        d = cb - ca
+        d /= np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+        light = np.array([0.4, 0.8, -0.45])
+        light /= np.linalg.norm(light)
+        shade = 0.55 + 0.45 * np.sqrt(np.clip(1 - (d @ light) ** 2, 0, 1))  # a capsule lit from the side
+        colors = np.clip(self.bone_color * shade[:, None], 0, 1)[order]
+        self.outline.set_segments(segs)
+        self.outline.set_linewidths(width[order] + 2.0)
+        self.limbs.set_segments(segs)
+        self.limbs.set_linewidths(width[order])
+        self.limbs.set_color(colors)
+        if self.head is not None:
+            hc = cam.to_camera(p[self.head][None] + [0, 0.08, 0])
+            self.head_patch.set_offsets(cam.project(hc))
+            self.head_patch.set_sizes([(cam.focal * 0.2 / max(hc[0, 2], cam.near)) ** 2])
+        self.text.set_text(text)
+
+        self.canvas.draw()
+        buf = np.asarray(self.canvas.buffer_rgba())
+        return buf[..., :3].copy()
+
+
+def render_frame(positions: np.ndarray, parents: Sequence[int], *, body_joints=None, joint_names=None,
+                 targets=None, query_points=None, query_directions=None, obstacles=None,
+                 width: int = 640, height: int = 360, text: str = "") -> np.ndarray:
+    """One RGB image (H, W, 3) uint8 of a pose (J, 3) in world meters (see :class:`Renderer`)."""
+    r = Renderer(parents, body_joints=body_joints, joint_names=joint_names, width=width, height=height)
+    return r.draw(positions, targets=targets, query_points=query_points, query_directions=query_directions,
+                  obstacles=obstacles, text=text, snap_camera=True)
+
+
+def render_state(db, state: dict, *, width: int = 640, height: int = 360) -> np.ndarray:
+    """An env state (``env_state()``: root x, z, yaw, database frame, target) as one RGB image.
+
+    The database pose of the frame is placed at the root by the map from the frame's
+    character frame to the world root (no inertialization or IK: the env's fast path keeps no
+    pose history).
+    """
+    from . import _core
+    from .metrics import body_joints
+
+    f = int(state["frame"])
+    q = _core.database_global_positions(db._db, np.array([f], np.int64))[0].astype(np.float64)
+    a = float(state["yaw"]) - float(db.root_yaws[f])
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    p = (q - db.root_positions[f]) @ rot.T + np.array([state["x"], 0.0, state["z"]])
+    return render_frame(p, db.parents, body_joints=body_joints(db), joint_names=db.joint_names,
+                        targets=state.get("target"), obstacles=state.get("obstacles"), width=width, height=height,
+                        text=f"step {state.get('steps', 0)}")
+
+
+def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray], db, *, obstacles=None,
+                 width: int = 640, height: int = 360, fps: Optional[float] = None,
+                 success_radius: float = 0.5) -> int:
+    """Write a recording (see :func:`mmrl.rollouts.follow_targets`) as ``.mp4`` or ``.gif``.
+
+    Returns the number of frames written.
+    """
+    import imageio.v2 as iio
+
+    from .metrics import body_joints
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".mp4", ".gif"):
+        raise ValueError(f"{path}: the output must end in .mp4 or .gif")
+    pos = recording["positions"]
+    fps = float(fps or recording.get("fps", db.fps))
+    if suffix == ".mp4":  # H.264 with 4:2:0 chroma needs even sizes
+        width, height = width - width % 2, height - height % 2
+    targets = recording.get("targets")
+    qframes = recording.get("query_frames")
+    renderer = Renderer(db.parents, body_joints=body_joints(db), joint_names=db.joint_names, width=width,
+                        height=height, success_radius=success_radius)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if suffix == ".mp4":
+        writer = iio.get_writer(str(path), fps=fps, codec="libx264", quality=7, macro_block_size=2,
+                                ffmpeg_log_level="error", pixelformat="yuv420p")
+    else:
+        writer = iio.get_writer(str(path), mode="I", duration=1000.0 / fps, loop=0)
+    q = -1
+    try:
+        for t in range(pos.shape[0]):
+            if qframes is not None:
+                while q + 1 < len(qframes) and qframes[q + 1] <= t:
+                    q += 1
+            img = renderer.draw(pos[t], targets=None if targets is None else targets[t],
+                                query_points=recording["query_points"][q] if q >= 0 else None,
+                                query_directions=recording["query_directions"][q] if q >= 0 else None,
+                                obstacles=obstacles, text=f"{t / fps:5.2f} s", snap_camera=(t == 0))
+            writer.append_data(img)
+    finally:
+        writer.close()
+    return pos.shape[0]
 
 
 def render_topdown(states, size: int = 256, extent: float = 8.0) -> np.ndarray:
     """A simple top-down RGB image of characters (dots and headings) and their targets."""
     img = np.full((size, size, 3), 235, np.uint8)
+
     def px(x, z):
         return int(size / 2 - x / extent * size / 2), int(size / 2 - z / extent * size / 2)
+
     for s in states:
         tx, tz = s["target"]
         u, v = px(tx, tz)

@@ -59,6 +59,8 @@ struct Database {
   std::vector<uint8_t> valid;
   // Per frame, the clip index.
   std::vector<int32_t> frame_clip;
+  // Foot contacts (N x 2: left, right; 1 = planted), see database_compute_contacts.
+  std::vector<uint8_t> contacts;
 
   int num_clips() const { return static_cast<int>(clip_names.size()); }
 
@@ -77,6 +79,22 @@ struct Database {
 // Local translations are recomputed so that FK of the result gives the exact mirrored
 // positions; mirroring twice gives the original.
 Motion motion_mirror(const Motion& motion, const std::vector<int>& mirror_map);
+
+// Foot contact detection (offline). A foot is planted on a frame when its toe or its ankle
+// is near the ground and slow: height below ground + height_tolerance and horizontal speed
+// below max_speed. The ground heights of the toe and the ankle are estimated per side as
+// the ground_percentile-th percentile of their heights over the whole database (Bandai:
+// toes rest at about 4 cm, ankles at about 12 cm). The flags are then median-filtered over
+// median_window frames within each clip, which removes single-frame flickers.
+struct ContactOptions {
+  float max_speed = 0.15f;         // m/s, horizontal, central differences
+  float height_tolerance = 0.03f;  // meters above the estimated ground height
+  float ground_percentile = 5.0f;  // percent
+  int median_window = 5;           // frames (odd)
+};
+
+// Fills db.contacts (N x 2) from the local pose arrays. Needs roles and clip ranges.
+void database_compute_contacts(Database& db, const ContactOptions& options = {});
 
 Database database_build(const std::vector<const Motion*>& clips, const DatabaseOptions& options = {});
 Database database_build(const std::vector<Motion>& clips, const DatabaseOptions& options = {});

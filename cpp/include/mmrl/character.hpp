@@ -1,0 +1,134 @@
+// A motion-matching character: the decision rule and root playback of controller.hpp, plus
+// (on the full path) world-space poses with inertialization, foot locking and leg IK.
+//
+// Decisions and root motion are exactly those of controller.hpp (controller_query,
+// controller_match, root_advance), so the fast path (poses = false, used for training) and
+// the full path produce the same matches and the same root trajectory for the same queries.
+//
+// Poses. The database frame f is stored in the database's world, where its character frame
+// is C_f = (root_positions[f], root_yaws[f]); the character is at the world root
+// W = (x, z, yaw). A played frame is placed by the rigid map W * C_f^-1:
+//   - each BVH root joint (parent -1) has its local transform mapped by W * C_f^-1 (for
+//     Bandai the root is a static dummy and the hips move below it: the general case);
+//   - the hips are blended in the character frame (stitch.hpp) and placed at W, then
+//     re-expressed below their parent, so exported BVH local transforms stay consistent;
+//   - the other joints keep their (inertialized) local rotations and database translations.
+// Timing: after the k-th root advance of a step the root belongs to frame j + k, the k-th
+// played frame. At a transition from the shown frame s to the match j, the source pose is s
+// and the destination is j (the same instant); the first shown frame is j + 1.
+//
+// Foot locking (world space, per side): when the played frame's database contact starts
+// the ankle is locked where it is; the lock is released when the contact ends or the
+// animated ankle is more than lock_release_distance from it (then it stays free until the
+// next contact). A weight blends the IK target between the animated and the locked ankle
+// over lock_blend_time. The two-bone IK (ik.hpp) moves the ankle to the target and the
+// foot keeps its animated world orientation.
+//
+// The step allocates nothing: every buffer is sized at construction.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "mmrl/controller.hpp"
+#include "mmrl/ik.hpp"
+#include "mmrl/stitch.hpp"
+
+namespace mmrl {
+
+struct CharacterOptions {
+  int frames_per_step = 6;               // frames played per step (1..30)
+  bool poses = true;                     // false: the fast path (root motion only)
+  float inertialization_halflife = 0.1f; // seconds; <= 0: hard switch
+  bool ik = true;                        // two-bone leg IK
+  bool foot_locking = true;              // lock planted feet (needs ik)
+  float ik_margin = 0.015f;              // meters short of a straight leg
+  float lock_release_distance = 0.2f;    // meters between locked and animated ankle
+  float lock_blend_time = 0.1f;          // seconds to blend a lock in or out
+  float action_limit_std = 3.0f;         // trajectory clipped like PlaneVecEnv; <= 0: not clipped
+};
+
+// Global positions (J x 3, meters) of database frame f in the database's world.
+// rotations_scratch: J x 4 floats of caller-owned scratch (the global rotations on return).
+void database_pose_global(const Database& db, int64_t frame, float* positions, float* rotations_scratch);
+
+class Character {
+ public:
+  // db and matcher are borrowed and must outlive the character.
+  Character(const Database& db, const Matcher& matcher, const CharacterOptions& options);
+
+  const CharacterOptions& options() const { return options_; }
+  int num_joints() const { return J_; }
+
+  // Puts the character on database frame `frame` (any frame) at the world root; clears
+  // offsets and locks, and computes the shown pose.
+  void reset(int64_t frame, const RootState& root);
+
+  // One step with a 12-d normalized trajectory (finite; checked by the caller).
+  void step(const float* trajectory);
+
+  const RootState& root() const { return root_; }
+  int64_t frame() const { return frame_; }
+  int64_t last_match() const { return last_match_; }
+  bool last_transition() const { return last_transition_; }
+  float last_cost() const { return last_cost_; }
+
+  // Per played frame of the last step (frames_per_step rows). Pose arrays are filled only
+  // on the full path.
+  const int64_t* played_frames() const { return played_.data(); }        // F
+  const float* roots() const { return roots_.data(); }                    // F x 3 (x, z, yaw)
+  const float* global_positions() const { return gpos_.data(); }         // F x J x 3, meters
+  const float* global_rotations() const { return grot_.data(); }         // F x J x 4, w x y z
+  const float* local_translations() const { return lpos_.data(); }       // F x J x 3 (BVH locals)
+  const float* local_rotations() const { return lrot_.data(); }          // F x J x 4
+  const uint8_t* contacts() const { return contacts_.data(); }           // F x 2, database contacts
+  const float* lock_weights() const { return lock_w_out_.data(); }       // F x 2, 0..1
+  // The pose shown now (the last played frame, or the reset frame): J x 3 / J x 4.
+  const float* current_global_positions() const { return cur_gpos_.data(); }
+  const float* current_global_rotations() const { return cur_grot_.data(); }
+  const float* current_local_translations() const { return cur_lpos_.data(); }
+  const float* current_local_rotations() const { return cur_lrot_.data(); }
+
+ private:
+  void blend_pose_of(int64_t frame, BlendPose& pose) const;
+  void blend_velocity_of(int64_t frame, BlendVelocity& vel);
+  // Shows database frame f (root_ already advanced to it): fills the current pose.
+  void show_frame(int64_t f, bool decay);
+  void forward_kinematics();
+  void solve_leg(int side, const Vec3& target);
+
+  const Database& db_;
+  const Matcher& matcher_;
+  CharacterOptions options_;
+  int J_ = 0;
+  float dt_ = 1.0f / 30.0f;
+  float low_[kTrajectoryDim], high_[kTrajectoryDim];
+  std::vector<int> hips_chain_;   // root .. hips
+  std::vector<bool> above_hips_;  // ancestors of the hips
+
+  RootState root_;
+  int64_t frame_ = 0, last_match_ = -1;
+  bool last_transition_ = false;
+  float last_cost_ = 0;
+
+  Inertializer inertializer_;
+  BlendPose src_, dst_, anim_, shown_, scratch_;
+  BlendVelocity src_vel_, dst_vel_;
+
+  // Foot locks.
+  bool locked_[2] = {false, false}, released_in_contact_[2] = {false, false};
+  float lock_weight_[2] = {0, 0};
+  Vec3 lock_position_[2] = {Vec3::Zero(), Vec3::Zero()};
+
+  // Current pose: BVH-form locals (roots placed in the world) and globals.
+  std::vector<Vec3> loc_t_, glob_t_;
+  std::vector<Quat> loc_r_, glob_r_;
+  std::vector<float> cur_gpos_, cur_grot_, cur_lpos_, cur_lrot_;
+
+  // Step outputs.
+  std::vector<int64_t> played_;
+  std::vector<float> roots_, gpos_, grot_, lpos_, lrot_, lock_w_out_;
+  std::vector<uint8_t> contacts_;
+};
+
+}  // namespace mmrl

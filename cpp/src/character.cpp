@@ -1,0 +1,281 @@
+#include "mmrl/character.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace mmrl {
+
+namespace {
+
+inline Vec3 load3(const float* p) { return Vec3(p[0], p[1], p[2]); }
+inline void store3(const Vec3& v, float* p) {
+  p[0] = v.x();
+  p[1] = v.y();
+  p[2] = v.z();
+}
+inline float smoothstep(float x) { return x * x * (3.0f - 2.0f * x); }
+
+}  // namespace
+
+void database_pose_global(const Database& db, int64_t frame, float* positions, float* rotations_scratch) {
+  const size_t o = static_cast<size_t>(frame) * db.num_joints;
+  pose_forward_kinematics(db.skeleton.parents, &db.bone_translations[o * 3], &db.bone_rotations[o * 4], positions,
+                          rotations_scratch);
+}
+
+Character::Character(const Database& db, const Matcher& matcher, const CharacterOptions& options)
+    : db_(db), matcher_(matcher), options_(options), J_(db.num_joints) {
+  if (options.frames_per_step < 1 || options.frames_per_step > kTrajectoryOffsets[2])
+    throw std::invalid_argument("frames_per_step must be between 1 and 30");
+  if (!std::isfinite(options.inertialization_halflife))
+    throw std::invalid_argument("inertialization_halflife must be finite (<= 0 turns it off)");
+  if (!(options.ik_margin >= 0) || !(options.lock_release_distance > 0) || !(options.lock_blend_time >= 0))
+    throw std::invalid_argument("ik_margin must be >= 0, lock_release_distance > 0 and lock_blend_time >= 0");
+  if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("matcher was not built over this database");
+  if (db.contacts.size() != static_cast<size_t>(db.num_frames) * 2)
+    throw std::invalid_argument("database has no foot contacts (rebuild it)");
+  dt_ = 1.0f / db.fps;
+  if (options.action_limit_std > 0) {
+    trajectory_action_box(db, options.action_limit_std, low_, high_);
+  } else {
+    std::fill(low_, low_ + kTrajectoryDim, -INFINITY);
+    std::fill(high_, high_ + kTrajectoryDim, INFINITY);
+  }
+  above_hips_.assign(J_, false);
+  for (int a = db.roles.hips; a >= 0; a = db.skeleton.parents[a]) hips_chain_.insert(hips_chain_.begin(), a);
+  for (int a : hips_chain_)
+    if (a != db.roles.hips) above_hips_[a] = true;
+  std::vector<bool> blended(J_);
+  for (int j = 0; j < J_; ++j) blended[j] = !above_hips_[j];
+  inertializer_.reset(J_, db.roles.hips, blended, options.inertialization_halflife);
+  for (BlendPose* p : {&src_, &dst_, &anim_, &shown_, &scratch_}) p->resize(J_);
+  src_vel_.resize(J_);
+  dst_vel_.resize(J_);
+  loc_t_.assign(J_, Vec3::Zero());
+  glob_t_.assign(J_, Vec3::Zero());
+  loc_r_.assign(J_, Quat::Identity());
+  glob_r_.assign(J_, Quat::Identity());
+  cur_gpos_.assign(static_cast<size_t>(J_) * 3, 0);
+  cur_lpos_.assign(static_cast<size_t>(J_) * 3, 0);
+  cur_grot_.assign(static_cast<size_t>(J_) * 4, 0);
+  cur_lrot_.assign(static_cast<size_t>(J_) * 4, 0);
+  const size_t F = options.frames_per_step;
+  played_.assign(F, 0);
+  roots_.assign(F * 3, 0);
+  contacts_.assign(F * 2, 0);
+  lock_w_out_.assign(F * 2, 0);
+  if (options.poses) {
+    gpos_.assign(F * J_ * 3, 0);
+    lpos_.assign(F * J_ * 3, 0);
+    grot_.assign(F * J_ * 4, 0);
+    lrot_.assign(F * J_ * 4, 0);
+  }
+  reset(0, RootState{});
+}
+
+void Character::reset(int64_t frame, const RootState& root) {
+  if (frame < 0 || frame >= db_.num_frames) throw std::out_of_range("start frame out of range");
+  frame_ = frame;
+  root_ = root;
+  last_match_ = -1;
+  last_transition_ = false;
+  inertializer_.clear();
+  for (int s = 0; s < 2; ++s) {
+    locked_[s] = released_in_contact_[s] = false;
+    lock_weight_[s] = 0;
+  }
+  if (options_.poses) show_frame(frame, false);
+}
+
+void Character::blend_pose_of(int64_t f, BlendPose& pose) const {
+  const size_t o = static_cast<size_t>(f) * J_;
+  const float* t = &db_.bone_translations[o * 3];
+  const float* r = &db_.bone_rotations[o * 4];
+  for (int j = 0; j < J_; ++j) pose.rotations[j] = quat_load(r + j * 4);
+  // The hips' transform in the database world, then in frame f's character frame.
+  Vec3 gp = Vec3::Zero();
+  Quat gr = Quat::Identity();
+  for (int a : hips_chain_) {
+    gp = gp + gr * load3(t + a * 3);
+    gr = gr * pose.rotations[a];
+  }
+  const float yaw = db_.root_yaws[f];
+  const Vec3 c = load3(&db_.root_positions[f * 3]);
+  pose.hips_position = world_to_local_dir(gp - c, yaw);
+  pose.hips_rotation = (quat_from_yaw(-yaw) * gr).normalized();
+}
+
+void Character::blend_velocity_of(int64_t f, BlendVelocity& vel) {
+  // Forward difference inside the clip (backward at its last frame).
+  const int clip = db_.frame_clip[f];
+  const bool forward = f + 1 < db_.clip_ranges[clip * 2 + 1];
+  const int64_t a = forward ? f : f - 1, b = forward ? f + 1 : f;
+  blend_pose_of(a, scratch_);
+  // dst_/src_ may be in use by the caller; use anim_ as the second scratch.
+  blend_pose_of(b, anim_);
+  const float fps = db_.fps;
+  for (int j = 0; j < J_; ++j)
+    vel.angular[j] = quat_to_rotation_vector(anim_.rotations[j] * scratch_.rotations[j].conjugate()) * fps;
+  vel.hips_angular = quat_to_rotation_vector(anim_.hips_rotation * scratch_.hips_rotation.conjugate()) * fps;
+  vel.hips_linear = (anim_.hips_position - scratch_.hips_position) * fps;
+}
+
+void Character::forward_kinematics() {
+  const auto& parents = db_.skeleton.parents;
+  for (int j = 0; j < J_; ++j) {
+    const int p = parents[j];
+    if (p < 0) {
+      glob_t_[j] = loc_t_[j];
+      glob_r_[j] = loc_r_[j];
+    } else {
+      glob_t_[j] = glob_t_[p] + glob_r_[p] * loc_t_[j];
+      glob_r_[j] = (glob_r_[p] * loc_r_[j]).normalized();
+    }
+  }
+}
+
+void Character::solve_leg(int side, const Vec3& target) {
+  const int up = db_.roles.upper_leg[side], lo = db_.roles.lower_leg[side], ft = db_.roles.foot[side];
+  IkTwoBoneJob job;
+  job.hip = glob_t_[up];
+  job.knee = glob_t_[lo];
+  job.ankle = glob_t_[ft];
+  job.target = target;
+  job.margin = options_.ik_margin;
+  job.fallback_bend_direction = forward_from_yaw(root_.yaw);
+  if (!job.Run()) return;
+  // New globals of the thigh and shin; the foot keeps its world orientation.
+  const Quat foot_global = glob_r_[ft];
+  const Quat up_global = (job.hip_correction * glob_r_[up]).normalized();
+  const Quat lo_global = (job.knee_correction * glob_r_[lo]).normalized();
+  const int up_parent = db_.skeleton.parents[up];
+  const Quat parent_global = up_parent >= 0 ? glob_r_[up_parent] : Quat::Identity();
+  // Locals along the chain (upper -> lower -> foot are parent -> child in every skeleton
+  // the roles accept, possibly with joints in between that keep their local rotations).
+  loc_r_[up] = (parent_global.conjugate() * up_global).normalized();
+  forward_kinematics();
+  const int lo_parent = db_.skeleton.parents[lo];
+  loc_r_[lo] = (glob_r_[lo_parent].conjugate() * lo_global).normalized();
+  forward_kinematics();
+  const int ft_parent = db_.skeleton.parents[ft];
+  loc_r_[ft] = (glob_r_[ft_parent].conjugate() * foot_global).normalized();
+  forward_kinematics();
+}
+
+void Character::show_frame(int64_t f, bool decay) {
+  blend_pose_of(f, anim_);
+  if (decay) {
+    inertializer_.update(dt_, anim_, shown_);
+  } else {
+    shown_ = anim_;
+  }
+  // World placement: the root joints by W * C_f^-1, the hips at W.
+  const Quat world_yaw = quat_from_yaw(root_.yaw);
+  const Vec3 world_origin(root_.x, 0.0f, root_.z);
+  const Quat map_rot = quat_from_yaw(root_.yaw - db_.root_yaws[f]);
+  const Vec3 c = load3(&db_.root_positions[f * 3]);
+  const size_t o = static_cast<size_t>(f) * J_;
+  const auto& parents = db_.skeleton.parents;
+  const int hips = db_.roles.hips;
+  for (int j = 0; j < J_; ++j) {
+    const Vec3 t = load3(&db_.bone_translations[(o + j) * 3]);
+    const int p = parents[j];
+    if (j == hips) {
+      const Vec3 gp = world_origin + world_yaw * shown_.hips_position;
+      const Quat gr = (world_yaw * shown_.hips_rotation).normalized();
+      if (p < 0) {
+        loc_t_[j] = gp;
+        loc_r_[j] = gr;
+      } else {
+        loc_r_[j] = (glob_r_[p].conjugate() * gr).normalized();
+        loc_t_[j] = glob_r_[p].conjugate() * (gp - glob_t_[p]);
+      }
+    } else if (p < 0) {
+      loc_t_[j] = world_origin + map_rot * (t - c);
+      loc_r_[j] = (map_rot * shown_.rotations[j]).normalized();
+    } else {
+      loc_t_[j] = t;
+      loc_r_[j] = shown_.rotations[j];
+    }
+    if (p < 0) {
+      glob_t_[j] = loc_t_[j];
+      glob_r_[j] = loc_r_[j];
+    } else {
+      glob_t_[j] = glob_t_[p] + glob_r_[p] * loc_t_[j];
+      glob_r_[j] = (glob_r_[p] * loc_r_[j]).normalized();
+    }
+  }
+
+  // Foot locking and IK.
+  const bool locking = options_.ik && options_.foot_locking;
+  for (int side = 0; side < 2; ++side) {
+    const bool contact = db_.contacts[static_cast<size_t>(f) * 2 + side] != 0;
+    const Vec3 animated = glob_t_[db_.roles.foot[side]];
+    if (!locking || !decay) {
+      locked_[side] = released_in_contact_[side] = false;
+      lock_weight_[side] = 0;
+      if (!locking) continue;
+    }
+    if (!contact) released_in_contact_[side] = false;
+    if (locked_[side] && (!contact || (animated - lock_position_[side]).norm() > options_.lock_release_distance)) {
+      locked_[side] = false;
+      released_in_contact_[side] = contact;
+    }
+    if (contact && !locked_[side] && !released_in_contact_[side] && decay) {
+      locked_[side] = true;
+      lock_position_[side] = animated;
+    }
+    const float rate = options_.lock_blend_time > 0 ? dt_ / options_.lock_blend_time : 1.0f;
+    lock_weight_[side] = std::clamp(lock_weight_[side] + (locked_[side] ? rate : -rate), 0.0f, 1.0f);
+    const float w = smoothstep(lock_weight_[side]);
+    if (w > 0) solve_leg(side, animated + w * (lock_position_[side] - animated));
+  }
+
+  for (int j = 0; j < J_; ++j) {
+    store3(glob_t_[j], &cur_gpos_[j * 3]);
+    store3(loc_t_[j], &cur_lpos_[j * 3]);
+    quat_store(glob_r_[j], &cur_grot_[j * 4]);
+    quat_store(loc_r_[j], &cur_lrot_[j * 4]);
+  }
+}
+
+void Character::step(const float* trajectory) {
+  float query[kFeatureDim];
+  float traj[kTrajectoryDim];
+  for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high_[k], std::max(low_[k], trajectory[k]));
+  controller_query(db_, frame_, traj, query);
+  const int64_t j = controller_match(db_, matcher_, frame_, query, &last_cost_);
+  last_transition_ = (j != frame_);
+  last_match_ = j;
+  if (options_.poses && last_transition_ && inertializer_.enabled()) {
+    blend_velocity_of(frame_, src_vel_);
+    blend_velocity_of(j, dst_vel_);
+    blend_pose_of(frame_, src_);
+    blend_pose_of(j, dst_);
+    inertializer_.transition(src_, src_vel_, dst_, dst_vel_);
+  }
+  const int F = options_.frames_per_step;
+  const size_t JJ = static_cast<size_t>(J_);
+  for (int k = 0; k < F; ++k) {
+    root_advance(root_, &db_.root_deltas[static_cast<size_t>(j + k) * 3]);
+    const int64_t f = j + k + 1;
+    played_[k] = f;
+    roots_[k * 3] = root_.x;
+    roots_[k * 3 + 1] = root_.z;
+    roots_[k * 3 + 2] = root_.yaw;
+    contacts_[k * 2] = db_.contacts[f * 2];
+    contacts_[k * 2 + 1] = db_.contacts[f * 2 + 1];
+    if (!options_.poses) continue;
+    show_frame(f, true);
+    lock_w_out_[k * 2] = smoothstep(lock_weight_[0]);
+    lock_w_out_[k * 2 + 1] = smoothstep(lock_weight_[1]);
+    std::copy(cur_gpos_.begin(), cur_gpos_.end(), gpos_.begin() + k * JJ * 3);
+    std::copy(cur_lpos_.begin(), cur_lpos_.end(), lpos_.begin() + k * JJ * 3);
+    std::copy(cur_grot_.begin(), cur_grot_.end(), grot_.begin() + k * JJ * 4);
+    std::copy(cur_lrot_.begin(), cur_lrot_.end(), lrot_.begin() + k * JJ * 4);
+  }
+  frame_ = j + F;
+}
+
+}  // namespace mmrl

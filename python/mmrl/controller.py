@@ -1,0 +1,208 @@
+"""The motion-matching character controller (C++ ``Character``, see cpp/include/mmrl/character.hpp).
+
+Each :meth:`Controller.step` takes the 12-d trajectory half of a query (the same normalized
+units as the plane task's action), forms the full query from the current frame's pose
+features, matches and plays ``frames_per_step`` frames:
+
+- decision rule: the current frame is the starting best, so playback simply continues
+  unless another valid frame is strictly closer (a *transition*);
+- root motion: the played frames' database root deltas accumulate in world space;
+- the trajectory is clipped to the same box as the env action (``action_limit_std``).
+
+The full path also returns world-space poses of every played frame, inertialized at
+transitions, with planted feet locked by a two-bone leg IK. ``fast=True`` computes the root
+only (what training uses); both paths take the same decisions and root trajectory.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from . import _core
+from .database import POSE_DIM, TRAJECTORY_DIM, Database
+
+
+@dataclass
+class StepResult:
+    """What one controller step played (F = frames_per_step, J joints; world space, meters)."""
+
+    frames: np.ndarray
+    """(F,) database frames shown."""
+    roots: np.ndarray
+    """(F, 3) world root (x, z, yaw in radians) of each shown frame."""
+    positions: Optional[np.ndarray]
+    """(F, J, 3) global joint positions (None on the fast path)."""
+    rotations: Optional[np.ndarray]
+    """(F, J, 4) global joint rotations, unit quaternions (w, x, y, z)."""
+    local_translations: Optional[np.ndarray]
+    """(F, J, 3) BVH-style local translations (root joints placed in the world)."""
+    local_rotations: Optional[np.ndarray]
+    """(F, J, 4) local rotations (w, x, y, z)."""
+    contacts: np.ndarray
+    """(F, 2) bool: the database's left/right foot contacts of the shown frames."""
+    lock_weights: np.ndarray
+    """(F, 2) foot-lock blend weights (0 = animated, 1 = locked)."""
+    match: int
+    """The frame chosen by the match (the shown frames are match + 1 .. match + F)."""
+    transition: bool
+    """True when the match was not the current frame's continuation."""
+    cost: float
+    """Squared distance of the match in the normalized, weighted feature space."""
+
+
+class Controller:
+    """A character driven by motion matching.
+
+    Args:
+        db: the motion database.
+        frames_per_step: frames played per step (6 = 0.2 s at 30 fps).
+        inertialization_halflife: seconds; 0 or None switches hard at transitions.
+        ik: two-bone leg IK; foot_locking: lock planted feet (needs ``ik``).
+        start_frame: database frame to start on (default: the first valid frame).
+        position: world (x, z) of the root, meters; yaw: heading in radians (forward = (sin, 0, cos)).
+        fast: root motion only (no poses), the training path.
+        action_limit_std: trajectories are clipped to mean +- this many std per dimension,
+            like the env's action box (0 or None: no clipping).
+        record: keep every shown frame for :meth:`recording` (metrics, video, export).
+    """
+
+    def __init__(self, db: Database, *, frames_per_step: int = 6, inertialization_halflife: Optional[float] = 0.1,
+                 ik: bool = True, foot_locking: bool = True, start_frame: Optional[int] = None,
+                 position: Sequence[float] = (0.0, 0.0), yaw: float = 0.0, fast: bool = False,
+                 action_limit_std: Optional[float] = 3.0, record: bool = False):
+        if not isinstance(db, Database):
+            raise TypeError(f"db: expected an mmrl.Database, got {type(db).__name__}")
+        if not isinstance(frames_per_step, (int, np.integer)) or not 1 <= frames_per_step <= 30:
+            raise ValueError(f"frames_per_step must be an int between 1 and 30, got {frames_per_step!r}")
+        halflife = float(inertialization_halflife or 0.0)
+        if not np.isfinite(halflife) or halflife < 0:
+            raise ValueError(f"inertialization_halflife must be >= 0 seconds, got {inertialization_halflife!r}")
+        limit = float(action_limit_std or 0.0)
+        if not np.isfinite(limit) or limit < 0:
+            raise ValueError(f"action_limit_std must be >= 0, got {action_limit_std!r}")
+        opt = _core.CharacterOptions()
+        opt.frames_per_step = int(frames_per_step)
+        opt.poses = not fast
+        opt.inertialization_halflife = halflife
+        opt.ik = bool(ik)
+        opt.foot_locking = bool(foot_locking)
+        opt.action_limit_std = limit
+        self.db = db
+        self.fast = bool(fast)
+        self.frames_per_step = int(frames_per_step)
+        self._core = _core.Character(db._db, db.matcher, opt)
+        self._record = bool(record)
+        self._rec: Dict[str, List[np.ndarray]] = {}
+        self.reset(start_frame, position, yaw)
+
+    # ------------------------------------------------------------------ state
+    def reset(self, start_frame: Optional[int] = None, position: Sequence[float] = (0.0, 0.0),
+              yaw: float = 0.0) -> None:
+        """Put the character on ``start_frame`` at ``position`` (x, z) facing ``yaw``."""
+        if start_frame is None:
+            start_frame = int(np.flatnonzero(self.db.valid_mask)[0])
+        if not isinstance(start_frame, (int, np.integer)) or isinstance(start_frame, bool):
+            raise TypeError(f"start_frame: expected an int, got {type(start_frame).__name__}")
+        if not 0 <= start_frame < self.db.num_frames:
+            raise ValueError(f"start_frame {start_frame} is out of range [0, {self.db.num_frames})")
+        pos = np.asarray(position, dtype=np.float64)
+        if pos.shape != (2,) or not np.isfinite(pos).all():
+            raise ValueError(f"position: expected finite (x, z), got {position!r}")
+        if not np.isfinite(float(yaw)):
+            raise ValueError(f"yaw must be finite, got {yaw!r}")
+        self._core.reset(int(start_frame), float(pos[0]), float(pos[1]), float(yaw))
+        self.transitions = 0
+        self.steps = 0
+        if self._record:
+            self._rec = {k: [] for k in ("frames", "roots", "positions", "rotations", "local_translations",
+                                         "local_rotations", "contacts", "lock_weights")}
+            self._rec["frames"].append(np.array([self.frame], np.int64))
+            self._rec["roots"].append(np.array([self.root], np.float32))
+            self._rec["contacts"].append(self.db.contacts[self.frame][None].copy())
+            self._rec["lock_weights"].append(np.zeros((1, 2), np.float32))
+            if not self.fast:
+                for key, arr in zip(("positions", "rotations", "local_translations", "local_rotations"),
+                                    self._core.current_pose()):
+                    self._rec[key].append(np.array(arr)[None])
+            self._rec["transitions"] = []
+            self._rec["queries"] = []
+
+    @property
+    def root(self) -> Tuple[float, float, float]:
+        """World root (x, z, yaw)."""
+        return tuple(float(v) for v in self._core.root)
+
+    @property
+    def frame(self) -> int:
+        """The database frame shown now."""
+        return int(self._core.frame)
+
+    def pose(self) -> Tuple[np.ndarray, np.ndarray]:
+        """Global positions (J, 3) and rotations (J, 4) of the pose shown now (full path)."""
+        gp, gr, _, _ = self._core.current_pose()
+        return np.array(gp), np.array(gr)
+
+    def observation(self, target: Sequence[float]) -> np.ndarray:
+        """The plane task's observation (17,) for a world target (x, z): pose features + target in the character frame."""
+        x, z, yaw = self.root
+        dx, dz = float(target[0]) - x, float(target[1]) - z
+        c, s = np.cos(yaw), np.sin(yaw)
+        obs = np.empty(POSE_DIM + 2, np.float32)
+        obs[:POSE_DIM] = self.db.normalized_features[self.frame, :POSE_DIM]
+        obs[POSE_DIM] = c * dx - s * dz
+        obs[POSE_DIM + 1] = s * dx + c * dz
+        return obs
+
+    # ------------------------------------------------------------------ step
+    def step(self, trajectory_query) -> StepResult:
+        """Match with a 12-d normalized trajectory query and play ``frames_per_step`` frames."""
+        q = trajectory_query
+        if not isinstance(q, np.ndarray):
+            raise TypeError(f"trajectory_query: expected a numpy array, got {type(q).__name__}")
+        if not np.issubdtype(q.dtype, np.floating):
+            raise TypeError(f"trajectory_query: expected a float array, got dtype {q.dtype}")
+        if q.shape != (TRAJECTORY_DIM,):
+            raise ValueError(f"trajectory_query: expected shape ({TRAJECTORY_DIM},), got {q.shape}")
+        q = np.ascontiguousarray(q, dtype=np.float32)
+        if not np.isfinite(q).all():
+            raise ValueError("trajectory_query: contains NaN or inf")
+        c = self._core
+        c.step(q)
+        self.steps += 1
+        self.transitions += int(c.last_transition)
+        poses = (None,) * 4 if self.fast else tuple(np.array(a) for a in c.poses())
+        res = StepResult(frames=c.played_frames, roots=np.array(c.roots), positions=poses[0], rotations=poses[1],
+                         local_translations=poses[2], local_rotations=poses[3],
+                         contacts=np.array(c.contacts).astype(bool), lock_weights=np.array(c.lock_weights),
+                         match=int(c.last_match), transition=bool(c.last_transition), cost=float(c.last_cost))
+        if self._record:
+            r = self._rec
+            r["frames"].append(res.frames)
+            r["roots"].append(res.roots)
+            r["contacts"].append(res.contacts)
+            r["lock_weights"].append(res.lock_weights)
+            r["transitions"].append(res.transition)
+            r["queries"].append(q.copy())
+            if not self.fast:
+                for key in ("positions", "rotations", "local_translations", "local_rotations"):
+                    r[key].append(getattr(res, key))
+        return res
+
+    def recording(self) -> Dict[str, np.ndarray]:
+        """Everything shown since the last reset (needs ``record=True``).
+
+        Keys: ``frames`` (T,), ``roots`` (T, 3), ``contacts`` (T, 2), ``lock_weights`` (T, 2),
+        and on the full path ``positions``/``local_translations`` (T, J, 3) and
+        ``rotations``/``local_rotations`` (T, J, 4), where T = 1 + steps * frames_per_step (the
+        reset pose first); per step: ``transitions`` (S,) bool and ``queries`` (S, 12).
+        """
+        if not self._record:
+            raise ValueError("this controller was created with record=False")
+        out = {k: np.concatenate(v) for k, v in self._rec.items() if k not in ("transitions", "queries") and v}
+        out["transitions"] = np.array(self._rec["transitions"], bool)
+        out["queries"] = np.array(self._rec["queries"], np.float32).reshape(-1, TRAJECTORY_DIM)
+        out["fps"] = np.float32(self.db.fps)
+        out["frames_per_step"] = np.int32(self.frames_per_step)
+        return out

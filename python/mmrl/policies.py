@@ -1,0 +1,86 @@
+"""Scripted policies with the same interface as trained ones: ``act(obs[N, 17]) -> actions[N, 12]``.
+
+Observations and actions are the plane task's (see :mod:`mmrl.envs`): ``obs = [pose features
+(15, normalized), target (x, z) in the character frame (meters)]``; actions are the 12-d
+trajectory features in the database's normalized units.
+"""
+from __future__ import annotations
+
+from typing import Optional, Tuple
+
+import numpy as np
+
+from .database import POSE_DIM, TRAJECTORY_DIM, Database
+
+#: Seconds ahead of the three trajectory samples (+10, +20, +30 frames at 30 fps).
+TRAJECTORY_FRAMES = (10, 20, 30)
+
+
+def database_speeds(db: Database) -> Tuple[float, float]:
+    """(walk, run) speeds of a database, m/s.
+
+    The speed of a valid frame is the distance to its +30-frame trajectory sample over that
+    time. The speeds are split in two groups (a 1-d two-means), and each speed is the median
+    of its group: for the Bandai data about 1.1-1.2 m/s and 2.7-2.8 m/s.
+    """
+    f = db.features[db.valid_mask]
+    speed = np.hypot(f[:, 23], f[:, 24]) * db.fps / TRAJECTORY_FRAMES[2]
+    lo, hi = np.percentile(speed, 10), np.percentile(speed, 90)
+    for _ in range(20):
+        split = 0.5 * (lo + hi)
+        a, b = speed[speed < split], speed[speed >= split]
+        if a.size == 0 or b.size == 0:
+            break
+        lo, hi = float(np.median(a)), float(np.median(b))
+    return float(lo), float(hi)
+
+
+class JoystickPolicy:
+    """A straight line toward the target at a fixed speed, facing it: a gamepad held toward the target.
+
+    Args:
+        db: the database whose normalization the actions use.
+        speed: m/s; default: the database's walking speed (:func:`database_speeds`).
+    """
+
+    def __init__(self, db: Database, speed: Optional[float] = None):
+        if speed is None:
+            speed = database_speeds(db)[0]
+        if not np.isfinite(speed) or speed <= 0:
+            raise ValueError(f"speed must be positive, got {speed!r}")
+        self.speed = float(speed)
+        self._mean = np.asarray(db.feature_mean[POSE_DIM:], np.float32)
+        self._scale = np.asarray(db.feature_scale[POSE_DIM:], np.float32)
+        self._times = np.array(TRAJECTORY_FRAMES, np.float32) / db.fps
+
+    @classmethod
+    def preset(cls, db: Database, name: str) -> "JoystickPolicy":
+        """``"joystick"`` (walking speed) or ``"joystick-run"`` (running speed)."""
+        walk, run = database_speeds(db)
+        if name == "joystick":
+            return cls(db, walk)
+        if name == "joystick-run":
+            return cls(db, run)
+        raise ValueError(f"unknown joystick preset {name!r}; presets are 'joystick' and 'joystick-run'")
+
+    def raw_trajectory(self, obs: np.ndarray) -> np.ndarray:
+        """(N, 12) trajectory in meters / unit directions, character frame."""
+        g = obs[:, POSE_DIM:POSE_DIM + 2].astype(np.float64)
+        dist = np.linalg.norm(g, axis=1, keepdims=True)
+        d = np.where(dist > 1e-6, g / np.maximum(dist, 1e-6), np.array([[0.0, 1.0]]))
+        out = np.empty((obs.shape[0], TRAJECTORY_DIM), np.float32)
+        for k, t in enumerate(self._times):
+            out[:, 4 * k:4 * k + 2] = d * self.speed * t
+            out[:, 4 * k + 2:4 * k + 4] = d
+        return out
+
+    def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
+        """Actions (N, 12) in the env's normalized units for observations (N, 17)."""
+        obs = np.asarray(obs)
+        if obs.ndim != 2 or obs.shape[1] != POSE_DIM + 2:
+            raise ValueError(f"obs: expected shape (N, {POSE_DIM + 2}), got {obs.shape}")
+        if not np.isfinite(obs).all():
+            raise ValueError("obs: contains NaN or inf")
+        return ((self.raw_trajectory(obs) - self._mean) / self._scale).astype(np.float32)
+
+    __call__ = act

@@ -1,0 +1,97 @@
+"""mmrl export-bvh / render / eval through the command line; BVH round trip; video read back."""
+import json
+
+import imageio.v2 as iio
+import numpy as np
+import pytest
+
+import mmrl
+from mmrl.cli import main
+
+
+def read_video(path, width, height):
+    """All frames of a video decoded by imageio-ffmpeg's ffmpeg (subprocess.run closes every pipe)."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    out = subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(path), "-f", "rawvideo",
+                          "-pix_fmt", "rgb24", "-"], capture_output=True, check=True).stdout
+    return np.frombuffer(out, np.uint8).reshape(-1, height, width, 3)
+
+
+def test_export_bvh_round_trip_synthetic(tmp_path, capsys):
+    out = tmp_path / "gen.bvh"
+    assert main(["export-bvh", "--seconds", "2", "--seed", "1", "-o", str(out)]) == 0
+    m = mmrl.load_bvh(out)
+    z = np.load(out.with_suffix(".npz"))
+    assert m.num_frames == z["positions"].shape[0] == 1 + 10 * 6
+    assert m.fps == pytest.approx(30.0, rel=1e-4)
+    # The reloaded BVH reproduces the exported global positions (file units are written
+    # with limited precision).
+    np.testing.assert_allclose(m.global_positions(), z["positions"], atol=2e-4)
+    assert list(z["joint_names"]) == m.joint_names
+
+
+def test_export_bvh_on_shared_data(tmp_path, shared_data):
+    out = tmp_path / "gen.bvh"
+    data = sorted((shared_data / "normal").glob("*.bvh"))[:30]
+    assert main(["export-bvh", "--data", *map(str, data), "--seconds", "3", "-o", str(out)]) == 0
+    m = mmrl.load_bvh(out)
+    z = np.load(out.with_suffix(".npz"))
+    assert m.num_frames == z["positions"].shape[0] == 91
+    np.testing.assert_allclose(m.global_positions()[:, 1:], z["positions"][:, 1:], atol=2e-4)
+
+
+def test_render_mp4_shows_the_character_moving(tmp_path, shared_data):
+    out = tmp_path / "walk.mp4"
+    data = sorted((shared_data / "normal").glob("*.bvh"))[:30]
+    assert main(["render", "--data", *map(str, data), "--seconds", "2", "-o", str(out),
+                 "--size", "320x180", "--still", str(tmp_path / "still.png")]) == 0
+    frames = read_video(out, 320, 180)
+    assert len(frames) == 61 and frames[0].shape == (180, 320, 3)
+    assert np.abs(frames[0].astype(np.int16) - frames[-1]).mean() > 1.0
+    assert (tmp_path / "still.png").stat().st_size > 1000
+
+
+def test_render_gif_and_bad_output(tmp_path):
+    out = tmp_path / "a.gif"
+    assert main(["render", "--seconds", "0.4", "-o", str(out), "--size", "160x90"]) == 0
+    assert len(iio.mimread(str(out))) == 13
+    assert main(["render", "--seconds", "1", "-o", str(tmp_path / "a.avi")]) == 2
+
+
+def test_eval_json(capsys):
+    assert main(["eval", "--episodes", "3", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    for k in ("success_rate", "mean_time_to_target_s", "foot_sliding_cm_per_s", "max_pose_jump_cm",
+              "transitions_per_s"):
+        assert k in res
+    assert res["episodes"] == 3 and 0 <= res["success_rate"] <= 1
+
+
+def test_run_directory_without_ppo_or_policy(tmp_path, capsys):
+    (tmp_path / "config.json").write_text("{}")
+    assert main(["eval", str(tmp_path), "--episodes", "1", "--policy", "joystick-run", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["policy"] == "joystick-run"
+    assert main(["eval", str(tmp_path / "missing"), "--episodes", "1"]) == 2
+
+
+def test_pose_bindings_refuse_bad_input():
+    from mmrl import _core
+    from mmrl.envs import default_database
+
+    db = default_database()
+    J = db.num_joints
+    t, r = np.zeros((2, J, 3), np.float32), np.tile(np.array([1, 0, 0, 0], np.float32), (2, J, 1))
+    assert _core.motion_from_pose(db._db, t, r).num_frames == 2
+    with pytest.raises(TypeError, match="float32"):
+        _core.motion_from_pose(db._db, t.astype(np.float64), r)
+    with pytest.raises(ValueError, match="dimension 0"):
+        _core.motion_from_pose(db._db, t, r[:1])
+    with pytest.raises(ValueError, match="NaN"):
+        _core.motion_from_pose(db._db, t, np.full_like(r, np.nan))
+    with pytest.raises(TypeError, match="int64"):
+        _core.database_global_positions(db._db, np.zeros(3, np.int32))
+    with pytest.raises(IndexError):
+        _core.database_global_positions(db._db, np.array([db.num_frames], np.int64))
