@@ -21,8 +21,11 @@ def ref_match(db, frame, traj):
     q = np.concatenate([feats[frame, :15], traj])
     cost = ((feats - q) ** 2).sum(1)
     cost[~db.valid_mask] = np.inf
-    j = int(np.argmin(cost))
-    if db.valid_mask[frame] and cost[frame] <= cost[j]:
+    a, b = db.clip_ranges[db.frame_clip[frame]]
+    masked = cost.copy()
+    masked[max(a, frame - 20):min(b, frame + 21)] = np.inf  # the exclusion window
+    j = int(np.argmin(masked))
+    if db.valid_mask[frame] and cost[frame] <= masked[j]:
         j = frame
     return j, cost
 

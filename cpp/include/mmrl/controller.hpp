@@ -3,9 +3,12 @@
 // A character is a world-space root (x, z in meters, yaw in radians) and a current
 // database frame: the frame whose pose is shown now. One controller step:
 //   1. query = [normalized pose part of the current frame (15), trajectory part (12)];
-//   2. match: the nearest valid frame j. The current frame is the starting best when it is
-//      itself a valid match, so playback continues unless another frame is strictly
-//      better (the continuation rule);
+//   2. match: the nearest valid frame j outside a window of kMatchExcludeWindow frames on
+//      either side of the current frame (in its clip). The current frame itself is the
+//      starting best when it is a valid match, so playback continues unless another frame
+//      is strictly better (the continuation rule). The window stops the search from
+//      jumping a few frames back or ahead in the same clip, which can trap a character in
+//      a loop of one step's frames;
 //   3. playback: frames j+1 .. j+n are shown; the root advances by the database root
 //      deltas of frames j .. j+n-1 (each expressed in its own character frame), and the
 //      current frame becomes j+n.
@@ -13,6 +16,7 @@
 // The fast path (training) is exactly this; the full path adds poses on top of it.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 
 #include "mmrl/database.hpp"
@@ -39,11 +43,20 @@ inline void controller_query(const Database& db, int64_t frame, const float* tra
   for (int k = 0; k < kTrajectoryDim; ++k) query[kPoseDim + k] = trajectory[k];
 }
 
+// Frames on either side of the current one (within its clip) that a search skips.
+constexpr int kMatchExcludeWindow = 20;
+
 // The match with the continuation rule (see above). Returns the frame to play from.
 inline int64_t controller_match(const Database& db, const Matcher& matcher, int64_t frame, const float* query,
                                 float* cost = nullptr) {
   const int64_t bound = (frame >= 0 && db.valid[frame]) ? frame : -1;
-  return matcher.match(query, 0, 0, bound, cost);
+  int64_t lo = 0, hi = 0;
+  if (frame >= 0) {
+    const int c = db.frame_clip[frame];
+    lo = std::max<int64_t>(db.clip_ranges[c * 2], frame - kMatchExcludeWindow);
+    hi = std::min<int64_t>(db.clip_ranges[c * 2 + 1], frame + kMatchExcludeWindow + 1);
+  }
+  return matcher.match(query, lo, hi, bound, cost);
 }
 
 // Normalized trajectory features <-> raw (meters, unit directions) in the character frame.
