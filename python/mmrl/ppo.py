@@ -82,9 +82,10 @@ class PPOConfig:
     95% success in about half the env steps of 64 (the env, not the update,
     dominates the cost of a step in the real tasks)."""
 
-    learning_rate: float = 1e-3
+    learning_rate: float = 2e-3
     """Adam step size. Tiny 32 x 32 networks tolerate a larger rate than the
-    usual 3e-4, and learn faster with it."""
+    usual 3e-4, and learn faster with it (plane task on the shared data, seed 0:
+    95% deterministic success after ~5 s at 2e-3 with 8 epochs, ~16 s at 1e-3 with 4)."""
 
     anneal_lr: bool = False
     """Linearly decay the learning rate to zero over ``total_steps`` (by steps,
@@ -115,8 +116,10 @@ class PPOConfig:
     max_grad_norm: float = 0.5
     """Clip the global gradient norm to this (None disables)."""
 
-    update_epochs: int = 4
-    """Passes over each rollout batch."""
+    update_epochs: int = 8
+    """Passes over each rollout batch. The plane task's env step (a motion-matching
+    search) costs more than an update pass of the tiny networks, so squeezing more out of
+    each sample pays in wall time."""
 
     num_minibatches: int = 4
     """Minibatches per epoch; the minibatch size is batch / num_minibatches.
