@@ -60,7 +60,7 @@ def main():
         print("joystick baseline not available in this build")
         return
     for name in ("joystick", "joystick-run"):
-        ej = evaluate_plane(JoystickPolicy.preset(name, db), db, episodes=args.episodes)
+        ej = evaluate_plane(JoystickPolicy.preset(db, name), db, episodes=args.episodes)
         print(f"{name:<13}: success {ej['success_rate']:.3f}, time to target {ej['mean_time_to_target_s']:.2f} s")
     print(f"run directory: {out}")
 
