@@ -131,10 +131,13 @@ def cmd_train(args: argparse.Namespace) -> int:
         task_cfg = PlaneConfig()
         cfg = ppo.PPOConfig(seed=args.seed, snapshot_steps=FIGURE4_STEPS)
     else:
-        from ..obstacles import ObstaclesConfig, ObstaclesVectorEnv  # noqa: F401
+        from ..obstacles import OBSTACLE_MAP_RANGE, ObstaclesConfig
 
         task_cfg = ObstaclesConfig()
-        cfg = ppo.PPOConfig(seed=args.seed)
+        # The binary sensor maps stay unnormalized; the CNN's update dominates the cost, so
+        # torch gets both cores during updates (the env's threads idle then).
+        cfg = ppo.PPOConfig(seed=args.seed, obs_norm_exclude=OBSTACLE_MAP_RANGE, torch_threads=2, update_epochs=4,
+                            learning_rate=1e-3)
     if saved is not None:  # a resumed run keeps its configuration
         for k, v in saved["task_config"].items():
             setattr(task_cfg, k, v)
