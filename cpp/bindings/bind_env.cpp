@@ -11,13 +11,6 @@ struct PyPlaneVecEnv {
   PlaneVecEnv env;
 };
 
-template <class T>
-T* out_buffer(const py::handle& obj, const char* name, std::initializer_list<py::ssize_t> shape) {
-  auto a = check_array<T>(obj, name, shape);
-  if (!a.writeable()) throw py::value_error(std::string(name) + ": array is read-only");
-  return a.mutable_data();
-}
-
 }  // namespace
 
 void bind_env(py::module_& m) {
@@ -50,7 +43,7 @@ void bind_env(py::module_& m) {
       .def(
           "reset",
           [](PyPlaneVecEnv& s, uint64_t seed, const py::handle& obs) {
-            float* o = out_buffer<float>(obs, "obs", {s.env.num_envs(), PlaneVecEnv::kObsDim});
+            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), PlaneVecEnv::kObsDim});
             py::gil_scoped_release release;
             s.env.reset(seed, o);
           },
@@ -59,7 +52,7 @@ void bind_env(py::module_& m) {
           "reset_env",
           [](PyPlaneVecEnv& s, int i, const py::handle& obs) {
             if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
-            float* o = out_buffer<float>(obs, "obs", {s.env.num_envs(), PlaneVecEnv::kObsDim});
+            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), PlaneVecEnv::kObsDim});
             s.env.reset_env(i, o + static_cast<size_t>(i) * PlaneVecEnv::kObsDim);
           },
           py::arg("index"), py::arg("obs"))
@@ -71,14 +64,14 @@ void bind_env(py::module_& m) {
             const py::ssize_t n = s.env.num_envs();
             auto a = check_array<float>(actions, "actions", {n, PlaneVecEnv::kActionDim});
             check_finite(a.data(), a.size(), "actions");
-            float* o = out_buffer<float>(obs, "obs", {n, PlaneVecEnv::kObsDim});
-            float* r = out_buffer<float>(rewards, "rewards", {n});
-            uint8_t* te = out_buffer<uint8_t>(terminated, "terminated", {n});
-            uint8_t* tr = out_buffer<uint8_t>(truncated, "truncated", {n});
-            uint8_t* su = out_buffer<uint8_t>(success, "success", {n});
-            float* fo = out_buffer<float>(final_obs, "final_obs", {n, PlaneVecEnv::kObsDim});
-            float* er = out_buffer<float>(episode_return, "episode_return", {n});
-            int32_t* el = out_buffer<int32_t>(episode_length, "episode_length", {n});
+            float* o = writable_buffer<float>(obs, "obs", {n, PlaneVecEnv::kObsDim});
+            float* r = writable_buffer<float>(rewards, "rewards", {n});
+            uint8_t* te = writable_buffer<uint8_t>(terminated, "terminated", {n});
+            uint8_t* tr = writable_buffer<uint8_t>(truncated, "truncated", {n});
+            uint8_t* su = writable_buffer<uint8_t>(success, "success", {n});
+            float* fo = writable_buffer<float>(final_obs, "final_obs", {n, PlaneVecEnv::kObsDim});
+            float* er = writable_buffer<float>(episode_return, "episode_return", {n});
+            int32_t* el = writable_buffer<int32_t>(episode_length, "episode_length", {n});
             py::gil_scoped_release release;
             s.env.step(a.data(), o, r, te, tr, su, fo, er, el);
           },
@@ -105,14 +98,14 @@ void bind_env(py::module_& m) {
           "observe",
           [](const PyPlaneVecEnv& s, int i, const py::handle& out) {
             if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
-            float* o = out_buffer<float>(out, "out", {PlaneVecEnv::kObsDim});
+            float* o = writable_buffer<float>(out, "out", {PlaneVecEnv::kObsDim});
             s.env.observe(i, o);
           },
           py::arg("index"), py::arg("out"), "Writes environment i's current observation into out (float32, 17).")
       .def(
           "current_frames",
           [](const PyPlaneVecEnv& s, const py::handle& out) {
-            int64_t* o = out_buffer<int64_t>(out, "out", {s.env.num_envs()});
+            int64_t* o = writable_buffer<int64_t>(out, "out", {s.env.num_envs()});
             for (int i = 0; i < s.env.num_envs(); ++i) o[i] = s.env.state(i).frame;
           },
           py::arg("out"), "Writes each environment's current database frame into out (int64, N).")

@@ -12,13 +12,6 @@ struct PyObstacleVecEnv {
   ObstacleVecEnv env;
 };
 
-template <class T>
-T* writable(const py::handle& obj, const char* name, std::initializer_list<py::ssize_t> shape) {
-  auto a = check_array<T>(obj, name, shape);
-  if (!a.writeable()) throw py::value_error(std::string(name) + ": array is read-only");
-  return a.mutable_data();
-}
-
 int checked_index(const PyObstacleVecEnv& s, int i) {
   if (i < 0 || i >= s.env.num_envs())
     throw py::index_error("env index " + std::to_string(i) + " out of range [0, " + std::to_string(s.env.num_envs()) +
@@ -102,7 +95,7 @@ void bind_obstacles(py::module_& m) {
       .def(
           "reset",
           [](PyObstacleVecEnv& s, uint64_t seed, const py::handle& obs) {
-            float* o = writable<float>(obs, "obs", {s.env.num_envs(), E::kObsDim});
+            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), E::kObsDim});
             py::gil_scoped_release release;
             s.env.reset(seed, o);
           },
@@ -111,7 +104,7 @@ void bind_obstacles(py::module_& m) {
           "reset_env",
           [](PyObstacleVecEnv& s, int i, const py::handle& obs) {
             checked_index(s, i);
-            float* o = writable<float>(obs, "obs", {s.env.num_envs(), E::kObsDim});
+            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), E::kObsDim});
             s.env.reset_env(i, o + static_cast<size_t>(i) * E::kObsDim);
           },
           py::arg("index"), py::arg("obs"))
@@ -124,16 +117,16 @@ void bind_obstacles(py::module_& m) {
             const py::ssize_t n = s.env.num_envs();
             auto a = check_array<float>(actions, "actions", {n, E::kActionDim});
             check_finite(a.data(), a.size(), "actions");
-            float* o = writable<float>(obs, "obs", {n, E::kObsDim});
-            float* r = writable<float>(rewards, "rewards", {n});
-            uint8_t* te = writable<uint8_t>(terminated, "terminated", {n});
-            uint8_t* tr = writable<uint8_t>(truncated, "truncated", {n});
-            uint8_t* su = writable<uint8_t>(success, "success", {n});
-            uint8_t* co = writable<uint8_t>(collision, "collision", {n});
-            int32_t* hi = writable<int32_t>(hits, "hits", {n});
-            float* fo = writable<float>(final_obs, "final_obs", {n, E::kObsDim});
-            float* er = writable<float>(episode_return, "episode_return", {n});
-            int32_t* el = writable<int32_t>(episode_length, "episode_length", {n});
+            float* o = writable_buffer<float>(obs, "obs", {n, E::kObsDim});
+            float* r = writable_buffer<float>(rewards, "rewards", {n});
+            uint8_t* te = writable_buffer<uint8_t>(terminated, "terminated", {n});
+            uint8_t* tr = writable_buffer<uint8_t>(truncated, "truncated", {n});
+            uint8_t* su = writable_buffer<uint8_t>(success, "success", {n});
+            uint8_t* co = writable_buffer<uint8_t>(collision, "collision", {n});
+            int32_t* hi = writable_buffer<int32_t>(hits, "hits", {n});
+            float* fo = writable_buffer<float>(final_obs, "final_obs", {n, E::kObsDim});
+            float* er = writable_buffer<float>(episode_return, "episode_return", {n});
+            int32_t* el = writable_buffer<int32_t>(episode_length, "episode_length", {n});
             py::gil_scoped_release release;
             s.env.step(a.data(), o, r, te, tr, su, co, hi, fo, er, el);
           },

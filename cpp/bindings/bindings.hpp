@@ -51,6 +51,14 @@ carray<T> check_array(const py::handle& obj, const char* name, std::initializer_
   return py::reinterpret_borrow<carray<T>>(arr);
 }
 
+// A writable, C-contiguous output buffer of dtype T and the given shape (see check_array).
+template <class T>
+T* writable_buffer(const py::handle& obj, const char* name, std::initializer_list<py::ssize_t> shape) {
+  auto a = check_array<T>(obj, name, shape);
+  if (!a.writeable()) throw py::value_error(std::string(name) + ": array is read-only");
+  return a.mutable_data();
+}
+
 // Raises ValueError naming the argument if any value is NaN or infinite.
 inline void check_finite(const float* data, py::ssize_t n, const char* name) {
   for (py::ssize_t i = 0; i < n; ++i)
