@@ -1,8 +1,9 @@
-"""Scripted policies with the same interface as trained ones: ``act(obs[N, 17]) -> actions[N, 12]``.
+"""Scripted policies with the same interface as trained ones: ``act(obs[N, D]) -> actions[N, 12]``.
 
-Observations and actions are the plane task's (see :mod:`mmrl.envs`): ``obs = [pose features
-(15, normalized), target (x, z) in the character frame (meters)]``; actions are the 12-d
-trajectory features in the database's normalized units.
+Observations are the plane task's (D = 17, see :mod:`mmrl.envs`): ``obs = [pose features (15,
+normalized), target (x, z) in the character frame (meters)]``, or the moving-obstacles task's
+(D = 529, :mod:`mmrl.obstacles`), which ends with the same 17 floats after its sensor maps.
+Actions are the 12-d trajectory features in the database's normalized units.
 """
 from __future__ import annotations
 
@@ -10,8 +11,11 @@ from typing import Optional, Tuple
 
 import numpy as np
 
+from . import _core
 from .database import POSE_DIM, TRAJECTORY_DIM, Database
 
+#: Observation sizes the scripted policies read: the plane task's and the moving-obstacles task's.
+OBSERVATION_DIMS = (POSE_DIM + 2, int(_core.ObstacleVecEnv.obs_dim))
 #: Seconds ahead of the three trajectory samples (+10, +20, +30 frames at 30 fps).
 TRAJECTORY_FRAMES = (10, 20, 30)
 
@@ -37,6 +41,9 @@ def database_speeds(db: Database) -> Tuple[float, float]:
 
 class JoystickPolicy:
     """A straight line toward the target at a fixed speed, facing it: a gamepad held toward the target.
+
+    It reads only the target (the observation's last two floats), so on the moving-obstacles
+    task it ignores the obstacles: the baseline of the paper's comparison.
 
     Args:
         db: the database whose normalization the actions use.
@@ -65,7 +72,7 @@ class JoystickPolicy:
 
     def raw_trajectory(self, obs: np.ndarray) -> np.ndarray:
         """(N, 12) trajectory in meters / unit directions, character frame."""
-        g = obs[:, POSE_DIM:POSE_DIM + 2].astype(np.float64)
+        g = obs[:, -2:].astype(np.float64)
         dist = np.linalg.norm(g, axis=1, keepdims=True)
         d = np.where(dist > 1e-6, g / np.maximum(dist, 1e-6), np.array([[0.0, 1.0]]))
         out = np.empty((obs.shape[0], TRAJECTORY_DIM), np.float32)
@@ -75,10 +82,11 @@ class JoystickPolicy:
         return out
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """Actions (N, 12) in the env's normalized units for observations (N, 17)."""
+        """Actions (N, 12) in the env's normalized units for observations (N, 17) or (N, 529)."""
         obs = np.asarray(obs)
-        if obs.ndim != 2 or obs.shape[1] != POSE_DIM + 2:
-            raise ValueError(f"obs: expected shape (N, {POSE_DIM + 2}), got {obs.shape}")
+        if obs.ndim != 2 or obs.shape[1] not in OBSERVATION_DIMS:
+            raise ValueError(f"obs: expected shape (N, D) with D in {OBSERVATION_DIMS} (plane, obstacles), "
+                             f"got {obs.shape}")
         if not np.isfinite(obs).all():
             raise ValueError("obs: contains NaN or inf")
         return ((self.raw_trajectory(obs) - self._mean) / self._scale).astype(np.float32)

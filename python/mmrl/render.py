@@ -24,6 +24,11 @@ import numpy as np
 SKY = (0.86, 0.90, 0.95)
 GROUND = (0.80, 0.80, 0.77)
 GRID = (0.62, 0.62, 0.60)
+QUERY = (0.1, 0.6, 0.2)
+HIT_INSIDE, HIT_OUTSIDE = (0.9, 0.1, 0.1), (0.1, 0.75, 0.25)
+OBSTACLE_SIDE, OBSTACLE_TOP = (0.45, 0.42, 0.5), (0.62, 0.60, 0.68)
+OBSTACLE_HEIGHT = 0.3  # meters, drawing only: low enough to see the character and the sensors between them
+OBSTACLE_VIEW_RADIUS = 16.0  # meters from the camera focus; farther boxes are not drawn
 LEFT, RIGHT, CENTER = np.array([0.25, 0.45, 0.85]), np.array([0.90, 0.50, 0.20]), np.array([0.70, 0.70, 0.72])
 
 
@@ -36,6 +41,14 @@ def _rectangle_corners(rect) -> np.ndarray:
     if r.shape == (4, 2):
         return r
     raise ValueError(f"an obstacle is (x_min, z_min, x_max, z_max) or (4, 2) corners, got shape {r.shape}")
+
+
+def _as_verts(polys: list):
+    """Polygons for ``PolyCollection.set_verts``: one (n, k, 2) array when all have k vertices
+    (matplotlib then builds the paths vectorized, several times faster), else the list."""
+    if polys and all(len(p) == len(polys[0]) for p in polys):
+        return np.asarray(polys)
+    return polys
 
 
 class Camera:
@@ -105,7 +118,8 @@ class Renderer:
 
     def __init__(self, parents: Sequence[int], *, body_joints: Optional[Sequence[int]] = None,
                  joint_names: Optional[Sequence[str]] = None, width: int = 640, height: int = 360,
-                 follow_lag: float = 0.9, success_radius: float = 0.5):
+                 follow_lag: float = 0.9, success_radius: float = 0.5, camera_distance: float = 5.5,
+                 camera_elevation_deg: float = 22.0):
         import matplotlib
 
         matplotlib.use("Agg", force=False)
@@ -130,7 +144,7 @@ class Renderer:
                 side[j] = 2
         self.bone_color = np.array([[CENTER, LEFT, RIGHT][side[j]] for j, _ in self.bones]).reshape(-1, 3)
         self.head = next((j for j, n in enumerate(names) if "head" in n), None)
-        self.camera = Camera(width, height)
+        self.camera = Camera(width, height, distance=camera_distance, elevation_deg=camera_elevation_deg)
         self.follow_lag = follow_lag
         self.success_radius = success_radius
         self._focus = None
@@ -150,15 +164,19 @@ class Renderer:
                                       linewidths=1.0, zorder=2)
         self.shadow = LineCollection([], colors=[(0.3, 0.3, 0.3, 0.35)], capstyle="round", zorder=3)
         self.query = LineCollection([], colors=[(0.1, 0.6, 0.2)], linewidths=2.0, zorder=4)
-        self.query_pts = ax.scatter([], [], s=30, c=[(0.1, 0.6, 0.2)], zorder=4)
-        self.obstacles = PolyCollection([], facecolors=[(0.45, 0.42, 0.5)], edgecolors=[(0.2, 0.2, 0.25)],
-                                        linewidths=0.8, zorder=5)
+        self.query_pts = ax.scatter([], [], s=30, c=[QUERY], edgecolors=[(0.1, 0.1, 0.1)], linewidths=0.5, zorder=6)
+        # Occupied sensor cells are drawn over the obstacles that occupy them (zorder above).
+        self.sensor_cells = PolyCollection([], facecolors=[(0.95, 0.55, 0.1, 0.6)], edgecolors="none", zorder=5.5)
+        self.sensor_dots = ax.scatter([], [], s=2, c=[(0.35, 0.35, 0.4)], zorder=2)
+        self.sensor_frame = LineCollection([], colors=[(0.95, 0.55, 0.1)], linewidths=1.0, zorder=2)
+        self.obstacles = PolyCollection([], facecolors=[OBSTACLE_SIDE], edgecolors=[(0.2, 0.2, 0.25)],
+                                        linewidths=0.6, zorder=5)
         self.outline = LineCollection([], colors=[(0.15, 0.15, 0.2)], capstyle="round", zorder=6)
         self.limbs = LineCollection([], capstyle="round", zorder=7)
         self.head_patch = ax.scatter([], [], s=1, c=[CENTER], edgecolors=[(0.15, 0.15, 0.2)], zorder=8)
         self.text = ax.text(8, height - 8, "", va="top", ha="left", fontsize=9, color=(0.2, 0.2, 0.25), zorder=9)
-        for a in (self.ground, self.grid, self.targets, self.shadow, self.query, self.obstacles, self.outline,
-                  self.limbs):
+        for a in (self.ground, self.grid, self.targets, self.sensor_cells, self.sensor_frame, self.shadow, self.query,
+                  self.obstacles, self.outline, self.limbs):
             ax.add_collection(a)
 
     # ------------------------------------------------------------------ drawing
@@ -166,9 +184,103 @@ class Renderer:
         a = np.linspace(0, 2 * np.pi, n, endpoint=False)
         return np.stack([center_xz[0] + radius * np.cos(a), np.full(n, y), center_xz[1] + radius * np.sin(a)], 1)
 
+    def _ground_quads(self, quads: np.ndarray, y: float) -> tuple:
+        """Horizontal quads (n, 4, 2) world (x, z) at height y -> as :meth:`_faces`."""
+        return self._faces(np.concatenate([quads[..., :1], np.full(quads.shape[:-1] + (1,), y), quads[..., 1:]], -1))
+
+    def _faces(self, faces: np.ndarray) -> tuple:
+        """World polygons (n, k, 3) -> pixel polygons clipped at the near plane (hidden ones
+        dropped), their mean camera depths and indices into ``faces``; vectorized where no
+        clipping is needed."""
+        cam = self.camera
+        if len(faces) == 0:
+            return [], np.zeros(0), np.zeros(0, np.int64)
+        c = (faces - cam.eye) @ cam.rotation.T
+        z = c[..., 2]
+        front = (z > cam.near).all(1)
+        partly = ~front & (z > cam.near).any(1)
+        polys = list(cam.project(c[front]))
+        depth = list(z[front].mean(1))
+        index = list(np.flatnonzero(front))
+        for i in np.flatnonzero(partly):
+            pp = cam.polygon(faces[i])
+            if pp is not None:
+                polys.append(pp)
+                depth.append(float(z[i].mean()))
+                index.append(i)
+        return polys, np.asarray(depth), np.asarray(index, np.int64)
+
+    def _draw_obstacles(self, obstacles) -> None:
+        if obstacles is None or len(obstacles) == 0:
+            self.obstacles.set_verts([])
+            return
+        if isinstance(obstacles, np.ndarray) and obstacles.ndim == 3:
+            corners = obstacles.astype(np.float64)
+        else:
+            corners = np.array([_rectangle_corners(r) for r in obstacles], np.float64)
+        # Only boxes near the camera's focus matter (the ground drawn is 40 m wide).
+        centre = corners.mean(1)
+        near = np.hypot(centre[:, 0] - self._focus[0], centre[:, 1] - self._focus[2]) < OBSTACLE_VIEW_RADIUS
+        corners = corners[near]
+        n = len(corners)
+        if n == 0:
+            self.obstacles.set_verts([])
+            return
+        lo = np.concatenate([corners[..., :1], np.zeros((n, 4, 1)), corners[..., 1:]], -1)
+        hi = lo + np.array([0.0, OBSTACLE_HEIGHT, 0.0])
+        nxt = np.roll(np.arange(4), -1)
+        sides = np.stack([lo, lo[:, nxt], hi[:, nxt], hi], 2)  # (n, 4 sides, 4 corners, 3)
+        # A side faces the camera when its outward normal points toward the eye (corners may
+        # wind either way, so outward = away from the box centre).
+        mid = sides.mean(2)
+        box_centre = lo.mean(1)[:, None]
+        outward = mid - box_centre
+        outward[..., 1] = 0.0
+        facing = np.einsum("nsk,nsk->ns", outward, self.camera.eye - mid) > 0
+        faces = np.concatenate([sides[facing], hi])
+        shade = np.concatenate([np.full(int(facing.sum()), 0), np.ones(n, np.int64)])
+        polys, depth, index = self._faces(faces)
+        order = np.argsort(depth)[::-1]
+        self.obstacles.set_verts(_as_verts([polys[i] for i in order]))
+        self.obstacles.set_facecolor(np.array([OBSTACLE_SIDE, OBSTACLE_TOP])[shade[index[order]]])
+
+    def _draw_sensors(self, sensors) -> None:
+        if sensors is None:
+            self.sensor_cells.set_verts([])
+            self.sensor_dots.set_offsets(np.zeros((0, 2)))
+            self.sensor_frame.set_segments([])
+            return
+        pos = np.asarray(sensors["positions"], np.float64).reshape(-1, 2)
+        occupied = np.asarray(sensors["map"], bool).reshape(-1)
+        side = int(round(np.sqrt(len(pos))))
+        grid = pos.reshape(side, side, 2)
+        # Half pitch vectors along rows (forward) and columns (left), from neighbouring sensors.
+        half_row = 0.5 * (grid[1, 0] - grid[0, 0])
+        half_col = 0.5 * (grid[0, 1] - grid[0, 0])
+        cam = self.camera
+        cells = pos[occupied]
+        q = np.stack([cells - half_row - half_col, cells - half_row + half_col, cells + half_row + half_col,
+                      cells + half_row - half_col], 1) if len(cells) else np.zeros((0, 4, 2))
+        polys, _, _ = self._ground_quads(0.9 * q + 0.1 * cells[:, None] if len(cells) else q, 0.015)
+        self.sensor_cells.set_verts(_as_verts(polys))
+        free = pos[~occupied]
+        fc = cam.to_camera(np.column_stack([free[:, 0], np.full(len(free), 0.012), free[:, 1]]))
+        vis = fc[:, 2] > cam.near
+        self.sensor_dots.set_offsets(cam.project(fc[vis]) if vis.any() else np.zeros((0, 2)))
+        a, b = grid[0, 0] - half_row - half_col, grid[0, -1] - half_row + half_col
+        c, d = grid[-1, -1] + half_row + half_col, grid[-1, 0] + half_row - half_col
+        ring = np.array([a, b, c, d])
+        p3 = np.column_stack([ring[:, 0], np.full(4, 0.015), ring[:, 1]])
+        self.sensor_frame.set_segments(cam.segments(p3, np.roll(p3, -1, axis=0)))
+
     def draw(self, positions: np.ndarray, *, targets=None, query_points=None, query_directions=None,
-             obstacles=None, text: str = "", snap_camera: bool = False) -> np.ndarray:
-        """One frame: positions (J, 3) world meters; returns (H, W, 3) uint8."""
+             obstacles=None, sensors=None, hit_inside=None, text: str = "", snap_camera: bool = False) -> np.ndarray:
+        """One frame: positions (J, 3) world meters; returns (H, W, 3) uint8.
+
+        obstacles: rectangles, each (x_min, z_min, x_max, z_max) or (4, 2) world corners, or an
+        (n, 4, 2) array; sensors: ``{"positions": (16, 16, 2) world (x, z), "map": (16, 16)}``;
+        hit_inside: (3,) bools coloring the query points (red inside an obstacle, green outside).
+        """
         cam = self.camera
         p = np.asarray(positions, np.float64)
         body = p[self.body]
@@ -201,21 +313,11 @@ class Renderer:
                 polys.append(pp)
         self.targets.set_verts(polys)
 
-        # Obstacles: boxes 1 m high, faces depth-sorted far to near.
-        faces, depth = [], []
-        for rect in obstacles or []:
-            c = _rectangle_corners(rect)
-            lo = np.column_stack([c[:, 0], np.zeros(4), c[:, 1]])
-            hi = lo + np.array([0, 1.0, 0])
-            for i in range(4):
-                f = np.array([lo[i], lo[(i + 1) % 4], hi[(i + 1) % 4], hi[i]])
-                faces.append(f)
-            faces.append(hi)
-        for f in faces:
-            depth.append(cam.to_camera(f)[:, 2].mean())
-        order = np.argsort(depth)[::-1]
-        opolys = [cam.polygon(faces[i]) for i in order]
-        self.obstacles.set_verts([q for q in opolys if q is not None])
+        # Obstacles: boxes 1 m high; the faces that look at the camera, depth-sorted far to near.
+        self._draw_obstacles(obstacles)
+
+        # Sensors: the map's square outline, free sensors as dots, occupied cells as squares.
+        self._draw_sensors(sensors)
 
         # Queries: three future points and their facing directions.
         if query_points is not None:
@@ -224,6 +326,11 @@ class Renderer:
             qc = cam.to_camera(q3)
             vis = qc[:, 2] > cam.near
             self.query_pts.set_offsets(cam.project(qc[vis]) if vis.any() else np.zeros((0, 2)))
+            if hit_inside is None:
+                self.query_pts.set_facecolors([QUERY])
+            else:  # hit points: red inside an obstacle, green outside
+                inside = np.asarray(hit_inside, bool).reshape(-1)[vis]
+                self.query_pts.set_facecolors(np.where(inside[:, None], HIT_INSIDE, HIT_OUTSIDE))
             if query_directions is not None:
                 qd = np.asarray(query_directions, np.float64).reshape(-1, 2)
                 tips = q3 + 0.35 * np.column_stack([qd[:, 0], np.zeros(len(qd)), qd[:, 1]])
@@ -296,10 +403,15 @@ def render_state(db, state: dict, *, width: int = 640, height: int = 360) -> np.
 
 def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray], db, *, obstacles=None,
                  width: int = 640, height: int = 360, fps: Optional[float] = None,
-                 success_radius: float = 0.5) -> int:
+                 success_radius: float = 0.5, still: "str | os.PathLike[str] | None" = None,
+                 still_frame: Optional[int] = None) -> int:
     """Write a recording (see :func:`mmrl.rollouts.follow_targets`) as ``.mp4`` or ``.gif``.
 
-    Returns the number of frames written.
+    A moving-obstacles recording (:func:`mmrl.obstacle_rollouts.follow_obstacles`) also
+    shows its per-frame ``obstacles``, each decision's sensor map (``sensor_positions``,
+    ``sensor_maps``) and hit points colored by ``hit_inside``; the camera snaps at each new
+    ``episode``. ``still``: also write frame ``still_frame`` (default: the middle one) as an
+    image, exactly as in the video. Returns the number of frames written.
     """
     import imageio.v2 as iio
 
@@ -315,8 +427,12 @@ def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray
         width, height = width - width % 2, height - height % 2
     targets = recording.get("targets")
     qframes = recording.get("query_frames")
+    frame_obstacles = recording.get("obstacles")
+    episode = recording.get("episode")
+    # Obstacle scenes: a higher, farther camera shows the layout around the character.
+    view = dict(camera_distance=8.0, camera_elevation_deg=40.0) if frame_obstacles is not None else {}
     renderer = Renderer(db.parents, body_joints=body_joints(db), joint_names=db.joint_names, width=width,
-                        height=height, success_radius=success_radius)
+                        height=height, success_radius=success_radius, **view)
     path.parent.mkdir(parents=True, exist_ok=True)
     if suffix == ".mp4":
         writer = iio.get_writer(str(path), fps=fps, codec="libx264", quality=7, macro_block_size=2,
@@ -329,11 +445,24 @@ def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray
             if qframes is not None:
                 while q + 1 < len(qframes) and qframes[q + 1] <= t:
                     q += 1
+            new_episode = t == 0 or (episode is not None and episode[t] != episode[t - 1])
+            # A decision is shown only within its own episode.
+            has_q = q >= 0 and (episode is None or episode[qframes[q]] == episode[t])
+            sensors = None
+            if has_q and "sensor_maps" in recording:
+                sensors = {"positions": recording["sensor_positions"][q], "map": recording["sensor_maps"][q]}
+            text = f"{t / fps:5.2f} s"
+            if episode is not None:
+                text += f"   episode {int(episode[t]) + 1}"
             img = renderer.draw(pos[t], targets=None if targets is None else targets[t],
-                                query_points=recording["query_points"][q] if q >= 0 else None,
-                                query_directions=recording["query_directions"][q] if q >= 0 else None,
-                                obstacles=obstacles, text=f"{t / fps:5.2f} s", snap_camera=(t == 0))
+                                query_points=recording["query_points"][q] if has_q else None,
+                                query_directions=recording["query_directions"][q] if has_q else None,
+                                obstacles=frame_obstacles[t] if frame_obstacles is not None else obstacles,
+                                sensors=sensors, hit_inside=recording["hit_inside"][q] if has_q and
+                                "hit_inside" in recording else None, text=text, snap_camera=new_episode)
             writer.append_data(img)
+            if still is not None and t == (pos.shape[0] // 2 if still_frame is None else still_frame):
+                iio.imwrite(str(still), img)
     finally:
         writer.close()
     return pos.shape[0]

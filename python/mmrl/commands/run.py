@@ -2,7 +2,11 @@
 
 They share their options: an optional training run directory (its ``latest.pt`` policy and
 its ``config.json`` database), ``--data``/``--db``, ``--env``, ``--policy``, ``--seed``,
-``--seconds``, ``--episodes``, ``--no-ik`` and ``--no-inertialization``.
+``--seconds``, ``--episodes``, ``--stage``, ``--no-ik`` and ``--no-inertialization``.
+
+``--env obstacles`` (the default for a run trained with ``mmrl train obstacles``) steps the
+moving-obstacles env and the full-path character side by side
+(:mod:`mmrl.obstacle_rollouts`), at curriculum stage ``--stage`` (default: the last).
 """
 from __future__ import annotations
 
@@ -17,6 +21,9 @@ from typing import Any, Dict, Optional
 import numpy as np
 
 POLICIES = ("joystick", "joystick-run")
+ENVS = ("plane", "obstacles")
+#: Curriculum stages of the moving-obstacles task (mmrl.obstacles.Curriculum's default).
+NUM_STAGES = 10
 
 
 def add_shared_options(p: argparse.ArgumentParser) -> None:
@@ -25,7 +32,10 @@ def add_shared_options(p: argparse.ArgumentParser) -> None:
     src = p.add_mutually_exclusive_group()
     src.add_argument("--data", nargs="+", metavar="DIR|FILE", help="BVH files or directories to build the database from")
     src.add_argument("--db", metavar="FILE", help="a database saved by 'mmrl db build'")
-    p.add_argument("--env", choices=["plane"], default="plane", help="the task (default: plane)")
+    p.add_argument("--env", choices=ENVS, default=None,
+                   help="the task (default: RUN's task if RUN is given, else plane)")
+    p.add_argument("--stage", type=int, default=None, metavar="K",
+                   help=f"obstacles: curriculum stage 1..{NUM_STAGES} (default: {NUM_STAGES}, the hardest)")
     p.add_argument("--policy", choices=POLICIES, default=None,
                    help="a scripted policy (default: RUN's trained policy if RUN is given, else joystick)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
@@ -88,21 +98,46 @@ def resolve_database(args: argparse.Namespace):
     return resolve()
 
 
+def resolve_env(args: argparse.Namespace) -> str:
+    """The task: --env, else the run's own, else plane. Also checks --stage against it."""
+    saved = _run_config(args.run).get("task")
+    if saved is not None and saved not in ENVS:
+        raise ValueError(f"{args.run}: unknown task {saved!r} in config.json")
+    env = args.env or saved or "plane"
+    if saved is not None and args.policy is None and env != saved:
+        raise ValueError(f"{args.run} is a '{saved}' run; its policy cannot run --env {env} "
+                         f"(pass --env {saved}, or --policy joystick)")
+    if args.stage is not None:
+        if env != "obstacles":
+            raise ValueError("--stage applies to --env obstacles only")
+        if not 1 <= args.stage <= NUM_STAGES:
+            raise ValueError(f"--stage must be in 1..{NUM_STAGES}, got {args.stage}")
+    args.env = env
+    return env
+
+
 def resolve_task_config(args: argparse.Namespace):
-    """The plane task's numbers: the run's own (config.json "task_config") when given, else the defaults."""
+    """The task's numbers: the run's own (config.json "task_config") when given, else the defaults."""
     from dataclasses import fields
 
-    from ..envs import PlaneConfig
+    if resolve_env(args) == "obstacles":
+        from ..obstacles import ObstaclesConfig as Config
+    else:
+        from ..envs import PlaneConfig as Config
 
-    cfg = PlaneConfig()
+    cfg = Config()
     saved = _run_config(args.run)
-    if saved.get("task", "plane") != "plane":
-        raise ValueError(f"{args.run} is a '{saved.get('task')}' run; only --env plane is evaluated so far")
-    names = {f.name for f in fields(PlaneConfig)}
+    if saved.get("task", args.env) != args.env:  # a scripted policy on another task: the defaults
+        return cfg
+    names = {f.name for f in fields(Config)}
     for k, v in (saved.get("task_config") or {}).items():
         if k in names:
             setattr(cfg, k, v)
     return cfg
+
+
+def _stage(args) -> int:
+    return NUM_STAGES if args.stage is None else args.stage
 
 
 def resolve_policy(args: argparse.Namespace, db):
@@ -134,11 +169,18 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
     if args.episodes < 1:
         raise ValueError("--episodes must be >= 1")
+    config = resolve_task_config(args)
     db = resolve_database(args)
     policy, name = resolve_policy(args, db)
     t0 = time.perf_counter()
-    res = evaluate_full_path(db, policy, episodes=args.episodes, seed=args.seed, config=resolve_task_config(args),
-                         **_options(args))
+    if args.env == "obstacles":
+        from ..obstacle_rollouts import evaluate_obstacles
+
+        res = evaluate_obstacles(db, policy, episodes=args.episodes, seed=args.seed, config=config,
+                                 stage=_stage(args), **_options(args))
+    else:
+        res = evaluate_full_path(db, policy, episodes=args.episodes, seed=args.seed, config=config,
+                                 **_options(args))
     res.update({"policy": name, "env": args.env, "seed": args.seed, "ik": not args.no_ik,
                 "inertialization": not args.no_inertialization, "wall_time_s": time.perf_counter() - t0})
     if args.json:
@@ -146,9 +188,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
         sys.stdout.write("\n")
     else:
         fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
-        print(f"{name} on {args.env}: {args.episodes} episodes")
-        for k in ("success_rate", "mean_time_to_target_s", "foot_sliding_cm_per_s", "max_pose_jump_cm",
-                  "transitions_per_s"):
+        where = f" (stage {res['stage']})" if args.env == "obstacles" else ""
+        print(f"{name} on {args.env}{where}: {args.episodes} episodes")
+        keys = ["success_rate", "mean_time_to_target_s", "foot_sliding_cm_per_s", "max_pose_jump_cm",
+                "transitions_per_s"]
+        if args.env == "obstacles":
+            keys[1:1] = ["collision_rate"]
+        for k in keys:
             print(f"  {k:<24} {fmt(res[k])}")
     return 0
 
@@ -158,10 +204,15 @@ def _follow(args):
 
     if not args.seconds > 0:
         raise ValueError("--seconds must be positive")
+    config = resolve_task_config(args)
     db = resolve_database(args)
     policy, _ = resolve_policy(args, db)
-    return db, follow_targets(db, policy, seconds=args.seconds, seed=args.seed, config=resolve_task_config(args),
-                              **_options(args))
+    if args.env == "obstacles":
+        from ..obstacle_rollouts import follow_obstacles
+
+        return db, follow_obstacles(db, policy, seconds=args.seconds, seed=args.seed, config=config,
+                                    stage=_stage(args), **_options(args))
+    return db, follow_targets(db, policy, seconds=args.seconds, seed=args.seed, config=config, **_options(args))
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -176,11 +227,18 @@ def cmd_render(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in (".mp4", ".gif"):
         raise ValueError(f"{out}: the output must end in .mp4 or .gif")
     db, rec = _follow(args)
+    obstacles = args.env == "obstacles"
     t0 = time.perf_counter()
-    n = render_video(out, rec, db, width=w, height=h)
+    n = render_video(out, rec, db, width=w, height=h, still=args.still if obstacles else None)
     dt = time.perf_counter() - t0
     print(f"wrote {out}: {n} frames ({n / db.fps:.1f} s) rendered in {dt:.2f} s ({n / dt:.0f} frames/s)")
-    if args.still:
+    if obstacles:
+        names = {1: "success", 2: "collision", 3: "safety cap"}
+        print(f"stage {int(rec['stage'])}, episodes: " +
+              ", ".join(names.get(int(o), "running") for o in rec["outcomes"]))
+        if args.still:
+            print(f"wrote {args.still}")
+    elif args.still:
         import imageio.v3 as iio
 
         t = n // 2
@@ -205,8 +263,11 @@ def cmd_export(args: argparse.Namespace) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(motion.to_bvh())
     npz = out.with_suffix(".npz")
+    extra = {}
+    if args.env == "obstacles":  # per-frame obstacle corners and the episode index (episodes are cut together)
+        extra = {"obstacles": rec["obstacles"], "episode": rec["episode"], "outcomes": rec["outcomes"]}
     np.savez(npz, positions=rec["positions"].astype(np.float32), joint_names=np.array(db.joint_names, np.str_),
              parents=np.array(db.parents, np.int32), fps=np.float32(db.fps), roots=rec["roots"],
-             frames=rec["frames"], contacts=rec["contacts"], targets=rec["targets"])
+             frames=rec["frames"], contacts=rec["contacts"], targets=rec["targets"], **extra)
     print(f"wrote {out} ({motion.num_frames} frames at {db.fps:g} fps) and {npz} (global joint positions, meters)")
     return 0

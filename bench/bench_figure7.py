@@ -1,0 +1,152 @@
+"""The paper's Figure 7: the moving-obstacles task with and without the hit reward and the curriculum.
+
+    python bench/bench_figure7.py [--data DIR | --db FILE.npz] [--steps 2400000] [--seed 0]
+        [--out DIR] [--episodes 100] [--set KEY=VALUE ...]
+
+1. Trains three runs with the same env-step budget through the ``mmrl train obstacles``
+   command line: ours, ``--no-hit-reward`` and ``--no-curriculum`` (each in OUT/<name>,
+   ``--set`` options passed to every run).
+2. Plots success ratio, episode length and curriculum stage against env steps from each run's
+   metrics.csv into OUT/figure7.png.
+3. Prints a table: final curriculum stage, deterministic success and collision rates at the
+   last stage (``mmrl.obstacle_rollouts.evaluate_obstacles``: the full-path character, N
+   episodes, the same episodes for every run), env steps and training wall time; the
+   joystick baseline (which ignores obstacles) on the same episodes.
+
+The full budget (2.4M steps per run) takes hours on 2 cores; check the script end to end with
+a tiny one (``--steps 20000``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-2"
+#: (name, extra ``mmrl train obstacles`` flags), in the paper's legend order.
+VARIANTS = (("ours", []), ("no-hit-reward", ["--no-hit-reward"]), ("no-curriculum", ["--no-curriculum"]))
+LAST_STAGE = 10
+
+
+def train_variants(db_path: Path, out: Path, steps: int, seed: int, sets, threads: int) -> dict:
+    from mmrl.cli import main as mmrl_main
+
+    wall = {}
+    for name, flags in VARIANTS:
+        run = out / name
+        argv = ["train", "obstacles", "--db", str(db_path), "--steps", str(steps), "--seed", str(seed),
+                "--out", str(run), "--threads", str(threads), "--no-progress", *flags]
+        for s in sets:
+            argv += ["--set", s]
+        print("mmrl " + " ".join(argv), flush=True)
+        t0 = time.perf_counter()
+        code = mmrl_main(argv)
+        wall[name] = time.perf_counter() - t0
+        if code != 0:
+            raise SystemExit(f"mmrl train failed for {name} (exit code {code})")
+    return wall
+
+
+def plot(out: Path, curves: dict) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), constrained_layout=True)
+    for name, m in curves.items():
+        steps = m["step"]
+        for ax, key in zip(axes, ("success_rate", "episode_length", "curriculum_stage")):
+            if key in m:
+                ok = np.isfinite(m[key])
+                ax.plot(steps[ok], m[key][ok], label=name, lw=1.5)
+    for ax, title in zip(axes, ("success ratio", "episode length (steps)", "curriculum stage")):
+        ax.set_title(title)
+        ax.set_xlabel("env steps")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylim(-0.02, 1.02)
+    axes[2].set_ylim(0.5, LAST_STAGE + 0.5)
+    axes[0].legend()
+    path = out / "figure7.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def task_config(run: Path):
+    from dataclasses import fields
+
+    from mmrl.obstacles import ObstaclesConfig
+
+    saved = json.loads((run / "config.json").read_text()).get("task_config", {})
+    names = {f.name for f in fields(ObstaclesConfig)}
+    return ObstaclesConfig(**{k: v for k, v in saved.items() if k in names})
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    src = ap.add_mutually_exclusive_group()
+    src.add_argument("--data", default=None, help=f"BVH directory (default {DEFAULT_DATA})")
+    src.add_argument("--db", default=None, help="a database saved by 'mmrl db build'")
+    ap.add_argument("--steps", type=int, default=2_400_000, help="env steps per run (default 2.4M, the paper's)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--episodes", type=int, default=100, help="evaluation episodes at the last stage")
+    ap.add_argument("--threads", type=int, default=0, help="C++ env threads (0 = all cores)")
+    ap.add_argument("--out", default=None, help="output directory (default: a temporary one)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="passed to every 'mmrl train obstacles' run (repeatable)")
+    args = ap.parse_args()
+    if args.steps < 1 or args.episodes < 1:
+        raise SystemExit("--steps and --episodes must be positive")
+
+    import mmrl
+    from mmrl import ppo
+    from mmrl.obstacle_rollouts import evaluate_obstacles
+    from mmrl.plots import read_metrics
+    from mmrl.policies import JoystickPolicy
+
+    out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="mmrl-figure7-"))
+    out.mkdir(parents=True, exist_ok=True)
+    for name, _ in VARIANTS:
+        if (out / name / "latest.pt").exists():
+            raise SystemExit(f"{out / name} already holds a run; choose another --out")
+    t0 = time.perf_counter()
+    if args.db:
+        db_path = Path(args.db)
+        db = mmrl.Database.load(db_path)
+    else:  # build once, share the saved database between the runs
+        db = mmrl.Database.from_bvh(args.data or DEFAULT_DATA)
+        db_path = out / "db.npz"
+        db.save(db_path)
+    print(f"{db!r}; ready in {time.perf_counter() - t0:.1f} s; output in {out}", flush=True)
+
+    wall = train_variants(db_path, out, args.steps, args.seed, args.set, args.threads)
+    curves = {name: read_metrics(out / name) for name, _ in VARIANTS}
+    print(f"wrote {plot(out, curves)}")
+
+    rows = []
+    for name, _ in VARIANTS:
+        run, m = out / name, curves[name]
+        policy = ppo.load_policy(run / "latest.pt")
+        ev = evaluate_obstacles(db, policy, episodes=args.episodes, seed=args.seed + 1000, config=task_config(run),
+                                stage=LAST_STAGE)
+        stage = m.get("curriculum_stage", np.array([np.nan]))
+        rows.append((name, stage[np.isfinite(stage)][-1] if np.isfinite(stage).any() else float("nan"),
+                     ev["success_rate"], ev["collision_rate"], int(m["step"][-1]), wall[name]))
+    joy = evaluate_obstacles(db, JoystickPolicy.preset(db, "joystick"), episodes=args.episodes,
+                             seed=args.seed + 1000, config=task_config(out / VARIANTS[0][0]), stage=LAST_STAGE)
+    rows.append(("joystick", float("nan"), joy["success_rate"], joy["collision_rate"], 0, 0.0))
+
+    print(f"\nstage-{LAST_STAGE} evaluation: {args.episodes} deterministic episodes, full-path character")
+    print(f"{'run':<15}{'final stage':>12}{'success':>9}{'collision':>11}{'env steps':>12}{'wall s':>9}")
+    for name, stage, success, collision, steps, seconds in rows:
+        st = "-" if not np.isfinite(stage) else f"{stage:.0f}"
+        print(f"{name:<15}{st:>12}{success:>9.3f}{collision:>11.3f}{steps:>12,}{seconds:>9.1f}")
+
+
+if __name__ == "__main__":
+    main()
