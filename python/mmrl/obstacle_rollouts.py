@@ -101,7 +101,7 @@ class ObstacleLockstep:
         env = self.env
         before = {"sensor_map": env.sensor_map(0), "sensor_positions": env.sensor_positions(0),
                   "obstacles": env.obstacles(0), "target": self.target.copy()}
-        hits, points, inside = env._core.action_hits(0, np.ascontiguousarray(a[0]))
+        hits, points, inside = env.action_hits(0, a[0])
         before.update(hits=int(hits), hit_points=np.asarray(points), hit_inside=np.asarray(inside, bool))
         obs, reward, term, trunc, info = env.step(a)
         res = self.ctrl.step(a[0])

@@ -261,6 +261,16 @@ class ObstaclesVectorEnv(VectorEnv):
         """Env i's obstacles: centres (n,2), half_sizes (n,2), angles (n), velocities (n,2); world (x, z)."""
         return self._core.obstacles(i)
 
+    def action_hits(self, i: int, action: np.ndarray):
+        """For env i's current state: (hits, points (3, 2) world x/z, inside (3,) bool) of a
+        12-d action's three future trajectory positions (the hit reward's count)."""
+        a = np.ascontiguousarray(action, dtype=np.float32).reshape(-1)
+        return self._core.action_hits(int(i), a)
+
+    def collides(self, i: int, x: float, z: float) -> bool:
+        """Whether the body disc at world (x, z) overlaps one of env i's obstacles."""
+        return bool(self._core.collides(int(i), float(x), float(z)))
+
     def sensor_map(self, i: int, previous: bool = False) -> np.ndarray:
         """Env i's current (or previous) sensor map, uint8 (16, 16) [row (forward)][col (left)]."""
         return self._core.sensor_map(i, previous)
