@@ -76,7 +76,8 @@ def main():
                                   np.clip(acts(i), env.single_action_space.low, env.single_action_space.high)], 1)
                   .astype(np.float32) for i in range(8)]
             bounds = np.where(db.valid_mask[frames], frames, -1).astype(np.int64)
-            km, dtm = time_loop(lambda i: db.matcher.match(qs[i % len(qs)], bounds), args.seconds)
+            windows = db.controller_windows(frames)  # the env's match skips these rows too
+            km, dtm = time_loop(lambda i: db.matcher.match(qs[i % len(qs)], bounds, windows), args.seconds)
             mps = km * n / dtm
             print(f"{n:>6} {name:<12} {sps:>12,.0f} {mps:>12,.0f} {mps / sps:>10.2f}")
     # Peer: gymnasium's SyncVectorEnv of the single-env wrapper, 64 envs.

@@ -201,3 +201,17 @@ def test_actions_are_clipped_to_the_box(db):
     env.step(huge)
     ref = ref_step(db, st, high, env.single_action_space.low, high)
     assert env.env_state(0)["last_match"] == ref["match"]
+
+
+def test_database_match_with_controller_windows_equals_reference(db):
+    rng = np.random.default_rng(3)
+    frames = rng.choice(np.flatnonzero(db.valid_mask), 40)
+    traj = policy_like_actions(db, rng, 40)
+    queries = np.concatenate([db.normalized_features[frames, :15], traj], 1).astype(np.float32)
+    idx, cost = db.match(queries, normalized=True, bound_indices=frames.astype(np.int64),
+                         exclude=db.controller_windows(frames))
+    for k, f in enumerate(frames):
+        j, ref_cost = ref_match(db, int(f), traj[k].astype(np.float64))
+        assert idx[k] == j or abs(ref_cost[idx[k]] - ref_cost[j]) < 1e-4
+    with pytest.raises(ValueError, match="exclude"):
+        db.match(queries, normalized=True, exclude=np.zeros((3, 2), np.int64))

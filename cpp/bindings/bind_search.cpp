@@ -52,7 +52,8 @@ py::array check_mask(const py::handle& obj, py::ssize_t n) {
 using MatchFn = void (Matcher::*)(const float*, int64_t, int64_t*, float*, ThreadPool&, const int64_t*,
                                   const int64_t*, const int64_t*) const;
 
-py::tuple run_match(PyMatcher& self, const py::handle& queries_obj, const py::object& bounds_obj, MatchFn fn) {
+py::tuple run_match(PyMatcher& self, const py::handle& queries_obj, const py::object& bounds_obj,
+                    const py::object& exclude_obj, MatchFn fn) {
   auto queries = check_queries(queries_obj, self.matcher.dim());
   const py::ssize_t m = queries.shape(0);
   const int64_t* bounds = nullptr;
@@ -65,12 +66,25 @@ py::tuple run_match(PyMatcher& self, const py::handle& queries_obj, const py::ob
         throw py::value_error("bound_indices: entry " + std::to_string(i) + " = " + std::to_string(bounds[i]) +
                               " is outside [-1, " + std::to_string(self.matcher.num_rows()) + ")");
   }
+  // Optional per-query excluded windows [lo, hi) as an (M, 2) int64 array.
+  const int64_t* lo = nullptr;
+  const int64_t* hi = nullptr;
+  std::vector<int64_t> lo_hi;
+  if (!exclude_obj.is_none()) {
+    auto ex = check_array<int64_t>(exclude_obj, "exclude", {m, 2});
+    lo_hi.resize(static_cast<size_t>(m) * 2);
+    for (py::ssize_t i = 0; i < m; ++i) {
+      lo_hi[i] = ex.at(i, 0);
+      lo_hi[m + i] = ex.at(i, 1);
+    }
+    lo = lo_hi.data();
+    hi = lo_hi.data() + m;
+  }
   py::array_t<int64_t> indices(m);
   py::array_t<float> costs(m);
   {
     py::gil_scoped_release release;
-    (self.matcher.*fn)(queries.data(), m, indices.mutable_data(), costs.mutable_data(), *self.pool, nullptr, nullptr,
-                       bounds);
+    (self.matcher.*fn)(queries.data(), m, indices.mutable_data(), costs.mutable_data(), *self.pool, lo, hi, bounds);
   }
   return py::make_tuple(indices, costs);
 }
@@ -130,18 +144,19 @@ void bind_search(py::module_& m) {
            py::arg("points"), py::arg("valid_mask"), py::arg("num_threads") = 0, py::arg("leaf_size") = 16)
       .def(
           "match",
-          [](PyMatcher& self, const py::handle& q, const py::object& b) {
-            return run_match(self, q, b, &Matcher::match_batch);
+          [](PyMatcher& self, const py::handle& q, const py::object& b, const py::object& ex) {
+            return run_match(self, q, b, ex, &Matcher::match_batch);
           },
-          py::arg("queries"), py::arg("bound_indices") = py::none(),
-          "(M, D) float32 normalized queries [, (M,) int64 bound indices, -1 = none] -> (indices int64 (M,), "
-          "squared costs float32 (M,)). Index -1 when no valid row exists and there is no bound.")
+          py::arg("queries"), py::arg("bound_indices") = py::none(), py::arg("exclude") = py::none(),
+          "(M, D) float32 normalized queries [, (M,) int64 bound indices, -1 = none] [, (M, 2) int64 excluded "
+          "row windows [lo, hi)] -> (indices int64 (M,), squared costs float32 (M,)). Index -1 when no valid row "
+          "exists and there is no bound.")
       .def(
           "brute_force",
-          [](PyMatcher& self, const py::handle& q, const py::object& b) {
-            return run_match(self, q, b, &Matcher::brute_force_batch);
+          [](PyMatcher& self, const py::handle& q, const py::object& b, const py::object& ex) {
+            return run_match(self, q, b, ex, &Matcher::brute_force_batch);
           },
-          py::arg("queries"), py::arg("bound_indices") = py::none(),
+          py::arg("queries"), py::arg("bound_indices") = py::none(), py::arg("exclude") = py::none(),
           "The same contract as match(), answered by a brute-force scan (the reference).")
       .def_property_readonly("num_rows", [](const PyMatcher& self) { return self.matcher.num_rows(); })
       .def_property_readonly("num_valid", [](const PyMatcher& self) { return self.matcher.num_valid(); })

@@ -286,13 +286,16 @@ class Database:
 
     # ----------------------------------------------------------------- matching
     def match(self, queries: np.ndarray, *, normalized: bool = False,
-              bound_indices: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
+              bound_indices: Optional[np.ndarray] = None,
+              exclude: Optional[np.ndarray] = None) -> Tuple[np.ndarray, np.ndarray]:
         """Nearest valid frame for each query.
 
         Args:
             queries: (M, 27) float32 raw features, or already normalized if ``normalized``.
             bound_indices: optional (M,) int64 current frames; a query keeps its bound frame
                 unless another valid frame is strictly better.
+            exclude: optional (M, 2) int64 row windows [lo, hi) a query may not return (the
+                bound frame itself stays allowed). See :meth:`controller_windows`.
 
         Returns:
             (indices (M,) int64, costs (M,) float32): costs are squared distances in the
@@ -309,7 +312,16 @@ class Database:
             raise ValueError("queries: contains NaN or inf")
         if not normalized:
             q = self.normalize(q)
-        return self.matcher.match(np.ascontiguousarray(q), bound_indices)
+        return self.matcher.match(np.ascontiguousarray(q), bound_indices, exclude)
+
+    def controller_windows(self, frames: np.ndarray, radius: int = 20) -> np.ndarray:
+        """The rows a controller at ``frames`` skips: ``radius`` frames either side, within
+        each frame's clip ((M, 2) int64 [lo, hi)), as in the runtime's match rule."""
+        frames = np.asarray(frames, np.int64)
+        ranges = self.clip_ranges[self.frame_clip[frames]]
+        lo = np.maximum(ranges[:, 0], frames - radius)
+        hi = np.minimum(ranges[:, 1], frames + radius + 1)
+        return np.ascontiguousarray(np.stack([lo, hi], 1).astype(np.int64))
 
     @property
     def matcher(self):
