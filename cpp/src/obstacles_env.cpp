@@ -1,4 +1,5 @@
 #include "mmrl/obstacles_env.hpp"
+#include "mmrl/vecenv.hpp"  // draw_episode_start
 
 #include <algorithm>
 #include <cmath>
@@ -116,14 +117,8 @@ void ObstacleVecEnv::reset_env(int i, float* obs_row) {
   ObstacleEnvState& s = envs_[i];
   s.max_speed = stage_max_speed_;
   s.target_half_extent = stage_half_extent_;
-  s.frame = valid_frames_[s.rng.below(valid_frames_.size())];
-  s.root = RootState{};
-  s.root.yaw = config_.random_heading ? s.rng.uniform(-kPi, kPi) : 0.0f;
-  const float h = s.target_half_extent;
-  do {
-    s.target_x = s.rng.uniform(-h, h);
-    s.target_z = s.rng.uniform(-h, h);
-  } while (std::hypot(s.target_x, s.target_z) < config_.min_target_distance);
+  draw_episode_start(s.rng, valid_frames_, config_.random_heading, s.target_half_extent,
+                     config_.min_target_distance, &s.frame, &s.root, &s.target_x, &s.target_z);
   const ClearDisc clear[2] = {{0.0f, 0.0f, config_.body_radius + config_.start_clearance},
                               {s.target_x, s.target_z, config_.target_clearance}};
   field_.spawn(i, s.rng, s.max_speed, clear, 2);

@@ -41,14 +41,8 @@ void PlaneVecEnv::set_target(int i, float x, float z) {
 
 void PlaneVecEnv::reset_env(int i, float* obs_row) {
   TargetEnvState& s = envs_[i];
-  s.frame = valid_frames_[s.rng.below(valid_frames_.size())];
-  s.root = RootState{};
-  s.root.yaw = config_.random_heading ? s.rng.uniform(-kPi, kPi) : 0.0f;
-  const float h = config_.target_half_extent;
-  do {
-    s.target_x = s.rng.uniform(-h, h);
-    s.target_z = s.rng.uniform(-h, h);
-  } while (std::hypot(s.target_x, s.target_z) < config_.min_target_distance);
+  draw_episode_start(s.rng, valid_frames_, config_.random_heading, config_.target_half_extent,
+                     config_.min_target_distance, &s.frame, &s.root, &s.target_x, &s.target_z);
   s.steps = 0;
   s.episode_return = 0;
   s.last_match = -1;

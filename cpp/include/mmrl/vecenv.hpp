@@ -14,6 +14,7 @@
 // the environment is reset at once, its first observation written to obs.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
@@ -44,6 +45,21 @@ struct TargetEnvState {
   bool last_transition = false;
   Rng rng;
 };
+
+// Draws an episode start shared by the target tasks: a uniformly random valid frame, the
+// root at the origin with a random (or zero) heading, and a target uniform in the square
+// [-half_extent, half_extent]^2, redrawn while closer than min_target_distance.
+inline void draw_episode_start(Rng& rng, const std::vector<int64_t>& valid_frames, bool random_heading,
+                               float half_extent, float min_target_distance, int64_t* frame, RootState* root,
+                               float* target_x, float* target_z) {
+  *frame = valid_frames[rng.below(valid_frames.size())];
+  *root = RootState{};
+  root->yaw = random_heading ? rng.uniform(-kPi, kPi) : 0.0f;
+  do {
+    *target_x = rng.uniform(-half_extent, half_extent);
+    *target_z = rng.uniform(-half_extent, half_extent);
+  } while (std::hypot(*target_x, *target_z) < min_target_distance);
+}
 
 class PlaneVecEnv {
  public:
