@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import asdict, dataclass, fields
-from pathlib import Path
 from typing import Any, Dict, Optional, Sequence, Union
 
 import gymnasium as gym

@@ -160,7 +160,7 @@ def evaluate_obstacles(db: Database, policy, *, episodes: int = 20, seed: int = 
     keys of :func:`mmrl.rollouts.evaluate_full_path` plus ``collision_rate``, ``truncation_rate``
     and ``stage``.
     """
-    from .rollouts import _quality
+    from .rollouts import EpisodeSummary
 
     if episodes < 1:
         raise ValueError(f"episodes must be >= 1, got {episodes}")
@@ -168,9 +168,7 @@ def evaluate_obstacles(db: Database, policy, *, episodes: int = 20, seed: int = 
                            inertialization_halflife=inertialization_halflife, fast=fast, record=True)
     cfg = run.config
     step_time = cfg.frames_per_step / db.fps
-    results: List[Dict[str, Any]] = []
-    sliding_sum = sliding_w = jump = 0.0
-    transitions = steps_total = 0
+    summary = EpisodeSummary(db, step_time, fast)
     for _ in range(episodes):
         distance = float(np.hypot(*(run.target - np.array(run.ctrl.root[:2]))))
         while True:
@@ -183,31 +181,16 @@ def evaluate_obstacles(db: Database, policy, *, episodes: int = 20, seed: int = 
               "steps": out["episode_length"], "distance_m": distance,
               "time_to_target_s": ((out["episode_length"] - 1) * step_time + out["shown"] / db.fps)
               if out["success"] else None}
-        rec = run.last_recording
-        if not fast:
-            q = _quality(db, rec)
-            ep.update(q)
-            n = rec["frames"].size
-            sliding_sum += q["foot_sliding_cm_per_s"] * n
-            sliding_w += n
-            jump = max(jump, q["max_pose_jump_cm"])
-        transitions += int(rec["transitions"].sum())
-        steps_total += out["episode_length"]
-        results.append(ep)
-    times = [e["time_to_target_s"] for e in results if e["success"]]
-    return {
-        "episodes": episodes,
-        "success_rate": float(np.mean([e["success"] for e in results])),
-        "mean_time_to_target_s": float(np.mean(times)) if times else None,
-        "foot_sliding_cm_per_s": sliding_sum / sliding_w if sliding_w else None,
-        "max_pose_jump_cm": jump if not fast else None,
-        "transitions_per_s": transitions / (steps_total * step_time) if steps_total else 0.0,
-        "mean_steps": float(np.mean([e["steps"] for e in results])),
+        summary.add(ep, run.last_recording, out["episode_length"])
+    results = summary.results
+    out = summary.summary()
+    out.update({
         "collision_rate": float(np.mean([e["collision"] for e in results])),
         "truncation_rate": float(np.mean([e["truncated"] for e in results])),
         "stage": stage,
-        "episode_results": results,
-    }
+    })
+    out["episode_results"] = out.pop("episode_results")  # keep the per-episode list last
+    return out
 
 
 def follow_obstacles(db: Database, policy, *, seconds: float = 10.0, seed: int = 0,

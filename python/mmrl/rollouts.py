@@ -43,6 +43,45 @@ def _quality(db: Database, rec: Dict[str, np.ndarray]) -> Dict[str, float]:
     }
 
 
+class EpisodeSummary:
+    """Collects evaluation episodes and their quality metrics into the JSON summary that
+    ``mmrl eval`` prints (shared by the plane and obstacles tasks)."""
+
+    def __init__(self, db: Database, step_time: float, fast: bool):
+        self.db, self.step_time, self.fast = db, step_time, fast
+        self.results: List[Dict[str, Any]] = []
+        self.sliding_sum = self.sliding_w = self.jump = 0.0
+        self.transitions = self.steps_total = 0
+
+    def add(self, ep: Dict[str, Any], rec: Dict[str, np.ndarray], steps: int) -> None:
+        """Adds one episode (``ep`` gets its quality metrics unless ``fast``)."""
+        if not self.fast:
+            q = _quality(self.db, rec)
+            ep.update(q)
+            n = rec["frames"].size
+            self.sliding_sum += q["foot_sliding_cm_per_s"] * n
+            self.sliding_w += n
+            self.jump = max(self.jump, q["max_pose_jump_cm"])
+        self.transitions += int(rec["transitions"].sum())
+        self.steps_total += steps
+        self.results.append(ep)
+
+    def summary(self) -> Dict[str, Any]:
+        results = self.results
+        times = [e["time_to_target_s"] for e in results if e["success"]]
+        return {
+            "episodes": len(results),
+            "success_rate": float(np.mean([e["success"] for e in results])),
+            "mean_time_to_target_s": float(np.mean(times)) if times else None,
+            "foot_sliding_cm_per_s": self.sliding_sum / self.sliding_w if self.sliding_w else None,
+            "max_pose_jump_cm": self.jump if not self.fast else None,
+            "transitions_per_s": (self.transitions / (self.steps_total * self.step_time)
+                                  if self.steps_total else 0.0),
+            "mean_steps": float(np.mean([e["steps"] for e in results])),
+            "episode_results": results,
+        }
+
+
 def evaluate_full_path(db: Database, policy, *, episodes: int = 20, seed: int = 0,
                    config: Optional[PlaneConfig] = None, ik: bool = True, foot_locking: bool = True,
                    inertialization_halflife: float = 0.1, fast: bool = False,
@@ -65,11 +104,7 @@ def evaluate_full_path(db: Database, policy, *, episodes: int = 20, seed: int = 
                       ik=ik, foot_locking=foot_locking, fast=fast, action_limit_std=config.action_limit_std,
                       record=True)
     step_time = config.frames_per_step / db.fps
-    results: List[Dict[str, Any]] = []
-    sliding_sum = sliding_w = 0.0
-    jump = 0.0
-    transitions = 0
-    steps_total = 0
+    summary = EpisodeSummary(db, step_time, fast)
     for _ in range(episodes):
         start = int(rng.choice(valid))
         yaw = float(rng.uniform(-np.pi, np.pi)) if config.random_heading else 0.0
@@ -90,28 +125,8 @@ def evaluate_full_path(db: Database, policy, *, episodes: int = 20, seed: int = 
         rec = ctrl.recording()
         ep = {"success": success, "time_to_target_s": time_s, "steps": ctrl.steps,
               "distance_m": float(np.hypot(*target))}
-        if not fast:
-            q = _quality(db, rec)
-            ep.update(q)
-            n = rec["frames"].size
-            sliding_sum += q["foot_sliding_cm_per_s"] * n
-            sliding_w += n
-            jump = max(jump, q["max_pose_jump_cm"])
-        transitions += int(rec["transitions"].sum())
-        steps_total += ctrl.steps
-        results.append(ep)
-    times = [e["time_to_target_s"] for e in results if e["success"]]
-    out: Dict[str, Any] = {
-        "episodes": episodes,
-        "success_rate": float(np.mean([e["success"] for e in results])),
-        "mean_time_to_target_s": float(np.mean(times)) if times else None,
-        "foot_sliding_cm_per_s": sliding_sum / sliding_w if sliding_w else None,
-        "max_pose_jump_cm": jump if not fast else None,
-        "transitions_per_s": transitions / (steps_total * step_time) if steps_total else 0.0,
-        "mean_steps": float(np.mean([e["steps"] for e in results])),
-        "episode_results": results,
-    }
-    return out
+        summary.add(ep, rec, ctrl.steps)
+    return summary.summary()
 
 
 def follow_targets(db: Database, policy, *, seconds: float = 10.0, seed: int = 0,
