@@ -121,18 +121,19 @@ void Character::blend_velocity_of(int64_t f, BlendVelocity& vel) {
   vel.hips_linear = (anim_.hips_position - scratch_.hips_position) * fps;
 }
 
-void Character::forward_kinematics() {
-  const auto& parents = db_.skeleton.parents;
-  for (int j = 0; j < J_; ++j) {
-    const int p = parents[j];
-    if (p < 0) {
-      glob_t_[j] = loc_t_[j];
-      glob_r_[j] = loc_r_[j];
-    } else {
-      glob_t_[j] = glob_t_[p] + glob_r_[p] * loc_t_[j];
-      glob_r_[j] = (glob_r_[p] * loc_r_[j]).normalized();
-    }
+void Character::forward_kinematics_joint(int j) {
+  const int p = db_.skeleton.parents[j];
+  if (p < 0) {
+    glob_t_[j] = loc_t_[j];
+    glob_r_[j] = loc_r_[j];
+  } else {
+    glob_t_[j] = glob_t_[p] + glob_r_[p] * loc_t_[j];
+    glob_r_[j] = (glob_r_[p] * loc_r_[j]).normalized();
   }
+}
+
+void Character::forward_kinematics() {
+  for (int j = 0; j < J_; ++j) forward_kinematics_joint(j);
 }
 
 void Character::solve_leg(int side, const Vec3& target) {
@@ -198,13 +199,7 @@ void Character::show_frame(int64_t f, bool decay) {
       loc_t_[j] = t;
       loc_r_[j] = shown_.rotations[j];
     }
-    if (p < 0) {
-      glob_t_[j] = loc_t_[j];
-      glob_r_[j] = loc_r_[j];
-    } else {
-      glob_t_[j] = glob_t_[p] + glob_r_[p] * loc_t_[j];
-      glob_r_[j] = (glob_r_[p] * loc_r_[j]).normalized();
-    }
+    forward_kinematics_joint(j);  // the hips' local transform above needs its parent's global
   }
 
   // Foot locking and IK.
@@ -241,11 +236,7 @@ void Character::show_frame(int64_t f, bool decay) {
 }
 
 void Character::step(const float* trajectory) {
-  float query[kFeatureDim];
-  float traj[kTrajectoryDim];
-  for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high_[k], std::max(low_[k], trajectory[k]));
-  controller_query(db_, frame_, traj, query);
-  const int64_t j = controller_match(db_, matcher_, frame_, query, &last_cost_);
+  const int64_t j = controller_decide(db_, matcher_, frame_, trajectory, low_, high_, &last_cost_);
   last_transition_ = (j != frame_);
   last_match_ = j;
   if (options_.poses && last_transition_ && inertializer_.enabled()) {

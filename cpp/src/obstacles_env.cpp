@@ -164,10 +164,7 @@ bool ObstacleVecEnv::advance(int i, const float* action, float* reward, bool* te
   ObstacleEnvState& s = envs_[i];
   s.last_hits = action_hits(i, action, s.hit_points, s.hit_inside);
   *hits = s.last_hits;
-  float query[kFeatureDim], traj[kTrajectoryDim];
-  for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high_[k], std::max(low_[k], action[k]));
-  controller_query(db_, s.frame, traj, query);
-  const int64_t j = controller_match(db_, matcher_, s.frame, query);
+  const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_);
   s.last_transition = (j != s.frame);
   s.last_match = j;
   const float r2 = config_.success_radius * config_.success_radius;

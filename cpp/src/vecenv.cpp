@@ -59,11 +59,7 @@ void PlaneVecEnv::reset(uint64_t seed, float* obs) {
 
 bool PlaneVecEnv::advance(int i, const float* action, float* reward, bool* terminated, bool* truncated) {
   TargetEnvState& s = envs_[i];
-  float query[kFeatureDim];
-  float traj[kTrajectoryDim];
-  for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high_[k], std::max(low_[k], action[k]));
-  controller_query(db_, s.frame, traj, query);
-  const int64_t j = controller_match(db_, matcher_, s.frame, query);
+  const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_);
   s.last_transition = (j != s.frame);
   s.last_match = j;
   const float r2 = config_.success_radius * config_.success_radius;

@@ -59,6 +59,17 @@ inline int64_t controller_match(const Database& db, const Matcher& matcher, int6
   return matcher.match(query, lo, hi, bound, cost);
 }
 
+// One decision: clips the trajectory action to the box [low, high] (12 each), forms the
+// query for the current frame and matches it. Returns the frame to play from.
+inline int64_t controller_decide(const Database& db, const Matcher& matcher, int64_t frame, const float* action,
+                                 const float* low, const float* high, float* cost = nullptr) {
+  float query[kFeatureDim];
+  float traj[kTrajectoryDim];
+  for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high[k], std::max(low[k], action[k]));
+  controller_query(db, frame, traj, query);
+  return controller_match(db, matcher, frame, query, cost);
+}
+
 // Normalized trajectory features <-> raw (meters, unit directions) in the character frame.
 inline void trajectory_denormalize(const Database& db, const float* normalized, float* raw) {
   const auto scale = db.normalization.column_scale();
