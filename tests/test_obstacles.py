@@ -187,6 +187,71 @@ def test_hit_counts_on_hand_built_scenes(db):
     assert env._core.action_hits(0, action)[0] == 0
 
 
+def test_hit_radius_counts_points_whose_disc_touches_an_obstacle(db):
+    frame = int(np.flatnonzero(db.valid_mask)[120])
+    action = _action_of_frame(db, frame)
+    counts = {}
+    for radius in (0.0, 0.15, 0.3, 0.6):
+        env = make(db, n=1, hit_radius=radius)
+        env.reset(seed=1)
+        env._core.set_root(0, 0.0, 0.0, 0.3)
+        set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
+        _, pts, _ = env._core.action_hits(0, action)
+        # A 10 cm square whose near edge is 0.2 m beside the +20 point (rotated 0.4 rad about
+        # its centre, so the distance is measured through the obstacle frame).
+        centre = pts[1] + np.array([0.25 + 0.05, 0.0])
+        set_scene(env, 0, [centre], [[0.05, 0.05]], angles=[0.4])
+        d = obb_distance(env.obstacles(0), pts[:, 0], pts[:, 1]).min(axis=-1)
+        hits, _, inside = env._core.action_hits(0, action)
+        assert inside == tuple(bool(x) for x in d <= radius)
+        counts[radius] = hits
+    assert counts[0.0] == 0 and counts[0.6] >= 1
+    assert counts[0.0] <= counts[0.15] <= counts[0.3] <= counts[0.6]
+
+
+def test_hit_lookahead_tests_each_point_against_the_obstacles_at_its_time(db):
+    """A point the obstacle will reach after 20 frames (not at 10 or now) is a hit only for the
+    +20 point with lookahead; the predicted positions are where stepping the field puts them."""
+    frame = int(np.flatnonzero(db.valid_mask)[120])
+    action = _action_of_frame(db, frame)
+    speed = 1.5
+    found = {}
+    for lookahead in (False, True):
+        env = make(db, n=1, hit_lookahead=lookahead, speed_cap=2.0, obstacle_max_speed=2.0)
+        env.reset(seed=1)
+        env._core.set_root(0, 0.0, 0.0, 0.3)
+        set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
+        _, pts, _ = env._core.action_hits(0, action)
+        # Starts 1 m (at 1.5 m/s: 20 frames) beside the +20 point, moving toward it.
+        t20 = 20 / db.fps
+        start = pts[1] - np.array([speed * t20, 0.0])
+        set_scene(env, 0, [start], [[0.05, 0.05]], velocities=[[speed, 0.0]])
+        found[lookahead] = env._core.action_hits(0, action)[2]
+    assert found[False] == (False, False, False)
+    assert found[True][1] and not found[True][0]
+
+
+def test_hit_lookahead_bounces_like_the_field(db):
+    """Predictions across the border match where the env's own frame-by-frame motion puts the
+    obstacle: step a static-root scene 30 frames and compare."""
+    env = make(db, n=1, hit_lookahead=True, speed_cap=2.0, obstacle_max_speed=2.0, body_radius=0.0)
+    env.reset(seed=3)
+    frame = int(np.flatnonzero(db.valid_mask)[120])
+    action = _action_of_frame(db, frame)
+    env._core.set_root(0, 0.0, 0.0, 0.0)
+    set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
+    _, pts, _ = env._core.action_hits(0, action)
+    # An obstacle 0.3 m from the +x border moving out at 1.8 m/s: after 30 frames (1 s) it has
+    # bounced back to x = 10 - 1.5. Put the +30 point there by moving the root.
+    start, v = np.array([9.7, 5.0]), np.array([1.8, 0.0])
+    end = np.array([10.0 - (1.8 - 0.3), 5.0])
+    env._core.set_root(0, float(end[0] - pts[2][0]), float(end[1] - pts[2][1]), 0.0)
+    set_scene(env, 0, [start], [[0.05, 0.05]], velocities=[v])
+    assert env._core.action_hits(0, action)[2] == (False, False, True)
+    set_scene(env, 0, [start], [[0.05, 0.05]], velocities=[-v])  # moving inward instead: elsewhere
+    assert env._core.action_hits(0, action)[2] == (False, False, False)
+
+
 def test_step_reward_hits_and_no_hit_reward_ablation(db):
     frame = int(np.flatnonzero(db.valid_mask)[200])
     action = _action_of_frame(db, frame)
@@ -539,6 +604,7 @@ def test_bad_inputs_are_refused(db):
     ("target_half_extent", 0.5, "target_half_extent"),
     ("frames_per_step", 0, "frames_per_step"),
     ("body_radius", -0.1, "body_radius"),
+    ("hit_radius", -0.1, "hit_radius"),
     ("sensor_size", 0.0, "sensor_size"),
     ("grid_cell_size", 0.0, "cell_size"),
 ])

@@ -39,6 +39,8 @@ void bind_obstacles(py::module_& m) {
       .def_readwrite("success_radius", &ObstacleTaskConfig::success_radius)
       .def_readwrite("success_bonus", &ObstacleTaskConfig::success_bonus)
       .def_readwrite("hit_reward", &ObstacleTaskConfig::hit_reward)
+      .def_readwrite("hit_radius", &ObstacleTaskConfig::hit_radius)
+      .def_readwrite("hit_lookahead", &ObstacleTaskConfig::hit_lookahead)
       .def_readwrite("max_steps", &ObstacleTaskConfig::max_steps)
       .def_readwrite("action_limit_std", &ObstacleTaskConfig::action_limit_std)
       .def_readwrite("random_heading", &ObstacleTaskConfig::random_heading)

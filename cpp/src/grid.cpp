@@ -222,6 +222,30 @@ bool ObstacleField::disc_overlaps_any(int env, float x, float z, float radius) c
   return false;
 }
 
+namespace {
+// Where a centre at c moving at v sits after dt in [-h, h] with mirror bounces (period 4h).
+float bounced(float c, float v, float dt, float h) {
+  if (!(h > 0)) return c;
+  const float period = 4 * h;
+  float q = std::fmod(c + v * dt + h, period);
+  if (q < 0) q += period;
+  if (q > 2 * h) q = period - q;
+  return q - h;
+}
+}  // namespace
+
+bool ObstacleField::disc_overlaps_any_ahead(int env, float x, float z, float radius, float dt) const {
+  const float h = config_.square_half, r2 = radius * radius;
+  const size_t b = at(env, 0), e = b + count_[env];
+  for (size_t a = b; a < e; ++a) {
+    const float dx = x - bounced(cx_[a], vx_[a], dt, h), dz = z - bounced(cz_[a], vz_[a], dt, h);
+    const float u = cos_[a] * dx - sin_[a] * dz, v = sin_[a] * dx + cos_[a] * dz;
+    const float du = std::max(std::abs(u) - hx_[a], 0.0f), dv = std::max(std::abs(v) - hz_[a], 0.0f);
+    if (du * du + dv * dv <= r2) return true;
+  }
+  return false;
+}
+
 Vec2 ObstacleField::sensor_position(float x, float z, float yaw, int row, int col) const {
   return sensor_lattice(config_, x, z, yaw).at(row, col);
 }

@@ -28,6 +28,7 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
       !(c.obstacle_max_speed <= c.speed_cap))
     throw std::invalid_argument("obstacle_max_speed must be in [0, speed_cap]");
   if (!finite(c.success_bonus)) throw std::invalid_argument("success_bonus must be finite");
+  if (!(c.hit_radius >= 0) || !finite(c.hit_radius)) throw std::invalid_argument("hit_radius must be finite and >= 0");
   if (!(c.body_radius >= 0) || !(c.start_clearance >= 0) || !(c.target_clearance >= 0) || !finite(c.body_radius) ||
       !finite(c.start_clearance) || !finite(c.target_clearance))
     throw std::invalid_argument("body_radius, start_clearance and target_clearance must be finite and >= 0");
@@ -151,7 +152,11 @@ int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8
     // Layout (features.hpp): per horizon, position (x, z) then direction (x, z).
     const Vec2 w = local_to_world_xz(raw[4 * k], raw[4 * k + 1], s.root.yaw);
     const float x = s.root.x + w.x(), z = s.root.z + w.y();
-    const bool in = field_.point_inside_any(i, x, z);
+    // The grid's margin covers body_radius, so a wider disc or a look ahead tests every obstacle.
+    const float dt = static_cast<float>(kTrajectoryOffsets[k]) / db_.fps;
+    const bool in = (config_.hit_lookahead || config_.hit_radius > config_.body_radius)
+                        ? field_.disc_overlaps_any_ahead(i, x, z, config_.hit_radius, config_.hit_lookahead ? dt : 0.0f)
+                        : field_.disc_overlaps_any(i, x, z, config_.hit_radius);
     hits += in;
     if (points) points[2 * k] = x, points[2 * k + 1] = z;
     if (inside) inside[k] = in;

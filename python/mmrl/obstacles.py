@@ -94,6 +94,13 @@ class ObstaclesConfig:
     """Reward added on success. The paper says 10 (section 4) and none (section 5); 10 here."""
     hit_reward: bool = True
     """Add exp(-hits(a_t)) to the reward (False: the ``--no-hit-reward`` ablation)."""
+    hit_radius: float = 0.0
+    """A trajectory point counts as a hit when a disc of this radius (meters) around it overlaps
+    an obstacle; 0 is the paper's point test."""
+    hit_lookahead: bool = False
+    """Test each trajectory point against the obstacles where they will be at that point's time
+    (10 / 20 / 30 frames ahead, constant velocity with bounces); False is the paper's test
+    against the current positions."""
     max_steps: int = 1500
     """Safety cap on the episode length (truncation; 1500 steps = 300 s). The paper has none."""
     action_limit_std: float = 3.0

@@ -92,6 +92,10 @@ class ObstacleField {
   // covers the motion since the last rebuild, plus r for disc queries).
   bool point_inside_any(int env, float x, float z) const;
   bool disc_overlaps_any(int env, float x, float z, float radius) const;
+  // Whether a disc at (x, z) overlaps any obstacle where it will be dt seconds from now
+  // (constant velocity, mirrored at the square's border as move() does). Tests every
+  // obstacle (no grid: the grid's margin covers one step's motion, not dt).
+  bool disc_overlaps_any_ahead(int env, float x, float z, float radius, float dt) const;
   // Writes env's sensor map (kMapCells bytes, 0/1) for a character at (x, z, yaw).
   void sensor_map(int env, float x, float z, float yaw, uint8_t* map);
   // The same map by testing every sensor against every obstacle (the tests' reference).

@@ -13,7 +13,10 @@
 // reward       exp(-|g_t|) after the step
 //              + exp(-hits) if hit_reward (hits: how many of the clipped action's three
 //                positions, denormalized and placed in the world through the character
-//                frame at the step's start, lie inside an obstacle at the step's start)
+//                frame at the step's start, lie inside an obstacle at the step's start;
+//                the paper's test. hit_radius > 0 tests a disc of that radius instead of
+//                the point, and hit_lookahead tests position k against the obstacles as
+//                they will be at its own time, 10 / 20 / 30 frames ahead)
 //              + success_bonus on success. The paper says both "10 rewards" on success
 //                (section 4) and "no extra rewards" (section 5); the default is 10.
 // terminated   success (root within success_radius of the target) or collision (the body
@@ -54,6 +57,8 @@ struct ObstacleTaskConfig {
   float success_radius = 0.5f;       // meters
   float success_bonus = 10.0f;
   bool hit_reward = true;            // add exp(-hits(a_t)) to the reward
+  float hit_radius = 0.0f;           // a trajectory point hits when a disc this wide overlaps an obstacle (0: the point)
+  bool hit_lookahead = false;        // test point k against the obstacles as they will be at its time (10/20/30 frames)
   int max_steps = 1500;              // safety cap (truncation), 300 s at 6 frames per step
   float action_limit_std = 3.0f;     // action box half-width, in standard deviations
   bool random_heading = true;        // start heading uniform in [-pi, pi)
