@@ -86,6 +86,28 @@ def test_layout_matches_the_network_default():
     assert _core.ObstacleVecEnv.obs_dim == 529
 
 
+@pytest.mark.parametrize("lag", [1, 3])
+def test_previous_map_is_the_map_read_lag_steps_ago(db, lag):
+    env = make(db, n=4, target_half_extent=5.0, obstacle_max_speed=0.5, previous_map_lag=lag)
+    obs, _ = env.reset(seed=11)
+    rng = np.random.default_rng(1)
+    low, high = env.single_action_space.low, env.single_action_space.high
+    history = [[obs[i, :N_MAP].copy()] for i in range(env.num_envs)]  # current maps of each episode
+    checked = 0
+    for _ in range(30):
+        obs, _, term, trunc, _ = env.step(rng.uniform(low, high, (env.num_envs, 12)).astype(np.float32))
+        for i in range(env.num_envs):
+            if term[i] or trunc[i]:
+                history[i] = []  # the new episode's first map is its own previous map
+            history[i].append(obs[i, :N_MAP].copy())
+            h = history[i]
+            expected = h[-1 - lag] if len(h) > lag else h[0]
+            np.testing.assert_array_equal(obs[i, N_MAP:2 * N_MAP], expected)
+            np.testing.assert_array_equal(env.sensor_map(i, previous=True).reshape(-1), expected)
+            checked += len(h) > lag and not np.array_equal(h[-1 - lag], h[-1])
+    assert checked > 10  # the maps did change over the lag
+
+
 @pytest.mark.parametrize("speed", [0.0, 0.05, 0.5, 2.0])  # grid rebuilt never, every 16, 4, 1 steps
 def test_sensor_maps_and_collisions_match_brute_force_on_random_moving_scenes(db, speed):
     env = make(db, n=6, target_half_extent=5.0, obstacle_max_speed=speed)
@@ -605,6 +627,7 @@ def test_bad_inputs_are_refused(db):
     ("frames_per_step", 0, "frames_per_step"),
     ("body_radius", -0.1, "body_radius"),
     ("hit_radius", -0.1, "hit_radius"),
+    ("previous_map_lag", 0, "previous_map_lag"),
     ("sensor_size", 0.0, "sensor_size"),
     ("grid_cell_size", 0.0, "cell_size"),
 ])

@@ -53,6 +53,7 @@ void bind_obstacles(py::module_& m) {
       .def_readwrite("target_clearance", &ObstacleTaskConfig::target_clearance)
       .def_readwrite("sensor_size", &ObstacleTaskConfig::sensor_size)
       .def_readwrite("sensor_forward", &ObstacleTaskConfig::sensor_forward)
+      .def_readwrite("previous_map_lag", &ObstacleTaskConfig::previous_map_lag)
       .def_readwrite("grid_cell_size", &ObstacleTaskConfig::grid_cell_size);
 
   using E = ObstacleVecEnv;

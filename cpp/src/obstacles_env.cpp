@@ -28,6 +28,7 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
       !(c.obstacle_max_speed <= c.speed_cap))
     throw std::invalid_argument("obstacle_max_speed must be in [0, speed_cap]");
   if (!finite(c.success_bonus)) throw std::invalid_argument("success_bonus must be finite");
+  if (c.previous_map_lag < 1 || c.previous_map_lag > 30) throw std::invalid_argument("previous_map_lag must be in [1, 30]");
   if (!(c.hit_radius >= 0) || !finite(c.hit_radius)) throw std::invalid_argument("hit_radius must be finite and >= 0");
   if (!(c.body_radius >= 0) || !(c.start_clearance >= 0) || !(c.target_clearance >= 0) || !finite(c.body_radius) ||
       !finite(c.start_clearance) || !finite(c.target_clearance))
@@ -55,7 +56,8 @@ ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int n
       config_(config),
       envs_(static_cast<size_t>(std::max(1, num_envs))),
       field_(num_envs, field_config(db, config)),
-      maps_(static_cast<size_t>(std::max(1, num_envs)) * 2 * kMapCells, 0),
+      map_slots_(config.previous_map_lag + 1),
+      maps_(static_cast<size_t>(std::max(1, num_envs)) * (config.previous_map_lag + 1) * kMapCells, 0),
       stage_max_speed_(config.obstacle_max_speed),
       stage_half_extent_(config.target_half_extent),
       frame_dt_(1.0f / db.fps),
@@ -96,17 +98,23 @@ void ObstacleVecEnv::refresh(int i, bool keep_previous, bool force_rebuild) {
     field_.rebuild(i, margin(i));
     st.grid_age = 0;
   }
-  uint8_t* cur = &maps_[static_cast<size_t>(i) * 2 * kMapCells];
-  if (keep_previous) std::copy(cur, cur + kMapCells, cur + kMapCells);
-  const ObstacleEnvState& s = envs_[i];
-  field_.sensor_map(i, s.root.x, s.root.z, s.root.yaw, cur);
-  if (!keep_previous) std::copy(cur, cur + kMapCells, cur + kMapCells);
+  // A ring of previous_map_lag + 1 maps: a new map overwrites the oldest slot (the one after
+  // the head) and becomes the head, so the slot after the new head is previous_map_lag steps
+  // old. Without keep_previous (reset, hand-set scenes) every slot gets the new map.
+  if (keep_previous) st.map_head = (st.map_head + 1) % map_slots_;
+  uint8_t* cur = map_slot(i, st.map_head);
+  field_.sensor_map(i, st.root.x, st.root.z, st.root.yaw, cur);
+  if (!keep_previous)
+    for (int k = 0; k < map_slots_; ++k)
+      if (k != st.map_head) std::copy(cur, cur + kMapCells, map_slot(i, k));
 }
 
 void ObstacleVecEnv::observe(int i, float* obs) const {
   const ObstacleEnvState& s = envs_[i];
-  const uint8_t* maps = &maps_[static_cast<size_t>(i) * 2 * kMapCells];
-  for (int k = 0; k < 2 * kMapCells; ++k) obs[kMapOffset + k] = maps[k];
+  const uint8_t* cur = sensor_map(i);
+  const uint8_t* prev = previous_sensor_map(i);
+  for (int k = 0; k < kMapCells; ++k) obs[kMapOffset + k] = cur[k];
+  for (int k = 0; k < kMapCells; ++k) obs[kPrevMapOffset + k] = prev[k];
   const float* pose = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
   for (int k = 0; k < kPoseDim; ++k) obs[kPoseOffset + k] = pose[k];
   const Vec2 g = world_to_local_xz(s.target_x - s.root.x, s.target_z - s.root.z, s.root.yaw);

@@ -125,6 +125,10 @@ class ObstaclesConfig:
     """Side of the square sensor map (meters), 16 x 16 point sensors."""
     sensor_forward: float = 1.5
     """Centre of the sensor square ahead of the root (meters); 0 centres it on the character."""
+    previous_map_lag: int = 1
+    """The observation's second map is the one read this many RL steps ago (1: the paper's
+    previous step). At 0.5 m/s an obstacle moves 0.1 m in one step, under the 0.375 m sensor
+    pitch; a longer lag makes its motion show."""
     grid_cell_size: float = 1.5
     """Cell side (meters) of the uniform grid used for sensors, hits and collisions."""
 

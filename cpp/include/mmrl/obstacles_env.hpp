@@ -4,7 +4,8 @@
 // observation (kObsDim = 529 floats, flat):
 //   [0, 256)    current sensor map, row-major [row][col] (grid.hpp: row along the
 //               character's Z / forward, col along X / left), 0 or 1
-//   [256, 512)  the previous RL step's map (at reset: a copy of the current map)
+//   [256, 512)  the previous RL step's map (previous_map_lag steps ago; at reset: a copy of
+//               the current map)
 //   [512, 527)  c_t: normalized pose features of the current frame
 //   [527, 529)  g_t: target (x, z) in the character frame, meters
 //   i.e. maps as (channel, row, col) with channel 0 current, 1 previous.
@@ -71,6 +72,7 @@ struct ObstacleTaskConfig {
   float target_clearance = 0.5f;       // no obstacle starts within this of the target
   float sensor_size = 6.0f;            // sensor square side (meters)
   float sensor_forward = 1.5f;         // sensor square centre ahead of the root (meters; 0 = centred)
+  int previous_map_lag = 1;            // the "previous" map is this many RL steps old (1: the paper's)
   float grid_cell_size = 1.5f;         // broadphase cell side (meters)
 };
 
@@ -90,6 +92,7 @@ struct ObstacleEnvState {
   uint8_t hit_inside[3] = {0, 0, 0};
   bool collided = false;
   int grid_age = 0;  // RL steps since env's grid was rebuilt
+  int map_head = 0;  // ring slot of the current sensor map (the previous one is the next slot)
   Rng rng;
 };
 
@@ -127,8 +130,8 @@ class ObstacleVecEnv {
 
   const ObstacleEnvState& state(int i) const { return envs_[i]; }
   const ObstacleField& field() const { return field_; }
-  const uint8_t* sensor_map(int i) const { return &maps_[static_cast<size_t>(i) * 2 * kMapCells]; }
-  const uint8_t* previous_sensor_map(int i) const { return sensor_map(i) + kMapCells; }
+  const uint8_t* sensor_map(int i) const { return map_slot(i, envs_[i].map_head); }
+  const uint8_t* previous_sensor_map(int i) const { return map_slot(i, (envs_[i].map_head + 1) % map_slots_); }
   void observe(int i, float* obs_row) const;
   // Counts hits of an action (12 normalized floats, clipped like a step's) for env i's
   // current state; writes the three world points and inside flags if given.
@@ -156,7 +159,12 @@ class ObstacleVecEnv {
   ObstacleTaskConfig config_;
   std::vector<ObstacleEnvState> envs_;
   ObstacleField field_;
-  std::vector<uint8_t> maps_;  // per env: current map, previous map
+  const uint8_t* map_slot(int i, int k) const {
+    return &maps_[(static_cast<size_t>(i) * map_slots_ + k) * kMapCells];
+  }
+  uint8_t* map_slot(int i, int k) { return &maps_[(static_cast<size_t>(i) * map_slots_ + k) * kMapCells]; }
+  int map_slots_;              // previous_map_lag + 1
+  std::vector<uint8_t> maps_;  // per env: a ring of map_slots_ maps, the newest at the env's map_head
   std::vector<int64_t> valid_frames_;
   float low_[kTrajectoryDim], high_[kTrajectoryDim];
   float stage_max_speed_, stage_half_extent_;
