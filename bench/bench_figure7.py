@@ -1,7 +1,7 @@
 """The paper's Figure 7: the moving-obstacles task with and without the hit reward and the curriculum.
 
     python bench/bench_figure7.py [--data DIR | --db FILE.npz] [--steps 2400000] [--seed 0]
-        [--out DIR] [--episodes 100] [--set KEY=VALUE ...]
+        [--out DIR] [--episodes 100] [--fast-episodes 1000] [--set KEY=VALUE ...]
 
 1. Trains three runs with the same env-step budget through the ``mmrl train obstacles``
    command line: ours, ``--no-hit-reward`` and ``--no-curriculum`` (each in OUT/<name>,
@@ -9,9 +9,11 @@
 2. Plots success ratio, episode length and curriculum stage against env steps from each run's
    metrics.csv into OUT/figure7.png.
 3. Prints a table: final curriculum stage, deterministic success and collision rates at the
-   last stage (``mmrl.obstacle_rollouts.evaluate_obstacles``: the full-path character, N
-   episodes, the same episodes for every run), env steps and training wall time; the
-   joystick baseline (which ignores obstacles) on the same episodes.
+   last stage on the fast path (``mmrl.evaluation.evaluate_obstacles_fast``, --fast-episodes
+   episodes, with the success rate's standard error) and on the full-path character
+   (``mmrl.obstacle_rollouts.evaluate_obstacles``, --episodes episodes), the same episodes
+   for every run; env steps and training wall time; the joystick baseline (which ignores
+   obstacles) on the same episodes.
 
 The full budget (2.4M steps per run) takes hours on 2 cores; check the script end to end with
 a tiny one (``--steps 20000``).
@@ -94,17 +96,19 @@ def main() -> None:
     src.add_argument("--db", default=None, help="a database saved by 'mmrl db build'")
     ap.add_argument("--steps", type=int, default=2_400_000, help="env steps per run (default 2.4M, the paper's)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--episodes", type=int, default=100, help="evaluation episodes at the last stage")
+    ap.add_argument("--episodes", type=int, default=100, help="full-path evaluation episodes at the last stage")
+    ap.add_argument("--fast-episodes", type=int, default=1000, help="fast-path evaluation episodes at the last stage")
     ap.add_argument("--threads", type=int, default=0, help="C++ env threads (0 = all cores)")
     ap.add_argument("--out", default=None, help="output directory (default: a temporary one)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="passed to every 'mmrl train obstacles' run (repeatable)")
     args = ap.parse_args()
-    if args.steps < 1 or args.episodes < 1:
-        raise SystemExit("--steps and --episodes must be positive")
+    if args.steps < 1 or args.episodes < 1 or args.fast_episodes < 1:
+        raise SystemExit("--steps, --episodes and --fast-episodes must be positive")
 
     import mmrl
     from mmrl import ppo
+    from mmrl.evaluation import evaluate_obstacles_fast
     from mmrl.obstacle_rollouts import evaluate_obstacles
     from mmrl.plots import read_metrics
     from mmrl.policies import JoystickPolicy
@@ -128,25 +132,33 @@ def main() -> None:
     curves = {name: read_metrics(out / name) for name, _ in VARIANTS}
     print(f"wrote {plot(out, curves)}")
 
+    def evaluate(policy, run: Path) -> tuple:
+        cfg = task_config(run)
+        fast = evaluate_obstacles_fast(policy, db, episodes=args.fast_episodes, seed=args.seed + 1000, config=cfg,
+                                       stage=LAST_STAGE)
+        full = evaluate_obstacles(db, policy, episodes=args.episodes, seed=args.seed + 1000, config=cfg,
+                                  stage=LAST_STAGE)
+        return (fast["success_rate"], fast["success_stderr"], fast["collision_rate"], full["success_rate"],
+                full["collision_rate"])
+
     rows = []
     for name, _ in VARIANTS:
         run, m = out / name, curves[name]
-        policy = ppo.load_policy(run / "latest.pt")
-        ev = evaluate_obstacles(db, policy, episodes=args.episodes, seed=args.seed + 1000, config=task_config(run),
-                                stage=LAST_STAGE)
         stage = m.get("curriculum_stage", np.array([np.nan]))
-        rows.append((name, stage[np.isfinite(stage)][-1] if np.isfinite(stage).any() else float("nan"),
-                     ev["success_rate"], ev["collision_rate"], int(m["step"][-1]), wall[name]))
-    joy = evaluate_obstacles(db, JoystickPolicy.preset(db, "joystick"), episodes=args.episodes,
-                             seed=args.seed + 1000, config=task_config(out / VARIANTS[0][0]), stage=LAST_STAGE)
-    rows.append(("joystick", float("nan"), joy["success_rate"], joy["collision_rate"], 0, 0.0))
+        final = stage[np.isfinite(stage)][-1] if np.isfinite(stage).any() else float("nan")
+        rows.append((name, final, *evaluate(ppo.load_policy(run / "latest.pt"), run), int(m["step"][-1]),
+                     wall[name]))
+    joy = evaluate(JoystickPolicy.preset(db, "joystick"), out / VARIANTS[0][0])
+    rows.append(("joystick", float("nan"), *joy, 0, 0.0))
 
-    print(f"\nstage-{LAST_STAGE} evaluation: {args.episodes} deterministic episodes, full-path character")
-    print(f"{'run':<15}{'final stage':>12}{'success':>9}{'collision':>11}{'env steps':>12}{'wall s':>9}")
-    for name, stage, success, collision, steps, seconds in rows:
+    print(f"\nstage-{LAST_STAGE} evaluation, deterministic: fast path ({args.fast_episodes} episodes) and "
+          f"full-path character ({args.episodes} episodes)")
+    print(f"{'run':<15}{'final stage':>12}{'success (fast)':>18}{'collision':>11}{'success (full)':>16}"
+          f"{'collision':>11}{'env steps':>12}{'wall s':>9}")
+    for name, stage, ok, err, coll, ok_full, coll_full, steps, seconds in rows:
         st = "-" if not np.isfinite(stage) else f"{stage:.0f}"
-        print(f"{name:<15}{st:>12}{success:>9.3f}{collision:>11.3f}{steps:>12,}{seconds:>9.1f}")
-
+        print(f"{name:<15}{st:>12}{ok:>11.3f} ±{err:.3f}{coll:>11.3f}{ok_full:>16.3f}{coll_full:>11.3f}"
+              f"{steps:>12,}{seconds:>9.1f}")
 
 if __name__ == "__main__":
     main()

@@ -636,3 +636,29 @@ def test_bad_configs_are_refused(db, option, value, match):
         make(db, n=1, **{option: value})
     with pytest.raises(TypeError, match="unknown moving-obstacles option"):
         make(db, n=1, speed=1.0)
+
+
+def test_fast_evaluation_counts_each_first_episode(db):
+    from mmrl.evaluation import evaluate_obstacles_fast
+    from mmrl.obstacle_rollouts import stage_params
+    from mmrl.obstacles import ObstaclesConfig
+    from mmrl.policies import JoystickPolicy
+
+    joy = JoystickPolicy.preset(db, "joystick")
+    empty = evaluate_obstacles_fast(joy, db, episodes=64, seed=3, config=ObstaclesConfig(num_obstacles=0), stage=1)
+    assert empty["collision_rate"] == 0.0 and empty["success_rate"] > 0.95  # nothing in the way
+    a = evaluate_obstacles_fast(joy, db, episodes=64, seed=3, stage=10)
+    b = evaluate_obstacles_fast(joy, db, episodes=64, seed=3, stage=10)
+    assert a == b  # the same episodes for the same seed
+    assert a["collision_rate"] > 0.1 and a["success_rate"] < empty["success_rate"]
+    assert a["success_rate"] + a["collision_rate"] + a["truncation_rate"] == pytest.approx(1.0)
+    # The first episode of env i is the one the vector env runs from the same seed.
+    env = make(db, n=64)
+    env.set_stage(*stage_params(10), 10)
+    obs, _ = env.reset(seed=3)
+    first = np.full(64, -1)
+    while (first < 0).any():
+        obs, _, term, trunc, info = env.step(joy.act(obs))
+        for i in np.flatnonzero((term | trunc) & (first < 0)):
+            first[i] = info["success"][i]
+    assert a["success_rate"] == pytest.approx(first.mean())

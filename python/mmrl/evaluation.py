@@ -10,6 +10,31 @@ from __future__ import annotations
 import numpy as np
 
 
+def _run_episodes(env, policy, episodes: int, seed: int, deterministic: bool) -> dict:
+    """One episode per environment of ``env`` (a vector env of ``episodes`` envs): the first
+    episode's success, collision (False where the env has none) and length of each."""
+    obs, _ = env.reset(seed=seed)
+    done = np.zeros(episodes, bool)
+    out = {k: np.zeros(episodes, bool) for k in ("success", "collision")}
+    length = np.zeros(episodes, np.int64)
+    while not done.all():
+        try:
+            actions = policy.act(obs, deterministic=deterministic)
+        except TypeError:
+            actions = policy.act(obs)
+        obs, _, term, trunc, info = env.step(actions)
+        ended = (term | trunc) & ~done
+        if ended.any():
+            for k in out:
+                if k in info:
+                    out[k][ended] = info[k][ended]
+            length[ended] = info["episode_length"][ended]
+            done |= ended
+    env.close()
+    out["length"] = length
+    return out
+
+
 def evaluate_plane(policy, db, *, episodes: int = 1000, seed: int = 12345, config=None,
                    deterministic: bool = True, num_threads: int = 0) -> dict:
     """Run ``episodes`` plane-task episodes (one per environment) and summarize them.
@@ -27,27 +52,39 @@ def evaluate_plane(policy, db, *, episodes: int = 1000, seed: int = 12345, confi
     from .envs import PlaneVectorEnv
 
     env = PlaneVectorEnv(episodes, db=db, config=config, num_threads=num_threads)
-    obs, _ = env.reset(seed=seed)
-    done = np.zeros(episodes, bool)
-    success = np.zeros(episodes, bool)
-    length = np.zeros(episodes, np.int64)
+    r = _run_episodes(env, policy, episodes, seed, deterministic)
+    success, length = r["success"], r["length"]
     seconds_per_step = env.config.frames_per_step / db.fps
-    while not done.all():
-        try:
-            actions = policy.act(obs, deterministic=deterministic)
-        except TypeError:
-            actions = policy.act(obs)
-        obs, _, term, trunc, info = env.step(actions)
-        ended = (term | trunc) & ~done
-        if ended.any():
-            success[ended] = info["success"][ended]
-            length[ended] = info["episode_length"][ended]
-            done |= ended
-    env.close()
     ok = success.sum()
     return {
         "episodes": int(episodes),
         "success_rate": float(success.mean()),
         "mean_time_to_target_s": float(length[success].mean() * seconds_per_step) if ok else float("nan"),
         "mean_steps": float(length.mean()),
+    }
+
+
+def evaluate_obstacles_fast(policy, db, *, episodes: int = 1000, seed: int = 12345, config=None, stage: int = 10,
+                            deterministic: bool = True, num_threads: int = 0) -> dict:
+    """Moving-obstacles episodes at curriculum ``stage`` (one per environment, fast path).
+
+    The same seed gives the same episodes (starts, targets, obstacles) for every policy.
+    Returns ``success_rate``, ``collision_rate``, ``truncation_rate``, ``mean_steps``,
+    ``episodes``, ``stage`` and ``success_stderr`` (the binomial standard error).
+    """
+    from .obstacle_rollouts import stage_params
+    from .obstacles import ObstaclesVectorEnv
+
+    env = ObstaclesVectorEnv(episodes, db=db, config=config, num_threads=num_threads)
+    env.set_stage(*stage_params(stage), stage)
+    r = _run_episodes(env, policy, episodes, seed, deterministic)
+    p = float(r["success"].mean())
+    return {
+        "episodes": int(episodes),
+        "stage": int(stage),
+        "success_rate": p,
+        "success_stderr": float(np.sqrt(p * (1 - p) / episodes)),
+        "collision_rate": float(r["collision"].mean()),
+        "truncation_rate": float(1.0 - r["success"].mean() - r["collision"].mean()),
+        "mean_steps": float(r["length"].mean()),
     }
