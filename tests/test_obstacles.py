@@ -274,32 +274,30 @@ def test_hit_lookahead_bounces_like_the_field(db):
     assert env._core.action_hits(0, action)[2] == (False, False, False)
 
 
-def test_step_reward_hits_and_no_hit_reward_ablation(db):
+@pytest.mark.parametrize("options, hit_term", [
+    ({}, math.exp(-1)),                                            # the paper's exp(-hits)
+    ({"hit_reward": False}, 0.0),                                  # the --no-hit-reward ablation
+    ({"hit_weight": 4.0}, 4.0 * math.exp(-1)),
+    ({"hit_weight": 4.0, "hit_penalty": True}, 4.0 * (math.exp(-1) - 1.0)),
+])
+def test_step_reward_hit_term(db, options, hit_term):
     frame = int(np.flatnonzero(db.valid_mask)[200])
     action = _action_of_frame(db, frame)
-    rewards = {}
-    for hit_reward in (True, False):
-        env = make(db, n=1, hit_reward=hit_reward, obstacle_max_speed=0.0, success_bonus=10.0)
-        env.reset(seed=5)
-        env._core.set_root(0, 0.0, 0.0, 0.0)
-        env.set_target(0, 40.0, 40.0)  # far away: no success
-        set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
-        _, pts, _ = env._core.action_hits(0, action)
-        # A small square on the +30 point, which the root cannot reach within one 0.2 s step
-        # when it is more than 0.5 m away.
-        if np.hypot(*pts[2]) < 0.8:
-            pytest.skip("database frame barely moves")
-        set_scene(env, 0, [pts[2]], [[0.05, 0.05]])
-        _, r, term, trunc, _ = env.step(action[None])
-        assert not term[0] and not trunc[0]
-        assert env.last_hits[0] == 1
-        st = env.env_state(0)
-        dist = math.hypot(40.0 - st["x"], 40.0 - st["z"])
-        rewards[hit_reward] = (r[0], dist)
-    r, dist = rewards[True]
-    assert r == pytest.approx(math.exp(-dist) + math.exp(-1), rel=1e-5)
-    r, dist = rewards[False]
-    assert r == pytest.approx(math.exp(-dist), rel=1e-5, abs=1e-12)
+    env = make(db, n=1, obstacle_max_speed=0.0, success_bonus=10.0, **options)
+    env.reset(seed=5)
+    env._core.set_root(0, 0.0, 0.0, 0.0)
+    env.set_target(0, 40.0, 40.0)  # far away: no success
+    set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
+    _, pts, _ = env._core.action_hits(0, action)
+    # A small square on the +30 point, which the root cannot reach within one 0.2 s step.
+    assert np.hypot(*pts[2]) > 0.8
+    set_scene(env, 0, [pts[2]], [[0.05, 0.05]])
+    _, r, term, trunc, _ = env.step(action[None])
+    assert not term[0] and not trunc[0]
+    assert env.last_hits[0] == 1
+    st = env.env_state(0)
+    dist = math.hypot(40.0 - st["x"], 40.0 - st["z"])
+    assert r[0] == pytest.approx(math.exp(-dist) + hit_term, rel=1e-5, abs=1e-9)
 
 
 def test_collision_terminates_without_success(db):
@@ -627,6 +625,7 @@ def test_bad_inputs_are_refused(db):
     ("frames_per_step", 0, "frames_per_step"),
     ("body_radius", -0.1, "body_radius"),
     ("hit_radius", -0.1, "hit_radius"),
+    ("hit_weight", -1.0, "hit_weight"),
     ("previous_map_lag", 0, "previous_map_lag"),
     ("sensor_size", 0.0, "sensor_size"),
     ("grid_cell_size", 0.0, "cell_size"),

@@ -39,6 +39,8 @@ void bind_obstacles(py::module_& m) {
       .def_readwrite("success_radius", &ObstacleTaskConfig::success_radius)
       .def_readwrite("success_bonus", &ObstacleTaskConfig::success_bonus)
       .def_readwrite("hit_reward", &ObstacleTaskConfig::hit_reward)
+      .def_readwrite("hit_weight", &ObstacleTaskConfig::hit_weight)
+      .def_readwrite("hit_penalty", &ObstacleTaskConfig::hit_penalty)
       .def_readwrite("hit_radius", &ObstacleTaskConfig::hit_radius)
       .def_readwrite("hit_lookahead", &ObstacleTaskConfig::hit_lookahead)
       .def_readwrite("max_steps", &ObstacleTaskConfig::max_steps)

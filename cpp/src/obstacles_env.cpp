@@ -29,6 +29,7 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
     throw std::invalid_argument("obstacle_max_speed must be in [0, speed_cap]");
   if (!finite(c.success_bonus)) throw std::invalid_argument("success_bonus must be finite");
   if (c.previous_map_lag < 1 || c.previous_map_lag > 30) throw std::invalid_argument("previous_map_lag must be in [1, 30]");
+  if (!(c.hit_weight >= 0) || !finite(c.hit_weight)) throw std::invalid_argument("hit_weight must be finite and >= 0");
   if (!(c.hit_radius >= 0) || !finite(c.hit_radius)) throw std::invalid_argument("hit_radius must be finite and >= 0");
   if (!(c.body_radius >= 0) || !(c.start_clearance >= 0) || !(c.target_clearance >= 0) || !finite(c.body_radius) ||
       !finite(c.start_clearance) || !finite(c.target_clearance))
@@ -195,7 +196,8 @@ bool ObstacleVecEnv::advance(int i, const float* action, float* reward, bool* te
   s.collided = collision;
   const float dist = std::hypot(s.target_x - s.root.x, s.target_z - s.root.z);
   float r = std::exp(-dist);
-  if (config_.hit_reward) r += std::exp(-static_cast<float>(s.last_hits));
+  if (config_.hit_reward)
+    r += config_.hit_weight * (std::exp(-static_cast<float>(s.last_hits)) - (config_.hit_penalty ? 1.0f : 0.0f));
   if (success) r += config_.success_bonus;
   *reward = r;
   *terminated = success || collision;

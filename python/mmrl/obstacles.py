@@ -94,6 +94,12 @@ class ObstaclesConfig:
     """Reward added on success. The paper says 10 (section 4) and none (section 5); 10 here."""
     hit_reward: bool = True
     """Add exp(-hits(a_t)) to the reward (False: the ``--no-hit-reward`` ablation)."""
+    hit_weight: float = 1.0
+    """The hit term is ``hit_weight * exp(-hits)`` (the paper: 1)."""
+    hit_penalty: bool = False
+    """Subtract ``hit_weight`` from the hit term, making it a penalty that is 0 for a clear
+    action. The paper's form pays up to 1 for every surviving step, which (with the distance
+    term) is what makes a small success bonus teach wandering."""
     hit_radius: float = 0.0
     """A trajectory point counts as a hit when a disc of this radius (meters) around it overlaps
     an obstacle; 0 is the paper's point test."""

@@ -17,7 +17,9 @@
 //                frame at the step's start, lie inside an obstacle at the step's start;
 //                the paper's test. hit_radius > 0 tests a disc of that radius instead of
 //                the point, and hit_lookahead tests position k against the obstacles as
-//                they will be at its own time, 10 / 20 / 30 frames ahead)
+//                they will be at its own time, 10 / 20 / 30 frames ahead). The term is
+//                hit_weight * exp(-hits), minus hit_weight if hit_penalty (a penalty that
+//                is 0 for a clear action: the paper's form also pays for every surviving step)
 //              + success_bonus on success. The paper says both "10 rewards" on success
 //                (section 4) and "no extra rewards" (section 5); the default is 10.
 // terminated   success (root within success_radius of the target) or collision (the body
@@ -58,6 +60,8 @@ struct ObstacleTaskConfig {
   float success_radius = 0.5f;       // meters
   float success_bonus = 10.0f;
   bool hit_reward = true;            // add exp(-hits(a_t)) to the reward
+  float hit_weight = 1.0f;           // the hit term is hit_weight * exp(-hits) (the paper: 1)
+  bool hit_penalty = false;          // ... minus hit_weight: 0 for a clear action, so no reward for surviving
   float hit_radius = 0.0f;           // a trajectory point hits when a disc this wide overlaps an obstacle (0: the point)
   bool hit_lookahead = false;        // test point k against the obstacles as they will be at its time (10/20/30 frames)
   int max_steps = 1500;              // safety cap (truncation), 300 s at 6 frames per step
