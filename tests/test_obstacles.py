@@ -169,6 +169,13 @@ def _action_of_frame(db, frame):
     return db.normalized_features[frame, 15:27].astype(np.float32).copy()
 
 
+def _points_in_empty_scene(env, action, yaw=0.0):
+    """Root at the origin with ``yaw``, no obstacles: the action's three world positions (3, 2)."""
+    env._core.set_root(0, 0.0, 0.0, yaw)
+    set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
+    return env._core.action_hits(0, action)[1]
+
+
 def test_hit_points_are_the_action_positions_in_the_character_frame(db):
     env = make(db, n=1)
     env.reset(seed=1)
@@ -191,9 +198,7 @@ def test_hit_counts_on_hand_built_scenes(db):
     env.reset(seed=1)
     frame = int(np.flatnonzero(db.valid_mask)[120])
     action = _action_of_frame(db, frame)
-    env._core.set_root(0, 0.0, 0.0, 0.3)
-    set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
-    _, pts, _ = env._core.action_hits(0, action)
+    pts = _points_in_empty_scene(env, action, 0.3)
     # One 10 cm square on each chosen point (a rotated one on the last).
     for chosen, expected in [((0,), 1), ((2,), 1), ((0, 2), 2), ((0, 1, 2), 3), ((), 0)]:
         centres = [pts[k] for k in chosen]
@@ -216,9 +221,7 @@ def test_hit_radius_counts_points_whose_disc_touches_an_obstacle(db):
     for radius in (0.0, 0.15, 0.3, 0.6):
         env = make(db, n=1, hit_radius=radius)
         env.reset(seed=1)
-        env._core.set_root(0, 0.0, 0.0, 0.3)
-        set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
-        _, pts, _ = env._core.action_hits(0, action)
+        pts = _points_in_empty_scene(env, action, 0.3)
         # A 10 cm square whose near edge is 0.2 m beside the +20 point (rotated 0.4 rad about
         # its centre, so the distance is measured through the obstacle frame).
         centre = pts[1] + np.array([0.25 + 0.05, 0.0])
@@ -241,9 +244,7 @@ def test_hit_lookahead_tests_each_point_against_the_obstacles_at_its_time(db):
     for lookahead in (False, True):
         env = make(db, n=1, hit_lookahead=lookahead, speed_cap=2.0, obstacle_max_speed=2.0)
         env.reset(seed=1)
-        env._core.set_root(0, 0.0, 0.0, 0.3)
-        set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
-        _, pts, _ = env._core.action_hits(0, action)
+        pts = _points_in_empty_scene(env, action, 0.3)
         # Starts 1 m (at 1.5 m/s: 20 frames) beside the +20 point, moving toward it.
         t20 = 20 / db.fps
         start = pts[1] - np.array([speed * t20, 0.0])
@@ -254,15 +255,12 @@ def test_hit_lookahead_tests_each_point_against_the_obstacles_at_its_time(db):
 
 
 def test_hit_lookahead_bounces_like_the_field(db):
-    """Predictions across the border match where the env's own frame-by-frame motion puts the
-    obstacle: step a static-root scene 30 frames and compare."""
+    """A prediction across the border mirrors the obstacle back, as the field's own motion does."""
     env = make(db, n=1, hit_lookahead=True, speed_cap=2.0, obstacle_max_speed=2.0, body_radius=0.0)
     env.reset(seed=3)
     frame = int(np.flatnonzero(db.valid_mask)[120])
     action = _action_of_frame(db, frame)
-    env._core.set_root(0, 0.0, 0.0, 0.0)
-    set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
-    _, pts, _ = env._core.action_hits(0, action)
+    pts = _points_in_empty_scene(env, action, 0.0)
     # An obstacle 0.3 m from the +x border moving out at 1.8 m/s: after 30 frames (1 s) it has
     # bounced back to x = 10 - 1.5. Put the +30 point there by moving the root.
     start, v = np.array([9.7, 5.0]), np.array([1.8, 0.0])
