@@ -430,16 +430,25 @@ def test_curriculum_stage_parameters():
 
 def test_curriculum_advances_on_success_stats_and_resets_its_window():
     cur = Curriculum(window=10)
-    episodes = lambda s: {"episodes": {"success": np.asarray(s, bool)}}  # noqa: E731
-    assert cur.on_iteration(episodes([1] * 9)) == {"curriculum_stage": 1}  # window not full
-    assert cur.on_iteration(episodes([0])) == {"curriculum_stage": 2}  # 9/10 > 40%
-    assert cur.on_iteration(episodes([0] * 6 + [1] * 4)) == {"curriculum_stage": 2}  # exactly 40%
-    assert cur.on_iteration(episodes([1])) == {"curriculum_stage": 3}  # last 10: 5/10
-    for _ in range(20):
-        cur.on_iteration(episodes([1] * 10))
-    assert cur.stage == 10  # one stage per iteration, capped at 10
+    step = iter(range(1000, 10**6, 1000))
+    def it(s):  # one trainer iteration that finished episodes with these successes
+        out = cur.on_iteration({"step": next(step), "episode_data": {"success": np.asarray(s, bool)}})
+        return out["curriculum_stage"], out["curriculum_complete"]
+    assert it([1] * 9) == (1, 0)  # window not full
+    assert it([0]) == (2, 0)  # 9/10 > 40%
+    assert it([0] * 6 + [1] * 4) == (2, 0)  # exactly 40%
+    assert it([1]) == (3, 0)  # last 10: 5/10
+    for _ in range(7):
+        assert it([1] * 10)[1] == 0  # stages 4..10: one per iteration, not complete on arrival
+    assert cur.stage == 10 and not cur.complete
+    assert it([0] * 10) == (10, 0)  # the last stage's window must itself exceed 40%
+    assert it([1] * 5) == (10, 1)  # 5/10: every stage passed, training stays at 10
+    assert cur.complete_step == 13000  # the 13th iteration
+    assert it([0] * 10) == (10, 1)  # completion is kept
+    assert cur.complete_step == 13000
     off = Curriculum(window=1, enabled=False)
-    assert off.on_iteration(episodes([1] * 5)) == {"curriculum_stage": 10}
+    assert off.on_iteration({"episode_data": {"success": np.ones(5, bool)}}) == {
+        "curriculum_stage": 10, "curriculum_complete": 1}
 
 
 def test_curriculum_drives_the_envs_and_ignores_episodes_of_old_stages():
@@ -447,10 +456,10 @@ def test_curriculum_drives_the_envs_and_ignores_episodes_of_old_stages():
     cur = Curriculum(envs, window=4)
     assert envs.calls == [(0.0, 2.5, 1)]
     envs.records = (np.array([1, 1, 1, 1]), np.array([1, 1, 0, 1], bool))
-    assert cur.on_iteration({}) == {"curriculum_stage": 2}
+    assert cur.on_iteration({})["curriculum_stage"] == 2
     assert envs.calls[-1] == (pytest.approx(0.5 / 9), pytest.approx(2.5 + 2.5 / 9), 2)
     envs.records = (np.array([1, 1, 1, 1, 2]), np.ones(5, bool))  # stage-1 episodes still finishing
-    assert cur.on_iteration({}) == {"curriculum_stage": 2}
+    assert cur.on_iteration({})["curriculum_stage"] == 2
     assert list(cur._recent) == [True]
 
 
@@ -466,7 +475,7 @@ def test_curriculum_state_round_trip():
     envs2 = FakeEnvs()
     other = Curriculum(envs2, window=3)
     other.load_state_dict(state)
-    assert other.stage == 4 and list(other._recent) == [True, False]
+    assert other.stage == 4 and list(other._recent) == [True, False] and not other.complete
     assert envs2.calls[-1][2] == 4
     with pytest.raises(ValueError, match="stage"):
         other.load_state_dict({"stage": 0})

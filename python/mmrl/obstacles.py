@@ -370,8 +370,12 @@ class Curriculum:
     At most one advance per iteration. ``enabled=False`` (``--no-curriculum``) starts and
     stays at the last stage.
 
-    ``on_iteration(stats)`` returns ``{"curriculum_stage": k}``: the stage after this
-    iteration's update (the one the next iteration trains on).
+    Completion: the last stage is *passed* (``complete``, and every stage with it) the first
+    time its window is full and exceeds the threshold; ``complete_step`` is the env step of
+    that iteration when the trainer's stats give it. Training goes on at the last stage.
+
+    ``on_iteration(stats)`` returns ``{"curriculum_stage": k, "curriculum_complete": 0 or 1}``:
+    the stage after this iteration's update (the one the next iteration trains on).
     """
 
     def __init__(self, envs=None, *, num_stages: int = 10, first=(0.0, 2.5), last=(0.5, 5.0),
@@ -390,6 +394,8 @@ class Curriculum:
         self.enabled = bool(enabled)
         self.envs = getattr(envs, "unwrapped", envs)
         self.stage = 1 if self.enabled else self.num_stages
+        self.complete = False
+        self.complete_step: Optional[int] = None
         self._recent: deque = deque(maxlen=self.window)
         self._apply()
 
@@ -418,10 +424,14 @@ class Curriculum:
         self._recent.extend(success.tolist())
 
     def advance_if_ready(self) -> bool:
-        """Go to the next stage if the window is full and its success ratio exceeds the threshold."""
-        if not self.enabled or self.stage >= self.num_stages:
-            return False
+        """Go to the next stage if the window is full and its success ratio exceeds the
+        threshold (at the last stage: mark the curriculum complete and stay)."""
         if len(self._recent) < self.window or not self.success_ratio > self.threshold:
+            return False
+        if self.stage >= self.num_stages:
+            self.complete = True
+            return False
+        if not self.enabled:
             return False
         self.stage += 1
         self._recent.clear()
@@ -432,18 +442,22 @@ class Curriculum:
         """Trainer hook: record the iteration's finished episodes, maybe advance, report the stage.
 
         With envs attached, episodes come from ``envs.pop_finished_episodes()`` (which knows the
-        stage each ran with); otherwise from ``stats["episodes"]["success"]``.
+        stage each ran with); otherwise from the trainer's ``stats["episode_data"]["success"]``.
         """
         if self.envs is not None and hasattr(self.envs, "pop_finished_episodes"):
             stages, success = self.envs.pop_finished_episodes()
             self.record(success, stages)
-        elif stats is not None and "episodes" in stats:
-            self.record(stats["episodes"].get("success", ()))
+        elif stats is not None and isinstance(stats.get("episode_data"), dict):
+            self.record(stats["episode_data"].get("success", ()))
+        was_complete = self.complete
         self.advance_if_ready()
-        return {"curriculum_stage": self.stage}
+        if self.complete and not was_complete and stats is not None and "step" in stats:
+            self.complete_step = int(stats["step"])
+        return {"curriculum_stage": self.stage, "curriculum_complete": int(self.complete)}
 
     def state_dict(self) -> dict:
-        return {"stage": self.stage, "recent": list(self._recent), "enabled": self.enabled}
+        return {"stage": self.stage, "recent": list(self._recent), "enabled": self.enabled,
+                "complete": self.complete, "complete_step": self.complete_step}
 
     def load_state_dict(self, state: dict) -> None:
         stage = int(state["stage"])
@@ -451,6 +465,8 @@ class Curriculum:
             raise ValueError(f"curriculum state: stage {stage} outside 1..{self.num_stages}")
         self.stage = stage
         self.enabled = bool(state.get("enabled", self.enabled))
+        self.complete = bool(state.get("complete", False))
+        self.complete_step = state.get("complete_step")
         self._recent = deque((bool(s) for s in state.get("recent", ())), maxlen=self.window)
         if self.envs is not None and hasattr(self.envs, "pop_finished_episodes"):
             self.envs.pop_finished_episodes()  # episodes of the old stage setting

@@ -182,6 +182,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     print(f"trained {result.global_step:,} steps in {result.wall_s:.1f} s ({result.stopped_by}); "
           f"success {s.get('success_rate', float('nan')):.3f}, return {s.get('episode_return', float('nan')):.1f}; "
           f"checkpoint {result.checkpoint}")
+    if callbacks:
+        cur = callbacks[0]
+        passed = f"all stages passed at step {cur.complete_step:,}" if cur.complete_step is not None else (
+            "all stages passed" if cur.complete else "the last stage not passed yet")
+        print(f"curriculum: stage {cur.stage} of {cur.num_stages}; {passed}")
     envs.close()
     return 0
 
