@@ -8,7 +8,8 @@
    ``--set`` options passed to every run).
 2. Plots success ratio, episode length and curriculum stage against env steps from each run's
    metrics.csv into OUT/figure7.png.
-3. Prints a table: final curriculum stage, deterministic success and collision rates at the
+3. Prints a table: final curriculum stage, the env step at which stage 10 was reached and
+   passed (its window of 200 episodes above 40%: every stage passed), deterministic success and collision rates at the
    last stage on the fast path (``mmrl.evaluation.evaluate_obstacles_fast``, --fast-episodes
    episodes, with the success rate's standard error) and on the full-path character
    (``mmrl.obstacle_rollouts.evaluate_obstacles``, --episodes episodes), the same episodes
@@ -146,19 +147,23 @@ def main() -> None:
         run, m = out / name, curves[name]
         stage = m.get("curriculum_stage", np.array([np.nan]))
         final = stage[np.isfinite(stage)][-1] if np.isfinite(stage).any() else float("nan")
-        rows.append((name, final, *evaluate(ppo.load_policy(run / "latest.pt"), run), int(m["step"][-1]),
-                     wall[name]))
+        reached = m["step"][stage >= LAST_STAGE][0] if (stage >= LAST_STAGE).any() else None
+        done = m.get("curriculum_complete", np.zeros(1)) > 0
+        passed = m["step"][done][0] if done.any() else None
+        rows.append((name, final, reached, passed, *evaluate(ppo.load_policy(run / "latest.pt"), run),
+                     int(m["step"][-1]), wall[name]))
     joy = evaluate(JoystickPolicy.preset(db, "joystick"), out / VARIANTS[0][0])
-    rows.append(("joystick", float("nan"), *joy, 0, 0.0))
+    rows.append(("joystick", float("nan"), None, None, *joy, 0, 0.0))
 
     print(f"\nstage-{LAST_STAGE} evaluation, deterministic: fast path ({args.fast_episodes} episodes) and "
           f"full-path character ({args.episodes} episodes)")
-    print(f"{'run':<15}{'final stage':>12}{'success (fast)':>18}{'collision':>11}{'success (full)':>16}"
-          f"{'collision':>11}{'env steps':>12}{'wall s':>9}")
-    for name, stage, ok, err, coll, ok_full, coll_full, steps, seconds in rows:
+    print(f"{'run':<15}{'final stage':>12}{'stage 10 at':>12}{'passed at':>11}{'success (fast)':>18}{'collision':>11}"
+          f"{'success (full)':>16}{'collision':>11}{'env steps':>12}{'wall s':>9}")
+    step_text = lambda s: "-" if s is None else f"{s / 1e6:.2f}M"  # noqa: E731
+    for name, stage, reached, passed, ok, err, coll, ok_full, coll_full, steps, seconds in rows:
         st = "-" if not np.isfinite(stage) else f"{stage:.0f}"
-        print(f"{name:<15}{st:>12}{ok:>11.3f} ±{err:.3f}{coll:>11.3f}{ok_full:>16.3f}{coll_full:>11.3f}"
-              f"{steps:>12,}{seconds:>9.1f}")
+        print(f"{name:<15}{st:>12}{step_text(reached):>12}{step_text(passed):>11}{ok:>11.3f} ±{err:.3f}{coll:>11.3f}"
+              f"{ok_full:>16.3f}{coll_full:>11.3f}{steps:>12,}{seconds:>9.1f}")
 
 if __name__ == "__main__":
     main()
