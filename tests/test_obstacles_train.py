@@ -39,3 +39,27 @@ def test_no_curriculum_starts_at_the_last_stage(tmp_path):
     assert main(["train", "obstacles", "--steps", "2048", "--envs", "16", "--out", str(run), "--no-progress",
                  "--no-curriculum"]) == 0
     assert set(stages(run)) == {10}
+
+
+def test_presets_set_their_options_and_set_overrides_them(tmp_path, capsys):
+    import json
+
+    from mmrl.obstacles import OBSTACLE_PRESETS
+
+    def config(name, *extra):
+        run = tmp_path / name
+        assert main(["train", "obstacles", "--steps", "512", "--envs", "8", "--out", str(run), "--no-progress",
+                     *extra]) == 0
+        return json.loads((run / "config.json").read_text())
+
+    paper = config("paper")
+    assert paper["task_config"]["success_bonus"] == 10.0 and not paper["task_config"]["hit_penalty"]
+    ours = config("mmrl", "--preset", "mmrl", "--set", "hit_weight=3")
+    for key, value in OBSTACLE_PRESETS["mmrl"].items():
+        section = "ppo" if key in ours["ppo"] else "task_config"
+        assert ours[section][key] == (3.0 if key == "hit_weight" else value), key
+    capsys.readouterr()
+    assert main(["train", "plane", "--steps", "512", "--out", str(tmp_path / "p"), "--preset", "mmrl"]) == 2
+    assert "--preset applies to the obstacles task" in capsys.readouterr().err
+    assert main(["train", "obstacles", "--steps", "512", "--out", str(tmp_path / "b"), "--set", "hit_penalty=maybe"]) == 2
+    assert "expected true or false, got 'maybe'" in capsys.readouterr().err

@@ -145,6 +145,20 @@ class ObstaclesConfig:
         return c
 
 
+#: ``mmrl train obstacles --preset NAME``: option overrides (task options and PPOConfig fields).
+#: "paper" is the paper's task as written (success bonus 10, the hit term exp(-hits) on the
+#: three points at the obstacles' current positions). "mmrl" is what trains best here
+#: (docs/obstacles.md): a success bonus of 1000 (with 10, and even 300, the agent learns to
+#: wander), the hit term as a penalty of weight 10 that is 0 for a clear action, tested with
+#: the body's radius against where each obstacle will be at the point's time, and a linearly
+#: annealed learning rate.
+OBSTACLE_PRESETS: Dict[str, Dict[str, Any]] = {
+    "paper": {},
+    "mmrl": {"success_bonus": 1000.0, "hit_penalty": True, "hit_weight": 10.0, "hit_radius": 0.25,
+             "hit_lookahead": True, "anneal_lr": True},
+}
+
+
 def _config(config: Optional[ObstaclesConfig], overrides: Dict[str, Any]) -> ObstaclesConfig:
     cfg = ObstaclesConfig(**asdict(config)) if config is not None else ObstaclesConfig()
     for k, v in overrides.items():

@@ -39,6 +39,9 @@ def register_cli(sub) -> None:
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a PPOConfig field or a task option, e.g. --set learning_rate=3e-4 "
                         "--set max_steps=150 (repeatable)")
+    t.add_argument("--preset", choices=("paper", "mmrl"), default=None,
+                   help="obstacles: 'paper' (default: the paper's task as written) or 'mmrl' (bonus 1000, hit "
+                        "penalty, annealed learning rate; see docs/obstacles.md); --set overrides it")
     t.add_argument("--no-hit-reward", action="store_true", help="obstacles: drop the hit reward (ablation)")
     t.add_argument("--no-curriculum", action="store_true", help="obstacles: start at the hardest stage (ablation)")
     t.set_defaults(func=cmd_train)
@@ -53,7 +56,11 @@ def register_cli(sub) -> None:
 
 def _coerce(value: str, like):
     if isinstance(like, bool):
-        return value.lower() in ("1", "true", "yes", "on")
+        if value.lower() in ("1", "true", "yes", "on"):
+            return True
+        if value.lower() in ("0", "false", "no", "off"):
+            return False
+        raise ValueError(f"--set: expected true or false, got {value!r}")
     if isinstance(like, int):
         return int(float(value))
     if isinstance(like, float) or like is None:
@@ -145,7 +152,16 @@ def cmd_train(args: argparse.Namespace) -> int:
         for k, v in saved["ppo"].items():
             if hasattr(cfg, k):
                 setattr(cfg, k, tuple(v) if isinstance(getattr(cfg, k), tuple) else v)
-    ppo_over, task_over = split_overrides(args.set, cfg, task_cfg)
+    sets = list(args.set)
+    if args.preset is not None:
+        if task != "obstacles":
+            raise ValueError("--preset applies to the obstacles task")
+        if saved is not None:
+            raise ValueError("--preset: a resumed run keeps its configuration")
+        from ..obstacles import OBSTACLE_PRESETS
+
+        sets = [f"{k}={v}" for k, v in OBSTACLE_PRESETS[args.preset].items()] + sets
+    ppo_over, task_over = split_overrides(sets, cfg, task_cfg)
     for k, v in ppo_over.items():
         setattr(cfg, k, v)
     for k, v in task_over.items():
