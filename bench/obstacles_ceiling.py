@@ -81,16 +81,21 @@ def waypoint(dist: np.ndarray, xs: np.ndarray, x: float, z: float, cells: int) -
     return xs[j], xs[i]
 
 
-def run_episodes(env, act, episodes: int, seed: int) -> np.ndarray:
-    """Success of each env's first episode."""
-    obs, _ = env.reset(seed=seed)
-    done, success = np.zeros(episodes, bool), np.zeros(episodes, bool)
-    while not done.all():
-        obs, _, term, trunc, info = env.step(act(env, obs))
-        ended = (term | trunc) & ~done
-        success[ended] = info["success"][ended] if "success" in info else False
-        done |= ended
-    return success
+class _Act:
+    """A policy object for ``first_episodes`` from a function of (env, obs)."""
+
+    def __init__(self, env, fn):
+        self.env, self.fn = env, fn
+
+    def act(self, obs, deterministic=True):
+        return self.fn(self.env, obs)
+
+
+def run_episodes(env, act, seed: int) -> np.ndarray:
+    """Success of each env's first episode, acting with ``act(env, obs)``."""
+    from mmrl.evaluation import first_episodes
+
+    return first_episodes(env, _Act(env, act), seed)["success"]
 
 
 def main() -> None:
@@ -150,9 +155,9 @@ def main() -> None:
         return joystick.act(o)
 
     rows = [("reachable (body disc)", reachable.mean(), None), ("straight path clear", straight.mean(), None),
-            ("joystick", run_episodes(make(cfg, 0.0), lambda e, o: joystick.act(o), n, args.seed).mean(),
-             run_episodes(make(cfg, speed), lambda e, o: joystick.act(o), n, args.seed).mean()),
-            (f"planner + joystick (inflate {args.inflate} m)", run_episodes(make(cfg, 0.0), planner, n, args.seed).mean(),
+            ("joystick", run_episodes(make(cfg, 0.0), lambda e, o: joystick.act(o), args.seed).mean(),
+             run_episodes(make(cfg, speed), lambda e, o: joystick.act(o), args.seed).mean()),
+            (f"planner + joystick (inflate {args.inflate} m)", run_episodes(make(cfg, 0.0), planner, args.seed).mean(),
              None)]
     for run in args.run:
         saved = json.loads((Path(run) / "config.json").read_text())["task_config"]
@@ -160,8 +165,8 @@ def main() -> None:
         rcfg = ObstaclesConfig(**{k: v for k, v in saved.items() if k in names})
         policy = ppo.load_policy(Path(run) / "latest.pt")
         act = lambda e, o: policy.act(o, deterministic=True)  # noqa: E731
-        rows.append((f"trained: {run}", run_episodes(make(rcfg, 0.0), act, n, args.seed).mean(),
-                     run_episodes(make(rcfg, speed), act, n, args.seed).mean()))
+        rows.append((f"trained: {run}", run_episodes(make(rcfg, 0.0), act, args.seed).mean(),
+                     run_episodes(make(rcfg, speed), act, args.seed).mean()))
 
     print(f"stage-10 geometry, {n} episodes (seed {args.seed})")
     print(f"{'':<48}{'frozen obstacles':>17}{'moving (stage 10)':>19}")

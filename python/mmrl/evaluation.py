@@ -10,9 +10,11 @@ from __future__ import annotations
 import numpy as np
 
 
-def _run_episodes(env, policy, episodes: int, seed: int, deterministic: bool) -> dict:
-    """One episode per environment of ``env`` (a vector env of ``episodes`` envs): the first
-    episode's success, collision (False where the env has none) and length of each."""
+def first_episodes(env, policy, seed: int, deterministic: bool = True) -> dict:
+    """Run ``env`` (a vector env) until each environment's first episode has ended; returns
+    arrays of each one's ``success``, ``collision`` (False where the env has none) and
+    ``length``. ``policy.act(obs[N, D], deterministic=...) -> actions[N, 12]``. Closes ``env``."""
+    episodes = env.num_envs
     obs, _ = env.reset(seed=seed)
     done = np.zeros(episodes, bool)
     out = {k: np.zeros(episodes, bool) for k in ("success", "collision")}
@@ -52,7 +54,7 @@ def evaluate_plane(policy, db, *, episodes: int = 1000, seed: int = 12345, confi
     from .envs import PlaneVectorEnv
 
     env = PlaneVectorEnv(episodes, db=db, config=config, num_threads=num_threads)
-    r = _run_episodes(env, policy, episodes, seed, deterministic)
+    r = first_episodes(env, policy, seed, deterministic)
     success, length = r["success"], r["length"]
     seconds_per_step = env.config.frames_per_step / db.fps
     ok = success.sum()
@@ -77,7 +79,7 @@ def evaluate_obstacles_fast(policy, db, *, episodes: int = 1000, seed: int = 123
 
     env = ObstaclesVectorEnv(episodes, db=db, config=config, num_threads=num_threads)
     env.set_stage(*stage_params(stage), stage)
-    r = _run_episodes(env, policy, episodes, seed, deterministic)
+    r = first_episodes(env, policy, seed, deterministic)
     p = float(r["success"].mean())
     return {
         "episodes": int(episodes),
