@@ -1,24 +1,31 @@
 """The paper's Figure 7: the moving-obstacles task with and without the hit reward and the curriculum.
 
-    python bench/bench_figure7.py [--data DIR | --db FILE.npz] [--steps 2400000] [--seed 0]
-        [--out DIR] [--episodes 100] [--fast-episodes 1000] [--preset mmrl] [--set KEY=VALUE ...]
+    python bench/bench_figure7.py [--data DIR | --db FILE.npz] [--steps 2400000] [--seeds 0 1 2]
+        [--out DIR] [--episodes 100] [--fast-episodes 1000] [--eval-seed 1000] [--preset mmrl]
+        [--set KEY=VALUE ...]
 
-1. Trains three runs with the same env-step budget through the ``mmrl train obstacles``
-   command line: ours, ``--no-hit-reward`` and ``--no-curriculum`` (each in OUT/<name>,
-   ``--preset`` and ``--set`` options passed to every run).
+1. For each seed, trains three runs with the same env-step budget through the ``mmrl train
+   obstacles`` command line: ours, ``--no-hit-reward`` and ``--no-curriculum`` (in
+   OUT/seed<K>/<name>; ``--preset`` and ``--set`` options go to every run). A run that already
+   holds the full budget is reused and a shorter one is resumed, so an interrupted bench
+   continues where it stopped and more seeds can be added later.
 2. Plots success ratio, episode length and curriculum stage against env steps from each run's
-   metrics.csv into OUT/figure7.png.
-3. Prints a table: final curriculum stage, the env step at which stage 10 was reached and
-   passed (its window of 200 episodes above 40%: every stage passed), deterministic success and collision rates at the
-   last stage on the fast path (``mmrl.evaluation.evaluate_obstacles_fast``, --fast-episodes
-   episodes, with the success rate's standard error) and on the full-path character
-   (``mmrl.obstacle_rollouts.evaluate_obstacles``, --episodes episodes), the same episodes
-   for every run; env steps and training wall time; the joystick baseline (which ignores
-   obstacles) on the same episodes.
+   metrics.csv into OUT/figure7.png: one thin line per seed, the mean over seeds in bold.
+3. Prints, per run: final curriculum stage, the env step at which stage 10 was reached and
+   passed (its window of 200 episodes above 40%: every stage passed), deterministic success and
+   collision rates at the last stage on the fast path (``mmrl.evaluation.evaluate_obstacles_fast``,
+   --fast-episodes episodes, with the standard error) and on the full-path character
+   (``mmrl.obstacle_rollouts.evaluate_obstacles``, --episodes episodes; 0 skips it), the same
+   episodes (--eval-seed) for every run; and the joystick baseline (which ignores obstacles) on
+   those episodes.
+4. With several seeds, a summary per variant: seeds that passed every stage, the median step
+   at which they did, the fast-path success as mean ± std over seeds, and the difference to
+   ours paired by seed. Everything also goes to OUT/figure7.json.
 
-The full budget (2.4M steps per run) takes about 12 minutes a run on 2 cores; check the script end to end with
-a tiny one (``--steps 20000``).
+A run of the full budget (2.4M steps) takes about 12 minutes on 2 cores; check the script end
+to end with a tiny one (``--steps 20000``).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,40 +42,82 @@ VARIANTS = (("ours", []), ("no-hit-reward", ["--no-hit-reward"]), ("no-curriculu
 LAST_STAGE = 10
 
 
-def train_variants(db_path: Path, out: Path, steps: int, seed: int, preset, sets, threads: int) -> dict:
+def run_status(run: Path, steps: int) -> str:
+    """'done' (a checkpoint holding the budget), 'partial' (a shorter checkpoint) or 'new'."""
+    from mmrl.plots import read_metrics
+
+    if not (run / "latest.pt").exists():
+        return "new"
+    try:
+        last = read_metrics(run)["step"][-1]
+    except (FileNotFoundError, ValueError):
+        return "partial"
+    return "done" if last >= steps else "partial"
+
+
+def train_variants(variants, db_path: Path, out: Path, steps: int, seed: int, preset, sets, threads: int) -> dict:
+    """Train (or reuse, or resume) VARIANTS of one seed in OUT/seed<K>/<name>; wall seconds per run."""
     from mmrl.cli import main as mmrl_main
 
     wall = {}
-    for name, flags in VARIANTS:
-        run = out / name
-        argv = ["train", "obstacles", "--db", str(db_path), "--steps", str(steps), "--seed", str(seed),
-                "--out", str(run), "--threads", str(threads), "--no-progress", *flags]
-        if preset:
-            argv += ["--preset", preset]
-        for s in sets:
-            argv += ["--set", s]
+    for name, flags in variants:
+        run = out / f"seed{seed}" / name
+        status = run_status(run, steps)
+        if status == "done":
+            print(f"reusing {run} (holds {steps:,} steps)", flush=True)
+            wall[name] = float("nan")
+            continue
+        if status == "partial":
+            argv = ["train", "obstacles", "--resume", str(run), "--steps", str(steps), "--threads", str(threads),
+                    "--no-progress"]
+        else:
+            argv = ["train", "obstacles", "--db", str(db_path), "--steps", str(steps), "--seed", str(seed),
+                    "--out", str(run), "--threads", str(threads), "--no-progress", *flags]
+            if preset:
+                argv += ["--preset", preset]
+            for s in sets:
+                argv += ["--set", s]
         print("mmrl " + " ".join(argv), flush=True)
         t0 = time.perf_counter()
         code = mmrl_main(argv)
         wall[name] = time.perf_counter() - t0
         if code != 0:
-            raise SystemExit(f"mmrl train failed for {name} (exit code {code})")
+            raise SystemExit(f"mmrl train failed for {run} (exit code {code})")
     return wall
 
 
-def plot(out: Path, curves: dict) -> Path:
+def resample(m: dict, key: str, grid: np.ndarray) -> np.ndarray:
+    """A metrics column on a common step grid (linear between logged rows, NaN past the run's end)."""
+    ok = np.isfinite(m.get(key, np.array([np.nan])))
+    if not ok.any():
+        return np.full(grid.shape, np.nan)
+    x, y = m["step"][ok], m[key][ok]
+    out = np.interp(grid, x, y)
+    out[grid > x[-1]] = np.nan
+    return out
+
+
+def plot(out: Path, curves: dict, steps: int) -> Path:
+    """curves: {variant: {seed: metrics}}; thin lines per seed, bold mean over the seeds."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    grid = np.linspace(0, steps, 241)
+    keys = ("success_rate", "episode_length", "curriculum_stage")
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), constrained_layout=True)
-    for name, m in curves.items():
-        steps = m["step"]
-        for ax, key in zip(axes, ("success_rate", "episode_length", "curriculum_stage")):
-            if key in m:
-                ok = np.isfinite(m[key])
-                ax.plot(steps[ok], m[key][ok], label=name, lw=1.5)
+    for i, (name, runs) in enumerate(curves.items()):
+        color = f"C{i}"
+        for ax, key in zip(axes, keys):
+            ys = np.array([resample(m, key, grid) for m in runs.values()])
+            if len(runs) > 1:
+                for y in ys:
+                    ax.plot(grid, y, color=color, lw=0.6, alpha=0.35)
+            with np.errstate(invalid="ignore"):
+                mean = np.nanmean(ys, axis=0) if np.isfinite(ys).any() else ys[0]
+            label = name if len(runs) == 1 else f"{name} (mean of {len(runs)} seeds)"
+            ax.plot(grid, mean, color=color, lw=1.8, label=label)
     for ax, title in zip(axes, ("success ratio", "episode length (steps)", "curriculum stage")):
         ax.set_title(title)
         ax.set_xlabel("env steps")
@@ -92,37 +141,99 @@ def task_config(run: Path):
     return ObstaclesConfig(**{k: v for k, v in saved.items() if k in names})
 
 
+def evaluate_run(policy, db, cfg, args, cache: Path = None, checkpoint: Path = None) -> dict:
+    """Stage-10 success and collisions on the fast path and the full-path character.
+
+    Cached in CACHE, keyed by the evaluation options and CHECKPOINT's size and modification time.
+    """
+    from mmrl.evaluation import evaluate_obstacles_fast
+    from mmrl.obstacle_rollouts import evaluate_obstacles
+
+    key = {"eval_seed": args.eval_seed, "fast_episodes": args.fast_episodes, "episodes": args.episodes}
+    if checkpoint is not None:
+        st = checkpoint.stat()
+        key["checkpoint"] = [st.st_size, st.st_mtime_ns]
+    if cache is not None and cache.exists():
+        saved = json.loads(cache.read_text())
+        if saved.get("key") == key:
+            return saved["result"]
+    fast = evaluate_obstacles_fast(policy, db, episodes=args.fast_episodes, seed=args.eval_seed, config=cfg,
+                                   stage=LAST_STAGE)
+    result = {"success": fast["success_rate"], "stderr": fast["success_stderr"], "collision": fast["collision_rate"],
+              "success_full": float("nan"), "collision_full": float("nan")}
+    if args.episodes > 0:
+        full = evaluate_obstacles(db, policy, episodes=args.episodes, seed=args.eval_seed, config=cfg,
+                                  stage=LAST_STAGE)
+        result.update(success_full=full["success_rate"], collision_full=full["collision_rate"])
+    if cache is not None:
+        tmp = cache.with_name(cache.name + ".tmp")
+        tmp.write_text(json.dumps({"key": key, "result": result}))
+        tmp.replace(cache)
+    return result
+
+
+def curriculum_steps(m: dict) -> tuple:
+    """(final stage, step at which the last stage was reached or None, step at which it was passed or None)."""
+    stage = m.get("curriculum_stage", np.array([np.nan]))
+    final = float(stage[np.isfinite(stage)][-1]) if np.isfinite(stage).any() else float("nan")
+    reached = int(m["step"][stage >= LAST_STAGE][0]) if (stage >= LAST_STAGE).any() else None
+    done = m.get("curriculum_complete", np.zeros(1)) > 0
+    passed = int(m["step"][done][0]) if done.any() else None
+    return final, reached, passed
+
+
+def summarize(rows: list, seeds: list, names: list) -> list:
+    """Per variant over seeds: stages passed, median step, success mean/std, paired difference to ours."""
+    by = {(r["run"], r["seed"]): r for r in rows}
+    summary = []
+    for name in names:
+        ok = np.array([by[name, s]["success"] for s in seeds])
+        passed = [by[name, s]["passed_at"] for s in seeds if by[name, s]["passed_at"] is not None]
+        entry = {"run": name, "seeds": len(seeds), "passed_all": len(passed),
+                 "median_passed_at": float(np.median(passed)) if passed else None,
+                 "success_mean": float(ok.mean()), "success_std": float(ok.std(ddof=1)) if len(ok) > 1 else 0.0,
+                 "success_min": float(ok.min()), "success_max": float(ok.max())}
+        if name != names[0]:
+            diff = np.array([by[names[0], s]["success"] for s in seeds]) - ok
+            entry.update(diff_to_first_mean=float(diff.mean()),
+                         diff_to_first_stderr=float(diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else 0.0,
+                         first_better=int((diff > 0).sum()))
+        summary.append(entry)
+    return summary
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     src = ap.add_mutually_exclusive_group()
     src.add_argument("--data", default=None, help=f"BVH directory (default {DEFAULT_DATA})")
     src.add_argument("--db", default=None, help="a database saved by 'mmrl db build'")
     ap.add_argument("--steps", type=int, default=2_400_000, help="env steps per run (default 2.4M, the paper's)")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--episodes", type=int, default=100, help="full-path evaluation episodes at the last stage")
+    ap.add_argument("--seeds", type=int, nargs="+", default=None, help="training seeds (default: --seed)")
+    ap.add_argument("--seed", type=int, default=0, help="the training seed of a single-seed bench (default 0)")
+    ap.add_argument("--variants", nargs="+", default=[n for n, _ in VARIANTS], choices=[n for n, _ in VARIANTS],
+                    help="which runs (default all three; the first is the reference of the paired differences)")
+    ap.add_argument("--episodes", type=int, default=100, help="full-path evaluation episodes (0 skips them)")
     ap.add_argument("--fast-episodes", type=int, default=1000, help="fast-path evaluation episodes at the last stage")
+    ap.add_argument("--eval-seed", type=int, default=1000, help="seed of the evaluation episodes (all runs share them)")
     ap.add_argument("--threads", type=int, default=0, help="C++ env threads (0 = all cores)")
     ap.add_argument("--out", default=None, help="output directory (default: a temporary one)")
     ap.add_argument("--preset", choices=("paper", "mmrl"), default=None,
                     help="'mmrl train obstacles --preset' for every run (default: the command's, 'paper')")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                    help="passed to every 'mmrl train obstacles' run (repeatable)")
+                    help="passed to every new 'mmrl train obstacles' run (repeatable)")
     args = ap.parse_args()
-    if args.steps < 1 or args.episodes < 1 or args.fast_episodes < 1:
-        raise SystemExit("--steps, --episodes and --fast-episodes must be positive")
+    seeds = list(dict.fromkeys(args.seeds or [args.seed]))
+    names = list(dict.fromkeys(args.variants))
+    if args.steps < 1 or args.episodes < 0 or args.fast_episodes < 2:
+        raise SystemExit("--steps must be positive, --episodes non-negative and --fast-episodes at least 2")
 
     import mmrl
     from mmrl import ppo
-    from mmrl.evaluation import evaluate_obstacles_fast
-    from mmrl.obstacle_rollouts import evaluate_obstacles
     from mmrl.plots import read_metrics
     from mmrl.policies import JoystickPolicy
 
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="mmrl-figure7-"))
     out.mkdir(parents=True, exist_ok=True)
-    for name, _ in VARIANTS:
-        if (out / name / "latest.pt").exists():
-            raise SystemExit(f"{out / name} already holds a run; choose another --out")
     t0 = time.perf_counter()
     if args.db:
         db_path = Path(args.db)
@@ -133,41 +244,61 @@ def main() -> None:
         db.save(db_path)
     print(f"{db!r}; ready in {time.perf_counter() - t0:.1f} s; output in {out}", flush=True)
 
-    wall = train_variants(db_path, out, args.steps, args.seed, args.preset, args.set, args.threads)
-    curves = {name: read_metrics(out / name) for name, _ in VARIANTS}
-    print(f"wrote {plot(out, curves)}")
-
-    def evaluate(policy, run: Path) -> tuple:
-        cfg = task_config(run)
-        fast = evaluate_obstacles_fast(policy, db, episodes=args.fast_episodes, seed=args.seed + 1000, config=cfg,
-                                       stage=LAST_STAGE)
-        full = evaluate_obstacles(db, policy, episodes=args.episodes, seed=args.seed + 1000, config=cfg,
-                                  stage=LAST_STAGE)
-        return (fast["success_rate"], fast["success_stderr"], fast["collision_rate"], full["success_rate"],
-                full["collision_rate"])
+    variants = [v for v in VARIANTS if v[0] in names]
+    wall = {}
+    for seed in seeds:
+        for name, seconds in train_variants(variants, db_path, out, args.steps, seed, args.preset, args.set,
+                                            args.threads).items():
+            wall[name, seed] = seconds
+    curves = {name: {seed: read_metrics(out / f"seed{seed}" / name) for seed in seeds} for name in names}
+    print(f"wrote {plot(out, curves, args.steps)}")
 
     rows = []
-    for name, _ in VARIANTS:
-        run, m = out / name, curves[name]
-        stage = m.get("curriculum_stage", np.array([np.nan]))
-        final = stage[np.isfinite(stage)][-1] if np.isfinite(stage).any() else float("nan")
-        reached = m["step"][stage >= LAST_STAGE][0] if (stage >= LAST_STAGE).any() else None
-        done = m.get("curriculum_complete", np.zeros(1)) > 0
-        passed = m["step"][done][0] if done.any() else None
-        rows.append((name, final, reached, passed, *evaluate(ppo.load_policy(run / "latest.pt"), run),
-                     int(m["step"][-1]), wall[name]))
-    joy = evaluate(JoystickPolicy.preset(db, "joystick"), out / VARIANTS[0][0])
-    rows.append(("joystick", float("nan"), None, None, *joy, 0, 0.0))
+    for seed in seeds:
+        for name in names:
+            run, m = out / f"seed{seed}" / name, curves[name][seed]
+            final, reached, passed = curriculum_steps(m)
+            ev = evaluate_run(ppo.load_policy(run / "latest.pt"), db, task_config(run), args,
+                              cache=run / "figure7_eval.json", checkpoint=run / "latest.pt")
+            rows.append({"run": name, "seed": seed, "final_stage": final, "reached_at": reached, "passed_at": passed,
+                         **ev, "env_steps": int(m["step"][-1]),
+                         "wall_s": float(m["wall_s"][-1]) if "wall_s" in m else wall[name, seed]})
+    joy = evaluate_run(JoystickPolicy.preset(db, "joystick"), db, task_config(out / f"seed{seeds[0]}" / names[0]),
+                       args)
+    rows.append({"run": "joystick", "seed": None, "final_stage": float("nan"), "reached_at": None,
+                 "passed_at": None, **joy, "env_steps": 0, "wall_s": 0.0})
 
-    print(f"\nstage-{LAST_STAGE} evaluation, deterministic: fast path ({args.fast_episodes} episodes) and "
-          f"full-path character ({args.episodes} episodes)")
-    print(f"{'run':<15}{'final stage':>12}{'stage 10 at':>12}{'passed at':>11}{'success (fast)':>18}{'collision':>11}"
-          f"{'success (full)':>16}{'collision':>11}{'env steps':>12}{'wall s':>9}")
+    print(f"\nstage-{LAST_STAGE} evaluation, deterministic, eval seed {args.eval_seed}: fast path "
+          f"({args.fast_episodes} episodes) and full-path character ({args.episodes} episodes)")
+    print(f"{'run':<15}{'seed':>5}{'final stage':>12}{'stage 10 at':>12}{'passed at':>11}{'success (fast)':>18}"
+          f"{'collision':>11}{'success (full)':>16}{'collision':>11}{'env steps':>12}{'wall s':>9}")
     step_text = lambda s: "-" if s is None else f"{s / 1e6:.2f}M"  # noqa: E731
-    for name, stage, reached, passed, ok, err, coll, ok_full, coll_full, steps, seconds in rows:
-        st = "-" if not np.isfinite(stage) else f"{stage:.0f}"
-        print(f"{name:<15}{st:>12}{step_text(reached):>12}{step_text(passed):>11}{ok:>11.3f} ±{err:.3f}{coll:>11.3f}"
-              f"{ok_full:>16.3f}{coll_full:>11.3f}{steps:>12,}{seconds:>9.1f}")
+    for r in rows:
+        st = "-" if not np.isfinite(r["final_stage"]) else f"{r['final_stage']:.0f}"
+        seed = "-" if r["seed"] is None else str(r["seed"])
+        print(f"{r['run']:<15}{seed:>5}{st:>12}{step_text(r['reached_at']):>12}{step_text(r['passed_at']):>11}"
+              f"{r['success']:>11.3f} ±{r['stderr']:.3f}{r['collision']:>11.3f}{r['success_full']:>16.3f}"
+              f"{r['collision_full']:>11.3f}{r['env_steps']:>12,}{r['wall_s']:>9.1f}")
+
+    summary = summarize(rows, seeds, names) if len(seeds) > 1 else []
+    if summary:
+        print(f"\nover {len(seeds)} seeds ({', '.join(map(str, seeds))}): fast-path stage-{LAST_STAGE} success; "
+              f"joystick {joy['success']:.3f}")
+        print(f"{'run':<15}{'all stages passed':>19}{'median step':>13}{'success mean ± std':>21}{'min':>7}{'max':>7}"
+              f"{names[0] + ' minus run':>22}{names[0] + ' better':>16}")
+        for e in summary:
+            med = "-" if e["median_passed_at"] is None else f"{e['median_passed_at'] / 1e6:.2f}M"
+            diff = (f"{e['diff_to_first_mean']:+.3f} ±{e['diff_to_first_stderr']:.3f}" if "diff_to_first_mean" in e
+                    else "-")
+            better = f"{e['first_better']}/{e['seeds']}" if "first_better" in e else "-"
+            print(f"{e['run']:<15}{e['passed_all']:>13}/{e['seeds']:<5}{med:>13}"
+                  f"{e['success_mean']:>13.3f} ±{e['success_std']:.3f}{e['success_min']:>7.3f}{e['success_max']:>7.3f}"
+                  f"{diff:>22}{better:>16}")
+    report = {"steps": args.steps, "seeds": seeds, "eval_seed": args.eval_seed, "fast_episodes": args.fast_episodes,
+              "episodes": args.episodes, "preset": args.preset, "set": args.set, "rows": rows, "summary": summary}
+    (out / "figure7.json").write_text(json.dumps(report, indent=1, default=float))
+    print(f"wrote {out / 'figure7.json'}")
+
 
 if __name__ == "__main__":
     main()
