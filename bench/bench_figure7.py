@@ -1,14 +1,15 @@
 """The paper's Figure 7: the moving-obstacles task with and without the hit reward and the curriculum.
 
     python bench/bench_figure7.py [--data DIR | --db FILE.npz] [--steps 2400000] [--seeds 0 1 2]
-        [--out DIR] [--episodes 100] [--fast-episodes 1000] [--eval-seed 1000] [--preset mmrl]
-        [--set KEY=VALUE ...]
+        [--variants ours no-hit-reward no-curriculum] [--no-train] [--out DIR] [--episodes 100]
+        [--fast-episodes 1000] [--eval-seed 1000] [--preset mmrl] [--set KEY=VALUE ...]
 
 1. For each seed, trains three runs with the same env-step budget through the ``mmrl train
    obstacles`` command line: ours, ``--no-hit-reward`` and ``--no-curriculum`` (in
    OUT/seed<K>/<name>; ``--preset`` and ``--set`` options go to every run). A run that already
    holds the full budget is reused and a shorter one is resumed, so an interrupted bench
-   continues where it stopped and more seeds can be added later.
+   continues where it stopped and more seeds can be added later. ``--no-train`` only evaluates
+   and plots the runs already there (a variant may then have fewer seeds than another).
 2. Plots success ratio, episode length and curriculum stage against env steps from each run's
    metrics.csv into OUT/figure7.png: one thin line per seed, the mean over seeds in bold.
 3. Prints, per run: final curriculum stage, the env step at which stage 10 was reached and
@@ -20,7 +21,8 @@
    those episodes.
 4. With several seeds, a summary per variant: seeds that passed every stage, the median step
    at which they did, the fast-path success as mean ± std over seeds, and the difference to
-   ours paired by seed. Everything also goes to OUT/figure7.json.
+   the first variant (ours) paired by seed. Evaluations are cached in each run directory
+   (figure7_eval.json); everything also goes to OUT/figure7.json.
 
 A run of the full budget (2.4M steps) takes about 12 minutes on 2 cores; check the script end
 to end with a tiny one (``--steps 20000``).
@@ -183,19 +185,24 @@ def curriculum_steps(m: dict) -> tuple:
 
 
 def summarize(rows: list, seeds: list, names: list) -> list:
-    """Per variant over seeds: stages passed, median step, success mean/std, paired difference to ours."""
+    """Per variant over its seeds: stages passed, median step, success mean/std, and the difference to the
+    first variant paired by seed (over the seeds both have)."""
     by = {(r["run"], r["seed"]): r for r in rows}
     summary = []
     for name in names:
-        ok = np.array([by[name, s]["success"] for s in seeds])
-        passed = [by[name, s]["passed_at"] for s in seeds if by[name, s]["passed_at"] is not None]
-        entry = {"run": name, "seeds": len(seeds), "passed_all": len(passed),
+        have = [s for s in seeds if (name, s) in by]
+        if not have:
+            continue
+        ok = np.array([by[name, s]["success"] for s in have])
+        passed = [by[name, s]["passed_at"] for s in have if by[name, s]["passed_at"] is not None]
+        entry = {"run": name, "seeds": len(have), "passed_all": len(passed),
                  "median_passed_at": float(np.median(passed)) if passed else None,
                  "success_mean": float(ok.mean()), "success_std": float(ok.std(ddof=1)) if len(ok) > 1 else 0.0,
                  "success_min": float(ok.min()), "success_max": float(ok.max())}
-        if name != names[0]:
-            diff = np.array([by[names[0], s]["success"] for s in seeds]) - ok
-            entry.update(diff_to_first_mean=float(diff.mean()),
+        common = [s for s in have if (names[0], s) in by]
+        if name != names[0] and common:
+            diff = np.array([by[names[0], s]["success"] - by[name, s]["success"] for s in common])
+            entry.update(paired_seeds=len(common), diff_to_first_mean=float(diff.mean()),
                          diff_to_first_stderr=float(diff.std(ddof=1) / np.sqrt(len(diff))) if len(diff) > 1 else 0.0,
                          first_better=int((diff > 0).sum()))
         summary.append(entry)
@@ -215,6 +222,8 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=100, help="full-path evaluation episodes (0 skips them)")
     ap.add_argument("--fast-episodes", type=int, default=1000, help="fast-path evaluation episodes at the last stage")
     ap.add_argument("--eval-seed", type=int, default=1000, help="seed of the evaluation episodes (all runs share them)")
+    ap.add_argument("--no-train", action="store_true",
+                    help="only evaluate and plot the runs already in OUT (missing ones are left out)")
     ap.add_argument("--threads", type=int, default=0, help="C++ env threads (0 = all cores)")
     ap.add_argument("--out", default=None, help="output directory (default: a temporary one)")
     ap.add_argument("--preset", choices=("paper", "mmrl"), default=None,
@@ -246,25 +255,39 @@ def main() -> None:
 
     variants = [v for v in VARIANTS if v[0] in names]
     wall = {}
-    for seed in seeds:
-        for name, seconds in train_variants(variants, db_path, out, args.steps, seed, args.preset, args.set,
-                                            args.threads).items():
-            wall[name, seed] = seconds
-    curves = {name: {seed: read_metrics(out / f"seed{seed}" / name) for seed in seeds} for name in names}
+    if not args.no_train:
+        for seed in seeds:
+            for name, seconds in train_variants(variants, db_path, out, args.steps, seed, args.preset, args.set,
+                                                args.threads).items():
+                wall[name, seed] = seconds
+    curves = {}
+    for name in names:
+        for seed in seeds:
+            run = out / f"seed{seed}" / name
+            if (run / "latest.pt").exists():
+                curves.setdefault(name, {})[seed] = read_metrics(run)
+            else:
+                print(f"no run in {run}; left out", flush=True)
+    if not curves:
+        raise SystemExit(f"no runs in {out}")
+    names = [n for n in names if n in curves]
     print(f"wrote {plot(out, curves, args.steps)}")
 
     rows = []
     for seed in seeds:
         for name in names:
+            if seed not in curves[name]:
+                continue
             run, m = out / f"seed{seed}" / name, curves[name][seed]
             final, reached, passed = curriculum_steps(m)
             ev = evaluate_run(ppo.load_policy(run / "latest.pt"), db, task_config(run), args,
                               cache=run / "figure7_eval.json", checkpoint=run / "latest.pt")
             rows.append({"run": name, "seed": seed, "final_stage": final, "reached_at": reached, "passed_at": passed,
                          **ev, "env_steps": int(m["step"][-1]),
-                         "wall_s": float(m["wall_s"][-1]) if "wall_s" in m else wall[name, seed]})
-    joy = evaluate_run(JoystickPolicy.preset(db, "joystick"), db, task_config(out / f"seed{seeds[0]}" / names[0]),
-                       args)
+                         "wall_s": float(m["wall_s"][-1]) if "wall_s" in m else wall.get((name, seed), np.nan)})
+    first = rows[0]
+    joy = evaluate_run(JoystickPolicy.preset(db, "joystick"), db,
+                       task_config(out / f"seed{first['seed']}" / first["run"]), args)
     rows.append({"run": "joystick", "seed": None, "final_stage": float("nan"), "reached_at": None,
                  "passed_at": None, **joy, "env_steps": 0, "wall_s": 0.0})
 
@@ -290,7 +313,7 @@ def main() -> None:
             med = "-" if e["median_passed_at"] is None else f"{e['median_passed_at'] / 1e6:.2f}M"
             diff = (f"{e['diff_to_first_mean']:+.3f} ±{e['diff_to_first_stderr']:.3f}" if "diff_to_first_mean" in e
                     else "-")
-            better = f"{e['first_better']}/{e['seeds']}" if "first_better" in e else "-"
+            better = f"{e['first_better']}/{e['paired_seeds']}" if "first_better" in e else "-"
             print(f"{e['run']:<15}{e['passed_all']:>13}/{e['seeds']:<5}{med:>13}"
                   f"{e['success_mean']:>13.3f} ±{e['success_std']:.3f}{e['success_min']:>7.3f}{e['success_max']:>7.3f}"
                   f"{diff:>22}{better:>16}")
