@@ -179,6 +179,8 @@ def curriculum_steps(m: dict) -> tuple:
     stage = m.get("curriculum_stage", np.array([np.nan]))
     final = float(stage[np.isfinite(stage)][-1]) if np.isfinite(stage).any() else float("nan")
     reached = int(m["step"][stage >= LAST_STAGE][0]) if (stage >= LAST_STAGE).any() else None
+    if reached is not None and stage[0] >= LAST_STAGE:
+        reached = 0  # started there (no curriculum)
     done = m.get("curriculum_complete", np.zeros(1)) > 0
     passed = int(m["step"][done][0]) if done.any() else None
     return final, reached, passed
@@ -295,7 +297,7 @@ def main() -> None:
           f"({args.fast_episodes} episodes) and full-path character ({args.episodes} episodes)")
     print(f"{'run':<15}{'seed':>5}{'final stage':>12}{'stage 10 at':>12}{'passed at':>11}{'success (fast)':>18}"
           f"{'collision':>11}{'success (full)':>16}{'collision':>11}{'env steps':>12}{'wall s':>9}")
-    step_text = lambda s: "-" if s is None else f"{s / 1e6:.2f}M"  # noqa: E731
+    step_text = lambda s: "-" if s is None else "start" if s == 0 else f"{s / 1e6:.2f}M"  # noqa: E731
     for r in rows:
         st = "-" if not np.isfinite(r["final_stage"]) else f"{r['final_stage']:.0f}"
         seed = "-" if r["seed"] is None else str(r["seed"])
