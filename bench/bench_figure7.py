@@ -57,17 +57,15 @@ def run_status(run: Path, steps: int) -> str:
     return "done" if last >= steps else "partial"
 
 
-def train_variants(variants, db_path: Path, out: Path, steps: int, seed: int, preset, sets, threads: int) -> dict:
-    """Train (or reuse, or resume) VARIANTS of one seed in OUT/seed<K>/<name>; wall seconds per run."""
+def train_variants(variants, db_path: Path, out: Path, steps: int, seed: int, preset, sets, threads: int) -> None:
+    """Train (or reuse, or resume) VARIANTS of one seed in OUT/seed<K>/<name>."""
     from mmrl.cli import main as mmrl_main
 
-    wall = {}
     for name, flags in variants:
         run = out / f"seed{seed}" / name
         status = run_status(run, steps)
         if status == "done":
             print(f"reusing {run} (holds {steps:,} steps)", flush=True)
-            wall[name] = float("nan")
             continue
         if status == "partial":
             argv = ["train", "obstacles", "--resume", str(run), "--steps", str(steps), "--threads", str(threads),
@@ -80,12 +78,9 @@ def train_variants(variants, db_path: Path, out: Path, steps: int, seed: int, pr
             for s in sets:
                 argv += ["--set", s]
         print("mmrl " + " ".join(argv), flush=True)
-        t0 = time.perf_counter()
         code = mmrl_main(argv)
-        wall[name] = time.perf_counter() - t0
         if code != 0:
             raise SystemExit(f"mmrl train failed for {run} (exit code {code})")
-    return wall
 
 
 def resample(m: dict, key: str, grid: np.ndarray) -> np.ndarray:
@@ -148,6 +143,7 @@ def evaluate_run(policy, db, cfg, args, cache: Path = None, checkpoint: Path = N
 
     Cached in CACHE, keyed by the evaluation options and CHECKPOINT's size and modification time.
     """
+    from mmrl.commands.train import atomic_write_text
     from mmrl.evaluation import evaluate_obstacles_fast
     from mmrl.obstacle_rollouts import evaluate_obstacles
 
@@ -168,9 +164,7 @@ def evaluate_run(policy, db, cfg, args, cache: Path = None, checkpoint: Path = N
                                   stage=LAST_STAGE)
         result.update(success_full=full["success_rate"], collision_full=full["collision_rate"])
     if cache is not None:
-        tmp = cache.with_name(cache.name + ".tmp")
-        tmp.write_text(json.dumps({"key": key, "result": result}))
-        tmp.replace(cache)
+        atomic_write_text(cache, json.dumps({"key": key, "result": result}))
     return result
 
 
@@ -256,12 +250,9 @@ def main() -> None:
     print(f"{db!r}; ready in {time.perf_counter() - t0:.1f} s; output in {out}", flush=True)
 
     variants = [v for v in VARIANTS if v[0] in names]
-    wall = {}
     if not args.no_train:
         for seed in seeds:
-            for name, seconds in train_variants(variants, db_path, out, args.steps, seed, args.preset, args.set,
-                                                args.threads).items():
-                wall[name, seed] = seconds
+            train_variants(variants, db_path, out, args.steps, seed, args.preset, args.set, args.threads)
     curves = {}
     for name in names:
         for seed in seeds:
@@ -285,8 +276,7 @@ def main() -> None:
             ev = evaluate_run(ppo.load_policy(run / "latest.pt"), db, task_config(run), args,
                               cache=run / "figure7_eval.json", checkpoint=run / "latest.pt")
             rows.append({"run": name, "seed": seed, "final_stage": final, "reached_at": reached, "passed_at": passed,
-                         **ev, "env_steps": int(m["step"][-1]),
-                         "wall_s": float(m["wall_s"][-1]) if "wall_s" in m else wall.get((name, seed), np.nan)})
+                         **ev, "env_steps": int(m["step"][-1]), "wall_s": float(m["wall_s"][-1])})
     first = rows[0]
     joy = evaluate_run(JoystickPolicy.preset(db, "joystick"), db,
                        task_config(out / f"seed{first['seed']}" / first["run"]), args)
