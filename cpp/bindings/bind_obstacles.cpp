@@ -43,6 +43,7 @@ void bind_obstacles(py::module_& m) {
       .def_readwrite("hit_penalty", &ObstacleTaskConfig::hit_penalty)
       .def_readwrite("hit_radius", &ObstacleTaskConfig::hit_radius)
       .def_readwrite("hit_lookahead", &ObstacleTaskConfig::hit_lookahead)
+      .def_readwrite("hit_played", &ObstacleTaskConfig::hit_played)
       .def_readwrite("max_steps", &ObstacleTaskConfig::max_steps)
       .def_readwrite("action_limit_std", &ObstacleTaskConfig::action_limit_std)
       .def_readwrite("random_heading", &ObstacleTaskConfig::random_heading)

@@ -156,6 +156,11 @@ int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8
   float clipped[kTrajectoryDim], raw[kTrajectoryDim];
   for (int k = 0; k < kTrajectoryDim; ++k) clipped[k] = std::min(high_[k], std::max(low_[k], action[k]));
   trajectory_denormalize(db_, clipped, raw);
+  return trajectory_hits(i, raw, points, inside);
+}
+
+int ObstacleVecEnv::trajectory_hits(int i, const float* raw, float* points, uint8_t* inside) const {
+  const ObstacleEnvState& s = envs_[i];
   int hits = 0;
   for (int k = 0; k < 3; ++k) {
     // Layout (features.hpp): per horizon, position (x, z) then direction (x, z).
@@ -176,9 +181,13 @@ int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8
 bool ObstacleVecEnv::advance(int i, const float* action, float* reward, bool* terminated, bool* truncated,
                              bool* collided, int* hits) {
   ObstacleEnvState& s = envs_[i];
-  s.last_hits = action_hits(i, action, s.hit_points, s.hit_inside);
-  *hits = s.last_hits;
   const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_);
+  // Both tests use the root and the obstacles at the step's start, before anything moves.
+  s.last_hits = config_.hit_played
+                    ? trajectory_hits(i, &db_.features[static_cast<size_t>(j) * kFeatureDim + kPoseDim], s.hit_points,
+                                      s.hit_inside)
+                    : action_hits(i, action, s.hit_points, s.hit_inside);
+  *hits = s.last_hits;
   s.last_transition = (j != s.frame);
   s.last_match = j;
   const float r2 = config_.success_radius * config_.success_radius;

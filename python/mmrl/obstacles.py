@@ -107,6 +107,10 @@ class ObstaclesConfig:
     """Test each trajectory point against the obstacles where they will be at that point's time
     (10 / 20 / 30 frames ahead, constant velocity with bounces); False is the paper's test
     against the current positions."""
+    hit_played: bool = False
+    """Test the future trajectory of the frame the step matched (the path the clip plays, in
+    the character frame at the step's start) instead of the action's; False is the paper's
+    test of the action."""
     max_steps: int = 1500
     """Safety cap on the episode length (truncation; 1500 steps = 300 s). The paper has none."""
     action_limit_std: float = 3.0

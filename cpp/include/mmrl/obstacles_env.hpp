@@ -64,6 +64,7 @@ struct ObstacleTaskConfig {
   bool hit_penalty = false;          // ... minus hit_weight: 0 for a clear action, so no reward for surviving
   float hit_radius = 0.0f;           // a trajectory point hits when a disc this wide overlaps an obstacle (0: the point)
   bool hit_lookahead = false;        // test point k against the obstacles as they will be at its time (10/20/30 frames)
+  bool hit_played = false;           // test the matched frame's own future trajectory (the path the clip plays) instead of the action's
   int max_steps = 1500;              // safety cap (truncation), 300 s at 6 frames per step
   float action_limit_std = 3.0f;     // action box half-width, in standard deviations
   bool random_heading = true;        // start heading uniform in [-pi, pi)
@@ -140,6 +141,9 @@ class ObstacleVecEnv {
   // Counts hits of an action (12 normalized floats, clipped like a step's) for env i's
   // current state; writes the three world points and inside flags if given.
   int action_hits(int i, const float* action, float* points = nullptr, uint8_t* inside = nullptr) const;
+  // Counts hits of a raw trajectory (12 floats: meters and unit directions in env i's current
+  // character frame), as action_hits does after denormalizing.
+  int trajectory_hits(int i, const float* raw, float* points = nullptr, uint8_t* inside = nullptr) const;
 
   // Scene editing (tests, evaluation, rendering). Each refreshes the grid and the current
   // sensor map (the previous map is kept).
