@@ -110,7 +110,8 @@ class ObstaclesConfig:
     hit_played: bool = False
     """Test the future trajectory of the frame the step matched (the path the clip plays, in
     the character frame at the step's start) instead of the action's; False is the paper's
-    test of the action."""
+    test of the action. ``env_state``'s hit points follow the test; ``mmrl render`` draws the
+    action's points either way."""
     max_steps: int = 1500
     """Safety cap on the episode length (truncation; 1500 steps = 300 s). The paper has none."""
     action_limit_std: float = 3.0

@@ -17,7 +17,8 @@
 //                frame at the step's start, lie inside an obstacle at the step's start;
 //                the paper's test. hit_radius > 0 tests a disc of that radius instead of
 //                the point, and hit_lookahead tests position k against the obstacles as
-//                they will be at its own time, 10 / 20 / 30 frames ahead). The term is
+//                they will be at its own time, 10 / 20 / 30 frames ahead; hit_played
+//                tests the matched frame's own future positions instead). The term is
 //                hit_weight * exp(-hits), minus hit_weight if hit_penalty (a penalty that
 //                is 0 for a clear action: the paper's form also pays for every surviving step)
 //              + success_bonus on success. The paper says both "10 rewards" on success
@@ -91,7 +92,8 @@ struct ObstacleEnvState {
   bool last_transition = false;
   // The stage this episode runs with.
   float max_speed = 0, target_half_extent = 0;
-  // The last action's hits: its three trajectory positions in world (x, z) and which were inside.
+  // The last step's hits: the three tested trajectory positions in world (x, z) (the action's,
+  // or with hit_played the matched frame's) and which were inside.
   int last_hits = 0;
   float hit_points[6] = {0, 0, 0, 0, 0, 0};
   uint8_t hit_inside[3] = {0, 0, 0};
