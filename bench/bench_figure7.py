@@ -1,12 +1,13 @@
 """The paper's Figure 7: the moving-obstacles task with and without the hit reward and the curriculum.
 
     python bench/bench_figure7.py [--data DIR | --db FILE.npz] [--steps 2400000] [--seeds 0 1 2]
-        [--variants ours no-hit-reward no-curriculum] [--no-train] [--out DIR] [--episodes 100]
+        [--variants ours no-hit-reward no-curriculum [no-hit-no-curriculum]] [--no-train] [--out DIR] [--episodes 100]
         [--fast-episodes 1000] [--eval-seed 1000] [--preset mmrl] [--set KEY=VALUE ...]
 
 1. For each seed, trains three runs with the same env-step budget through the ``mmrl train
    obstacles`` command line: ours, ``--no-hit-reward`` and ``--no-curriculum`` (in
-   OUT/seed<K>/<name>; ``--preset`` and ``--set`` options go to every run). A run that already
+   OUT/seed<K>/<name>; ``--preset`` and ``--set`` options go to every run). ``--variants`` can add
+   ``no-hit-no-curriculum`` (both flags), which the paper does not show. A run that already
    holds the full budget is reused and a shorter one is resumed, so an interrupted bench
    continues where it stopped and more seeds can be added later. ``--no-train`` only evaluates
    and plots the runs already there (a variant may then have fewer seeds than another).
@@ -39,8 +40,11 @@ from pathlib import Path
 import numpy as np
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-2"
-#: (name, extra ``mmrl train obstacles`` flags), in the paper's legend order.
-VARIANTS = (("ours", []), ("no-hit-reward", ["--no-hit-reward"]), ("no-curriculum", ["--no-curriculum"]))
+#: (name, extra ``mmrl train obstacles`` flags), in the paper's legend order; then a run without both, which
+#: the paper does not show (only with --variants): it completes the two-by-two table of the ablations.
+VARIANTS = (("ours", []), ("no-hit-reward", ["--no-hit-reward"]), ("no-curriculum", ["--no-curriculum"]),
+            ("no-hit-no-curriculum", ["--no-hit-reward", "--no-curriculum"]))
+PAPER_VARIANTS = [n for n, _ in VARIANTS[:3]]
 LAST_STAGE = 10
 
 
@@ -213,8 +217,9 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=2_400_000, help="env steps per run (default 2.4M, the paper's)")
     ap.add_argument("--seeds", type=int, nargs="+", default=None, help="training seeds (default: --seed)")
     ap.add_argument("--seed", type=int, default=0, help="the training seed of a single-seed bench (default 0)")
-    ap.add_argument("--variants", nargs="+", default=[n for n, _ in VARIANTS], choices=[n for n, _ in VARIANTS],
-                    help="which runs (default all three; the first is the reference of the paired differences)")
+    ap.add_argument("--variants", nargs="+", default=PAPER_VARIANTS, choices=[n for n, _ in VARIANTS],
+                    help="which runs (default the paper's three; the first is the reference of the paired "
+                         "differences)")
     ap.add_argument("--episodes", type=int, default=100, help="full-path evaluation episodes (0 skips them)")
     ap.add_argument("--fast-episodes", type=int, default=1000, help="fast-path evaluation episodes at the last stage")
     ap.add_argument("--eval-seed", type=int, default=1000, help="seed of the evaluation episodes (all runs share them)")
@@ -285,13 +290,13 @@ def main() -> None:
 
     print(f"\nstage-{LAST_STAGE} evaluation, deterministic, eval seed {args.eval_seed}: fast path "
           f"({args.fast_episodes} episodes) and full-path character ({args.episodes} episodes)")
-    print(f"{'run':<15}{'seed':>5}{'final stage':>12}{'stage 10 at':>12}{'passed at':>11}{'success (fast)':>18}"
+    print(f"{'run':<21}{'seed':>5}{'final stage':>12}{'stage 10 at':>12}{'passed at':>11}{'success (fast)':>18}"
           f"{'collision':>11}{'success (full)':>16}{'collision':>11}{'env steps':>12}{'wall s':>9}")
     step_text = lambda s: "-" if s is None else "start" if s == 0 else f"{s / 1e6:.2f}M"  # noqa: E731
     for r in rows:
         st = "-" if not np.isfinite(r["final_stage"]) else f"{r['final_stage']:.0f}"
         seed = "-" if r["seed"] is None else str(r["seed"])
-        print(f"{r['run']:<15}{seed:>5}{st:>12}{step_text(r['reached_at']):>12}{step_text(r['passed_at']):>11}"
+        print(f"{r['run']:<21}{seed:>5}{st:>12}{step_text(r['reached_at']):>12}{step_text(r['passed_at']):>11}"
               f"{r['success']:>11.3f} ±{r['stderr']:.3f}{r['collision']:>11.3f}{r['success_full']:>16.3f}"
               f"{r['collision_full']:>11.3f}{r['env_steps']:>12,}{r['wall_s']:>9.1f}")
 
@@ -299,14 +304,14 @@ def main() -> None:
     if summary:
         print(f"\nover {len(seeds)} seeds ({', '.join(map(str, seeds))}): fast-path stage-{LAST_STAGE} success; "
               f"joystick {joy['success']:.3f}")
-        print(f"{'run':<15}{'all stages passed':>19}{'median step':>13}{'success mean ± std':>21}{'min':>7}{'max':>7}"
+        print(f"{'run':<21}{'all stages passed':>19}{'median step':>13}{'success mean ± std':>21}{'min':>7}{'max':>7}"
               f"{names[0] + ' minus run':>22}{names[0] + ' better':>16}")
         for e in summary:
             med = "-" if e["median_passed_at"] is None else f"{e['median_passed_at'] / 1e6:.2f}M"
             diff = (f"{e['diff_to_first_mean']:+.3f} ±{e['diff_to_first_stderr']:.3f}" if "diff_to_first_mean" in e
                     else "-")
             better = f"{e['first_better']}/{e['paired_seeds']}" if "first_better" in e else "-"
-            print(f"{e['run']:<15}{e['passed_all']:>13}/{e['seeds']:<5}{med:>13}"
+            print(f"{e['run']:<21}{e['passed_all']:>13}/{e['seeds']:<5}{med:>13}"
                   f"{e['success_mean']:>13.3f} ±{e['success_std']:.3f}{e['success_min']:>7.3f}{e['success_max']:>7.3f}"
                   f"{diff:>22}{better:>16}")
     report = {"steps": args.steps, "seeds": seeds, "eval_seed": args.eval_seed, "fast_episodes": args.fast_episodes,

@@ -63,3 +63,21 @@ def test_summary_against_hand_computation():
     cur = s["no-curriculum"]
     assert cur["seeds"] == 1 and cur["paired_seeds"] == 1 and cur["success_std"] == 0.0
     assert cur["diff_to_first_mean"] == pytest.approx(0.30)
+
+
+def test_train_variants_passes_each_variants_flags(tmp_path, monkeypatch):
+    import mmrl.cli
+
+    calls = []
+    monkeypatch.setattr(mmrl.cli, "main", lambda argv: calls.append(argv) or 0)
+    chosen = [v for v in fig7.VARIANTS if v[0] in ("ours", "no-hit-no-curriculum")]
+    fig7.train_variants(chosen, tmp_path / "db.npz", tmp_path, 1000, 3, "mmrl", ["hit_weight=5"], 0)
+    assert [a[a.index("--out") + 1] for a in calls] == [str(tmp_path / "seed3" / "ours"),
+                                                         str(tmp_path / "seed3" / "no-hit-no-curriculum")]
+    ours, both = calls
+    assert "--no-hit-reward" not in ours and "--no-curriculum" not in ours
+    assert "--no-hit-reward" in both and "--no-curriculum" in both
+    for argv in calls:
+        assert argv[argv.index("--preset") + 1] == "mmrl" and argv[argv.index("--set") + 1] == "hit_weight=5"
+        assert argv[argv.index("--seed") + 1] == "3"
+    assert fig7.PAPER_VARIANTS == ["ours", "no-hit-reward", "no-curriculum"]
