@@ -1,8 +1,8 @@
 """The paper's Figure 7: the moving-obstacles task with and without the hit reward and the curriculum.
 
     python bench/bench_figure7.py [--data DIR | --db FILE.npz] [--steps 2400000] [--seeds 0 1 2]
-        [--variants ours no-hit-reward no-curriculum [no-hit-no-curriculum]] [--no-train] [--out DIR] [--episodes 100]
-        [--fast-episodes 1000] [--eval-seed 1000] [--preset mmrl] [--set KEY=VALUE ...]
+        [--variants ours no-hit-reward no-curriculum [no-hit-no-curriculum]] [--no-train] [--out DIR]
+        [--episodes 100] [--fast-episodes 1000] [--eval-seed 1000] [--preset mmrl] [--set KEY=VALUE ...]
 
 1. For each seed, trains three runs with the same env-step budget through the ``mmrl train
    obstacles`` command line: ours, ``--no-hit-reward`` and ``--no-curriculum`` (in
