@@ -15,9 +15,9 @@
    metrics.csv into OUT/figure7.png: one thin line per seed, the mean over seeds in bold.
 3. Prints, per run: final curriculum stage, the env step at which stage 10 was reached and
    passed (its window of 200 episodes above 40%: every stage passed), deterministic success and
-   collision rates at the last stage on the fast path (``mmrl.evaluation.evaluate_obstacles_fast``,
+   collision rates at the last stage on the fast path (``mmrl.rollout.evaluate_fast``,
    --fast-episodes episodes, with the standard error) and on the full-path character
-   (``mmrl.obstacle_rollouts.evaluate_obstacles``, --episodes episodes; 0 skips it), the same
+   (``mmrl.rollout.evaluate_full_path``, --episodes episodes; 0 skips it), the same
    episodes (--eval-seed) for every run; and the joystick baseline (which ignores obstacles) on
    those episodes.
 4. With several seeds, a summary per variant: seeds that passed every stage, the median step
@@ -133,13 +133,9 @@ def plot(out: Path, curves: dict, steps: int) -> Path:
 
 
 def task_config(run: Path):
-    from dataclasses import fields
+    from mmrl.runs import RunDir
 
-    from mmrl.obstacles import ObstaclesConfig
-
-    saved = json.loads((run / "config.json").read_text()).get("task_config", {})
-    names = {f.name for f in fields(ObstaclesConfig)}
-    return ObstaclesConfig(**{k: v for k, v in saved.items() if k in names})
+    return RunDir(run).task_config()
 
 
 def evaluate_run(policy, db, cfg, args, cache: Path = None, checkpoint: Path = None) -> dict:
@@ -147,9 +143,11 @@ def evaluate_run(policy, db, cfg, args, cache: Path = None, checkpoint: Path = N
 
     Cached in CACHE, keyed by the evaluation options and CHECKPOINT's size and modification time.
     """
-    from mmrl.commands.train import atomic_write_text
-    from mmrl.evaluation import evaluate_obstacles_fast
-    from mmrl.obstacle_rollouts import evaluate_obstacles
+    from mmrl import get_task
+    from mmrl.io import atomic_write_text
+    from mmrl.rollout import evaluate_fast, evaluate_full_path
+
+    task = get_task("obstacles")
 
     key = {"eval_seed": args.eval_seed, "fast_episodes": args.fast_episodes, "episodes": args.episodes}
     if checkpoint is not None:
@@ -159,12 +157,12 @@ def evaluate_run(policy, db, cfg, args, cache: Path = None, checkpoint: Path = N
         saved = json.loads(cache.read_text())
         if saved.get("key") == key:
             return saved["result"]
-    fast = evaluate_obstacles_fast(policy, db, episodes=args.fast_episodes, seed=args.eval_seed, config=cfg,
+    fast = evaluate_fast(task, db, policy, episodes=args.fast_episodes, seed=args.eval_seed, config=cfg,
                                    stage=LAST_STAGE)
     result = {"success": fast["success_rate"], "stderr": fast["success_stderr"], "collision": fast["collision_rate"],
               "success_full": float("nan"), "collision_full": float("nan")}
     if args.episodes > 0:
-        full = evaluate_obstacles(db, policy, episodes=args.episodes, seed=args.eval_seed, config=cfg,
+        full = evaluate_full_path(task, db, policy, episodes=args.episodes, seed=args.eval_seed, config=cfg,
                                   stage=LAST_STAGE)
         result.update(success_full=full["success_rate"], collision_full=full["collision_rate"])
     if cache is not None:

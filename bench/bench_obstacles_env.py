@@ -22,8 +22,9 @@ from pathlib import Path
 import numpy as np
 
 import mmrl
-from mmrl.envs import PlaneVectorEnv
-from mmrl.obstacles import ObstaclesVectorEnv
+from mmrl.tasks.curriculum import stage_params
+from mmrl.tasks.obstacles import ObstaclesVectorEnv
+from mmrl.tasks.plane import PlaneVectorEnv
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-2"
 
@@ -78,7 +79,7 @@ def main() -> None:
     db = mmrl.Database.load(args.db) if args.db else mmrl.Database.from_bvh(args.data)
     _ = db.matcher
     print(f"database: {db.num_frames} frames ({db.minutes:.1f} min) loaded in {time.perf_counter() - t0:.1f} s")
-    speed, half = mmrl.obstacles.Curriculum().stage_params(args.stage)
+    speed, half = stage_params(args.stage)
     print(f"stage {args.stage}: obstacle speed <= {speed:.2f} m/s, targets in +-{half:.2f} m; threads {args.threads or 'all'}")
     rng = np.random.default_rng(0)
     print("steps/s: env steps per wall second; per CPU-s: per second of process CPU time (on a busy machine,\n"

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import mmrl
-from mmrl.envs import PlaneVectorEnv
+from mmrl.tasks.plane import PlaneVectorEnv
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-2"
 

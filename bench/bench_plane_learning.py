@@ -17,8 +17,12 @@ from pathlib import Path
 
 import mmrl
 from mmrl import ppo
-from mmrl.envs import PlaneVectorEnv
-from mmrl.evaluation import evaluate_plane
+from mmrl.rollout import evaluate_fast
+from mmrl.tasks.plane import PlaneVectorEnv
+
+
+def evaluate_plane(policy, db, **kwargs):
+    return evaluate_fast(mmrl.get_task("plane"), db, policy, **kwargs)
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-2"
 

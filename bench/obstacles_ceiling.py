@@ -21,8 +21,6 @@ costs a controller that knows the whole map; the trained policy sees only its se
 from __future__ import annotations
 
 import argparse
-import json
-from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -93,7 +91,7 @@ class _Act:
 
 def run_episodes(env, act, seed: int) -> np.ndarray:
     """Success of each env's first episode, acting with ``act(env, obs)``."""
-    from mmrl.evaluation import first_episodes
+    from mmrl.rollout import first_episodes
 
     return first_episodes(env, _Act(env, act), seed)["success"]
 
@@ -112,8 +110,9 @@ def main() -> None:
 
     import mmrl
     from mmrl import ppo
-    from mmrl.obstacle_rollouts import stage_params
-    from mmrl.obstacles import ObstaclesConfig, ObstaclesVectorEnv
+    from mmrl.runs import RunDir
+    from mmrl.tasks.curriculum import stage_params
+    from mmrl.tasks.obstacles import ObstaclesConfig, ObstaclesVectorEnv
     from mmrl.policies import JoystickPolicy
 
     db = mmrl.Database.load(args.db) if args.db else mmrl.Database.from_bvh(args.data or DEFAULT_DATA)
@@ -160,9 +159,7 @@ def main() -> None:
             (f"planner + joystick (inflate {args.inflate} m)", run_episodes(make(cfg, 0.0), planner, args.seed).mean(),
              None)]
     for run in args.run:
-        saved = json.loads((Path(run) / "config.json").read_text())["task_config"]
-        names = {f.name for f in fields(ObstaclesConfig)}
-        rcfg = ObstaclesConfig(**{k: v for k, v in saved.items() if k in names})
+        rcfg = RunDir(run).task_config()
         policy = ppo.load_policy(Path(run) / "latest.pt")
         act = lambda e, o: policy.act(o, deterministic=True)  # noqa: E731
         rows.append((f"trained: {run}", run_episodes(make(rcfg, 0.0), act, args.seed).mean(),

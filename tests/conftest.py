@@ -1,19 +1,52 @@
-"""Shared fixtures. Real-data tests read ../shared/data/bandai-namco-2 beside the checkout;
-they fail (never skip) when the CI environment variable is set and the data is missing."""
+"""Shared fixtures.
+
+Tests that need the real Bandai-Namco mocap take the ``shared_data`` fixture (or call
+``require_shared_data``). The data is looked up in ``$MMRL_DATA``, then in ``../shared``
+beside the checkout, then in ``~/.cache/mmrl/bandai-namco-2`` (where ``mmrl data fetch
+bandai-namco-2`` puts it). In the project's CI (the ``CI`` variable set by the runner) a
+missing data set fails those tests; elsewhere they skip, and the run ends with one line
+saying why and how to get it.
+"""
 import os
 from pathlib import Path
 
 import pytest
 
-SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-2"
+HOW_TO_GET = ("get it with `mmrl data fetch bandai-namco-2` (CC BY-NC 4.0) or point MMRL_DATA at a copy "
+              "of its directory")
+_CANDIDATES = [Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-2",
+               Path.home() / ".cache" / "mmrl" / "bandai-namco-2"]
+_skipped = []
+
+
+def find_shared_data():
+    """The Bandai-Namco directory (with its style folders), or None."""
+    env = os.environ.get("MMRL_DATA") or os.environ.get("MMRL_BANDAI_DIR")
+    for candidate in ([Path(env)] if env else []) + _CANDIDATES:
+        if (candidate / "normal").is_dir():
+            return candidate
+    return None
+
+
+SHARED_DATA = find_shared_data() or _CANDIDATES[0]
 
 
 def require_shared_data() -> Path:
-    if not SHARED_DATA.is_dir():
+    found = find_shared_data()
+    if found is None:
+        where = os.environ.get("MMRL_DATA") or _CANDIDATES[0]
         if os.environ.get("CI"):
-            pytest.fail(f"shared data missing at {SHARED_DATA}; CI must provide ../shared")
-        pytest.skip(f"shared data not found at {SHARED_DATA}")
-    return SHARED_DATA
+            pytest.fail(f"the Bandai-Namco mocap is missing at {where}; CI must provide ../shared beside the "
+                        f"checkout (or MMRL_DATA)")
+        _skipped.append(1)
+        pytest.skip(f"needs the Bandai-Namco mocap, not found at {where}; {HOW_TO_GET}")
+    return found
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _skipped:
+        terminalreporter.write_line(f"The tests that need the Bandai-Namco mocap were skipped: it is not here; "
+                                    f"{HOW_TO_GET}.")
 
 
 @pytest.fixture(scope="session")

@@ -5,8 +5,12 @@ import pytest
 
 import mmrl
 from mmrl import _core
-from mmrl.envs import PlaneConfig, default_database
-from mmrl.rollouts import evaluate_full_path
+from mmrl import default_database, get_task, rollout
+from mmrl.tasks.plane import PlaneConfig
+
+
+def evaluate_full_path(db, policy, **kwargs):
+    return rollout.evaluate_full_path(get_task("plane"), db, policy, **kwargs)
 from mmrl.policies import JoystickPolicy
 
 

@@ -8,7 +8,6 @@ import functools
 import hashlib
 import http.server
 import json
-import os
 import threading
 from pathlib import Path
 
@@ -20,14 +19,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _shared_dataset_dir():
-    # $MMRL_BANDAI_DIR (e.g. for a git worktree), else ../shared beside the checkout as in conftest.py
-    candidates = [os.environ.get("MMRL_BANDAI_DIR"), REPO.parent / "shared" / "data" / "bandai-namco-2"]
-    for c in candidates:
-        if c and (Path(c) / "normal").is_dir():
-            return Path(c)
-    if os.environ.get("CI"):
-        pytest.fail("the shared Bandai Namco data is missing (set MMRL_BANDAI_DIR)")
-    pytest.skip("the shared Bandai Namco data is not available")
+    from conftest import require_shared_data
+
+    return require_shared_data()
 
 
 class _Handler(http.server.SimpleHTTPRequestHandler):

@@ -7,12 +7,12 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import mmrl
-from mmrl.envs import PlaneVectorEnv
+from mmrl.tasks.plane import PlaneVectorEnv
 
 
 @pytest.fixture(scope="module")
 def db():
-    return mmrl.envs.default_database()
+    return mmrl.default_database()
 
 
 def ref_match(db, frame, traj):

@@ -79,7 +79,7 @@ def test_run_directory_without_ppo_or_policy(tmp_path, capsys):
 
 def test_pose_bindings_refuse_bad_input():
     from mmrl import _core
-    from mmrl.envs import default_database
+    from mmrl import default_database
 
     db = default_database()
     J = db.num_joints

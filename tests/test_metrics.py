@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from mmrl import _core, metrics
-from mmrl.envs import default_database
+from mmrl import default_database
 
 
 def test_foot_sliding_hand_computed():

@@ -9,8 +9,8 @@ from gymnasium.utils.env_checker import check_env
 
 import mmrl
 from mmrl import _core
-from mmrl.envs import default_database
-from mmrl.obstacles import (OBSTACLE_LAYOUT, OBSTACLE_MAP_SHAPE, Curriculum, ObstaclesConfig, ObstaclesEnv,
+from mmrl import default_database
+from mmrl.tasks.obstacles import (OBSTACLE_LAYOUT, OBSTACLE_MAP_SHAPE, Curriculum, ObstaclesConfig, ObstaclesEnv,
                             ObstaclesVectorEnv)
 
 MAP = 16
@@ -74,11 +74,11 @@ def set_scene(env, i, centres, half_sizes, angles=None, velocities=None):
 # -- sensors ---------------------------------------------------------------------------------
 
 def test_layout_matches_the_network_default():
-    from mmrl.obstacles import OBSTACLE_MAP_RANGE
+    from mmrl.tasks.obstacles import OBSTACLE_MAP_RANGE
 
     assert OBSTACLE_LAYOUT == (("maps", 512), ("pose", 15), ("goal", 2))
     assert OBSTACLE_MAP_RANGE == (0, 512)
-    from mmrl.obstacles import obstacle_policy_factory
+    from mmrl.tasks.obstacles import obstacle_policy_factory
 
     with pytest.raises(ValueError, match="obs_dim 17"):
         obstacle_policy_factory()(17, 12)
@@ -680,9 +680,13 @@ def test_bad_configs_are_refused(db, option, value, match):
 
 
 def test_fast_evaluation_counts_each_first_episode(db):
-    from mmrl.evaluation import evaluate_obstacles_fast
-    from mmrl.obstacle_rollouts import stage_params
-    from mmrl.obstacles import ObstaclesConfig
+    from mmrl import get_task
+    from mmrl.rollout import evaluate_fast
+    from mmrl.tasks.curriculum import stage_params
+    from mmrl.tasks.obstacles import ObstaclesConfig
+
+    def evaluate_obstacles_fast(policy, db, **kwargs):
+        return evaluate_fast(get_task("obstacles"), db, policy, **kwargs)
     from mmrl.policies import JoystickPolicy
 
     joy = JoystickPolicy.preset(db, "joystick")

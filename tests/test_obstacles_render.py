@@ -9,10 +9,20 @@ import pytest
 
 import mmrl
 from mmrl.cli import main
-from mmrl.envs import default_database
-from mmrl.obstacle_rollouts import (ObstacleLockstep, evaluate_obstacles, follow_obstacles, move_obstacles,
-                                    obstacle_corners)
-from mmrl.obstacles import ObstaclesVectorEnv
+from mmrl import default_database, get_task
+from mmrl.rollout import FullPath, evaluate_full_path, follow
+from mmrl.tasks.obstacles import ObstaclesVectorEnv
+from mmrl.tasks.obstacles_scene import obstacle_corners
+
+OBSTACLES = get_task("obstacles")
+
+
+def evaluate_obstacles(db, policy, **kwargs):
+    return evaluate_full_path(OBSTACLES, db, policy, **kwargs)
+
+
+def follow_obstacles(db, policy, **kwargs):
+    return follow(OBSTACLES, db, policy, **kwargs)
 from mmrl.policies import JoystickPolicy
 
 
@@ -30,14 +40,15 @@ def run_lockstep(db, steps, seed, stage=10):
     """Joystick actions with random perturbations (to force transitions); checks every step."""
     rng = np.random.default_rng(seed)
     joy = JoystickPolicy.preset(db, "joystick")
-    run = ObstacleLockstep(db, stage=stage, seed=seed)
+    run = FullPath(OBSTACLES, db, stage=stage, seed=seed, scene=True)
     low, high = run.env.single_action_space.low, run.env.single_action_space.high
     ends = {"success": 0, "collision": 0}
     checked = 0
     for _ in range(steps):
         a = joy.act(run.obs[None])[0] + rng.normal(0, 0.5, 12).astype(np.float32)
         a = np.clip(a, low, high).astype(np.float32)
-        before = run.env.obstacles(0)
+        # Where the env says its obstacles will be after the step's frames (its own motion rule).
+        predicted = run.env.obstacles_after(0, run.config.frames_per_step)
         out = run.step(a)
         if out["done"]:
             # The episode's last root (at the ending frame) is the controller's shown one.
@@ -52,13 +63,10 @@ def run_lockstep(db, steps, seed, stage=10):
         st = run.env.env_state(0)
         np.testing.assert_allclose(st["hit_points"], out["hit_points"], atol=1e-6)
         assert tuple(out["hit_inside"]) == st["hit_inside"]
-        # Per-frame obstacle motion replayed in Python ends where the env's obstacles are.
-        p, v = before["centres"], before["velocities"]
-        for _ in range(run.config.frames_per_step):
-            p, v = move_obstacles(p, v, 1.0 / db.fps, run.config.obstacle_square_half)
+        # The predicted per-frame obstacle motion ends where the env's obstacles are.
         after = run.env.obstacles(0)
-        np.testing.assert_allclose(p, after["centres"], atol=1e-5)
-        np.testing.assert_array_equal(v, after["velocities"])
+        np.testing.assert_allclose(predicted["centres"], after["centres"], atol=1e-5)
+        np.testing.assert_array_equal(predicted["velocities"], after["velocities"])
         checked += 1
     return checked, ends
 

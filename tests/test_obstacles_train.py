@@ -44,7 +44,7 @@ def test_no_curriculum_starts_at_the_last_stage(tmp_path):
 def test_presets_set_their_options_and_set_overrides_them(tmp_path, capsys):
     import json
 
-    from mmrl.obstacles import OBSTACLE_PRESETS
+    from mmrl.tasks.obstacles import OBSTACLE_PRESETS
 
     def config(name, *extra):
         run = tmp_path / name

@@ -7,7 +7,11 @@ import pytest
 
 import mmrl
 from mmrl.cli import main
-from mmrl.evaluation import evaluate_plane
+from mmrl.rollout import evaluate_fast
+
+
+def evaluate_plane(policy, db, **kwargs):
+    return evaluate_fast(mmrl.get_task("plane"), db, policy, **kwargs)
 
 
 @pytest.fixture(scope="module")
@@ -19,7 +23,7 @@ def trained_run(tmp_path_factory):
 
 def test_training_reaches_targets(trained_run):
     policy = mmrl.load_policy(trained_run / "latest.pt")
-    result = evaluate_plane(policy, mmrl.envs.default_database(), episodes=300, seed=99)
+    result = evaluate_plane(policy, mmrl.default_database(), episodes=300, seed=99)
     # A random policy succeeds in a few percent of episodes; trained, nearly all.
     assert result["success_rate"] >= 0.9, result
     assert result["mean_time_to_target_s"] < 6.0, result

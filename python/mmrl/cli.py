@@ -42,10 +42,22 @@ def main(argv: Optional[List[str]] = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except (ValueError, FileNotFoundError, OSError) as e:
-        # Bad input: one clear line, no traceback.
+    except user_errors() as e:
+        # Bad input: one clear line, no traceback. Anything else is a bug and keeps its traceback.
         print(f"mmrl: error: {e}", file=sys.stderr)
         return 2
+
+
+def user_errors() -> tuple:
+    """The exception types that mean bad input (a file, a directory or an argument), not a bug."""
+    from .bvh import BVHError, JointRoleError
+    from .data import ChecksumError, DownloadError
+    from .database import DatabaseFileError
+    from .errors import InputError
+    from .ppo import CheckpointError
+
+    return (InputError, BVHError, JointRoleError, DatabaseFileError, CheckpointError, ChecksumError, DownloadError,
+            FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError, PermissionError)
 
 
 if __name__ == "__main__":

@@ -41,6 +41,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Iterable, List, Optional, Sequence
 
+from .errors import InputError
+
 __all__ = [
     "DATASETS",
     "UPSTREAM_BASE_URL",
@@ -89,7 +91,7 @@ def dataset_manifest(name: str = "bandai-namco-2") -> dict:
 
 def _check_dataset(name: str) -> None:
     if name not in DATASETS:
-        raise ValueError(f"unknown dataset {name!r}; known: {', '.join(DATASETS)}")
+        raise InputError(f"unknown dataset {name!r}; known: {', '.join(DATASETS)}")
 
 
 def _select(manifest: dict, styles: Optional[Iterable[str]], contents: Optional[Iterable[str]]) -> List[dict]:
@@ -102,7 +104,7 @@ def _select(manifest: dict, styles: Optional[Iterable[str]], contents: Optional[
         known = sorted({f[key] for f in files})
         unknown = [w for w in wanted if w not in known]
         if unknown or not wanted:
-            raise ValueError(f"unknown {key}(s) {unknown or wanted!r} for {manifest['dataset']}; known: {', '.join(known)}")
+            raise InputError(f"unknown {key}(s) {unknown or wanted!r} for {manifest['dataset']}; known: {', '.join(known)}")
         chosen.append((key, set(wanted)))
     return [f for f in files if all(f[key] in wanted for key, wanted in chosen)]
 
@@ -178,7 +180,7 @@ def fetch(name: str = "bandai-namco-2", *, styles: Optional[Sequence[str]] = Non
     try:
         url_template.format(base_url="", file="", style="", content="")
     except (KeyError, IndexError, ValueError) as e:
-        raise ValueError(f"bad URL template {url_template!r}: placeholders are {{base_url}}, {{file}}, "
+        raise InputError(f"bad URL template {url_template!r}: placeholders are {{base_url}}, {{file}}, "
                          f"{{style}}, {{content}}") from e
     root = Path(dest) if dest is not None else cache_root() / name
 

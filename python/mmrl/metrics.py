@@ -111,3 +111,16 @@ def transitions_per_second(transitions: np.ndarray, frames_per_step: int, fps: f
     t = np.asarray(transitions, bool)
     seconds = t.size * frames_per_step / fps
     return float(t.sum() / seconds) if seconds > 0 else 0.0
+
+
+def quality(db, recording) -> dict:
+    """The motion-quality metrics of a controller recording (``Controller.recording``, full path):
+    ``foot_sliding_cm_per_s`` (ankles over the database's contact frames),
+    ``max_pose_jump_cm`` and ``transitions_per_s``."""
+    feet = [db.joint_names.index(db.roles["left_foot"]), db.joint_names.index(db.roles["right_foot"])]
+    rec = recording
+    return {
+        "foot_sliding_cm_per_s": foot_sliding(rec["positions"], rec["contacts"], feet, db.fps),
+        "max_pose_jump_cm": max_pose_jump(rec["positions"], rec["roots"], rec["frames"], db),
+        "transitions_per_s": transitions_per_second(rec["transitions"], int(rec["frames_per_step"]), db.fps),
+    }

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import csv
-import json
 import math
 import re
 from pathlib import Path
@@ -42,26 +41,25 @@ def snapshot_paths(run: Path) -> List[tuple]:
     return sorted(snaps)
 
 
-def rollout_to_targets(policy, db, targets, seed: int = 0, max_steps: int = 100, config=None):
+def rollout_to_targets(policy, db, targets, seed: int = 0, max_steps: int = 100, config=None, task=None):
     """Drive one character from the same start toward each target in turn (one episode per
-    target, each from the seeded start). Returns a list of (K, 2) root paths (x, z)."""
-    from .envs import PlaneVectorEnv
+    target, each from the seeded start, on the fast path). Returns a list of (K, 2) root
+    paths (x, z), one point per played frame."""
+    from .rollout import FullPath, policy_actions
+    from .tasks import get_task
 
+    task = task or get_task("plane")
+    config = (config or task.default_config()).replace(max_steps=max_steps)
     paths = []
     for tx, tz in targets:
-        env = PlaneVectorEnv(1, db=db, config=config, num_threads=1, max_steps=max_steps)
-        env.reset(seed=seed)
-        obs = env.set_target(0, tx, tz)[None]
-        st = env.env_state(0)
-        path = [(st["x"], st["z"])]
-        for _ in range(max_steps):
-            obs, _, term, trunc, info = env.step(policy.act(obs, deterministic=True))
-            if term[0] or trunc[0]:
+        run = FullPath(task, db, config=config, seed=seed, fast=True, record=False)
+        run.set_target(tx, tz)
+        path = [run.ctrl.root[:2]]
+        while True:
+            out = run.step(policy_actions(policy, run.obs[None]).reshape(-1))
+            path.extend(map(tuple, out["res"].roots[:out["shown"], :2]))
+            if out["done"]:
                 break
-            st = env.env_state(0)
-            path.append((st["x"], st["z"]))
-        if term[0]:
-            path.append((tx, tz))  # reached: the last played frames end within 0.5 m
         paths.append(np.array(path))
     return paths
 
@@ -69,8 +67,9 @@ def rollout_to_targets(policy, db, targets, seed: int = 0, max_steps: int = 100,
 def plot_run(run: Path, out_dir: Optional[Path] = None, num_targets: int = 4, seed: int = 0) -> List[Path]:
     """Write learning.png (return, length and success against steps and wall time) and, when the
     run has snapshots, trajectories.png (top-down paths of each snapshot toward the same targets)."""
-    import matplotlib
+    from .errors import require_extra
 
+    matplotlib = require_extra("matplotlib", "viz", "mmrl plot")
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -102,11 +101,11 @@ def plot_run(run: Path, out_dir: Optional[Path] = None, num_targets: int = 4, se
 
     if snaps:
         from . import ppo
-        from .commands.train import load_database
+        from .runs import RunDir
 
-        cfg = json.loads((run / "config.json").read_text()) if (run / "config.json").exists() else {}
-        if cfg.get("task", "plane") == "plane":
-            db = load_database(cfg.get("data", {"synthetic": True}))
+        rundir = RunDir(run)
+        if rundir.task is None or rundir.task.scene is None:  # paths on an empty plane
+            db = rundir.database()
             rng = np.random.default_rng(seed)
             angles = np.linspace(0, 2 * np.pi, num_targets, endpoint=False) + rng.uniform(0, np.pi)
             targets = [(4.0 * np.cos(a), 4.0 * np.sin(a)) for a in angles]

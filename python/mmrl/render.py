@@ -10,7 +10,7 @@ their facing directions.
 
 - :func:`render_frame`: one RGB image (gymnasium ``render()``);
 - :func:`render_video`: MP4 (imageio-ffmpeg) or GIF from a recording (see
-  :func:`mmrl.rollouts.follow_targets`);
+  :func:`mmrl.rollout.follow`);
 - :func:`render_topdown`: the older top-down overview of many environments.
 """
 from __future__ import annotations
@@ -20,6 +20,8 @@ from pathlib import Path
 from typing import Dict, Optional, Sequence
 
 import numpy as np
+
+from .errors import require_extra
 
 SKY = (0.86, 0.90, 0.95)
 GROUND = (0.80, 0.80, 0.77)
@@ -120,8 +122,7 @@ class Renderer:
                  joint_names: Optional[Sequence[str]] = None, width: int = 640, height: int = 360,
                  follow_lag: float = 0.9, success_radius: float = 0.5, camera_distance: float = 5.5,
                  camera_elevation_deg: float = 22.0):
-        import matplotlib
-
+        matplotlib = require_extra("matplotlib", "viz", "rendering")
         matplotlib.use("Agg", force=False)
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.collections import LineCollection, PolyCollection
@@ -405,15 +406,16 @@ def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray
                  width: int = 640, height: int = 360, fps: Optional[float] = None,
                  success_radius: float = 0.5, still: "str | os.PathLike[str] | None" = None,
                  still_frame: Optional[int] = None) -> int:
-    """Write a recording (see :func:`mmrl.rollouts.follow_targets`) as ``.mp4`` or ``.gif``.
+    """Write a recording (see :func:`mmrl.rollout.follow`) as ``.mp4`` or ``.gif``.
 
-    A moving-obstacles recording (:func:`mmrl.obstacle_rollouts.follow_obstacles`) also
+    A moving-obstacles recording (:func:`mmrl.rollout.follow` on the obstacles task) also
     shows its per-frame ``obstacles``, each decision's sensor map (``sensor_positions``,
     ``sensor_maps``) and hit points colored by ``hit_inside``; the camera snaps at each new
     ``episode``. ``still``: also write frame ``still_frame`` (default: the middle one) as an
     image, exactly as in the video. Returns the number of frames written.
     """
-    import imageio.v2 as iio
+    iio = require_extra("imageio.v2", "viz", "writing videos")
+    require_extra("imageio_ffmpeg", "viz", "writing videos")
 
     from .metrics import body_joints
 

@@ -1,41 +1,38 @@
-"""``mmrl eval``, ``mmrl render`` and ``mmrl export-bvh``: run a policy on the full-path controller.
+"""``mmrl eval``, ``mmrl render`` and ``mmrl export-bvh``: run a policy on the full-path character.
 
-They share their options: an optional training run directory (its ``latest.pt`` policy and
-its ``config.json`` database), ``--data``/``--db``, ``--env``, ``--policy``, ``--seed``,
-``--seconds``, ``--episodes``, ``--stage``, ``--no-ik`` and ``--no-inertialization``.
-
-``--env obstacles`` (the default for a run trained with ``mmrl train obstacles``) steps the
-moving-obstacles env and the full-path character side by side
-(:mod:`mmrl.obstacle_rollouts`), at curriculum stage ``--stage`` (default: the last).
+They share their options: an optional training run directory (its policy, task, options and
+database, read by :class:`mmrl.runs.RunDir`), ``--data``/``--db``, ``--env`` (any registered
+task), ``--policy``, ``--seed``, ``--seconds``, ``--episodes``, ``--stage`` (tasks with a
+curriculum), ``--no-ik`` and ``--no-inertialization``. The episodes run in
+:mod:`mmrl.rollout`'s full-path loop, the same for every task.
 """
 from __future__ import annotations
 
 import argparse
-import importlib
 import json
 import sys
 import time
 from pathlib import Path
-from typing import Any, Dict, Optional
+from typing import Optional
 
 import numpy as np
 
+from ..errors import InputError
+from ..tasks import get_task, task_names
+from .common import add_data_options, database_from_args
+
 POLICIES = ("joystick", "joystick-run")
-ENVS = ("plane", "obstacles")
-#: Curriculum stages of the moving-obstacles task (mmrl.obstacles.Curriculum's default).
-NUM_STAGES = 10
 
 
 def add_shared_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", nargs="?", metavar="RUN",
                    help="a training run directory (uses RUN/latest.pt and the database named in RUN/config.json)")
-    src = p.add_mutually_exclusive_group()
-    src.add_argument("--data", nargs="+", metavar="DIR|FILE", help="BVH files or directories to build the database from")
-    src.add_argument("--db", metavar="FILE", help="a database saved by 'mmrl db build'")
-    p.add_argument("--env", choices=ENVS, default=None,
+    add_data_options(p)
+    p.add_argument("--env", choices=task_names(), default=None,
                    help="the task (default: RUN's task if RUN is given, else plane)")
+    staged = [n for n in task_names() if get_task(n).stages]
     p.add_argument("--stage", type=int, default=None, metavar="K",
-                   help=f"obstacles: curriculum stage 1..{NUM_STAGES} (default: {NUM_STAGES}, the hardest)")
+                   help=f"curriculum stage ({', '.join(staged)}; default: the last, the hardest)")
     p.add_argument("--policy", choices=POLICIES, default=None,
                    help="a scripted policy (default: RUN's trained policy if RUN is given, else joystick)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
@@ -65,209 +62,130 @@ def register_cli(sub) -> None:
 
 
 # ---------------------------------------------------------------------- resolution
-def _run_config(run: Optional[str]) -> Dict[str, Any]:
-    if run is None:
-        return {}
-    d = Path(run)
-    if not d.is_dir():
-        raise FileNotFoundError(f"{d}: no such run directory")
-    cfg = d / "config.json"
-    if not cfg.is_file():
-        return {}
-    try:
-        return json.loads(cfg.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"{cfg}: not valid JSON ({e})") from e
+class Setup:
+    """What a command runs: the task, its config and stage, the database and the policy."""
+
+    def __init__(self, args: argparse.Namespace):
+        from ..runs import RunDir
+
+        run: Optional[RunDir] = RunDir(args.run) if args.run is not None else None
+        saved = run.task if run is not None else None
+        self.task = get_task(args.env) if args.env else (saved or get_task("plane"))
+        if saved is not None and args.policy is None and self.task is not saved:
+            raise InputError(f"{args.run} is a '{saved.name}' run; its policy cannot run --env {self.task.name} "
+                             f"(pass --env {saved.name}, or --policy joystick)")
+        self.stage = _check_stage(self.task, args.stage)
+        self.config = run.task_config(self.task) if saved is not None else self.task.default_config()
+        if args.db or args.data or run is None:
+            self.db = database_from_args(args)
+        else:
+            self.db = run.database()
+        self.policy, self.policy_name = self._policy(args, run)
+        self.options = dict(ik=not args.no_ik, foot_locking=not args.no_ik,
+                            inertialization_halflife=0.0 if args.no_inertialization else 0.1)
+
+    def _policy(self, args, run):
+        from ..policies import JoystickPolicy
+
+        if args.policy is not None:
+            return JoystickPolicy.preset(self.db, args.policy), args.policy
+        if run is not None:
+            return run.policy(), str(run.checkpoint)
+        return JoystickPolicy.preset(self.db, "joystick"), "joystick"
 
 
-def resolve_database(args: argparse.Namespace):
-    from ..envs import resolve_database as resolve
-
-    if args.db or args.data:
-        return resolve(db=args.db, data=args.data)
-    cfg = _run_config(args.run)
-    # 'mmrl train' writes {"data": {"db": FILE} | {"data": [PATHS], "mirror": bool} | {}}.
-    spec = cfg.get("data")
-    if isinstance(spec, (str, list)):
-        spec = {"data": spec}
-    spec = spec if isinstance(spec, dict) else {}
-    if spec.get("db"):
-        return resolve(db=spec["db"])
-    if spec.get("data"):
-        return resolve(data=spec["data"], mirror=bool(spec.get("mirror", False)))
-    return resolve()
+def _check_stage(task, stage: Optional[int]) -> Optional[int]:
+    if stage is None:
+        return None
+    if not task.stages:
+        staged = " or ".join(f"--env {n}" for n in task_names() if get_task(n).stages)
+        raise InputError(f"--stage applies to {staged} only")
+    if not 1 <= stage <= task.stages:
+        raise InputError(f"--stage must be in 1..{task.stages}, got {stage}")
+    return stage
 
 
-def resolve_env(args: argparse.Namespace) -> str:
-    """The task: --env, else the run's own, else plane. Also checks --stage against it."""
-    saved = _run_config(args.run).get("task")
-    if saved is not None and saved not in ENVS:
-        raise ValueError(f"{args.run}: unknown task {saved!r} in config.json")
-    env = args.env or saved or "plane"
-    if saved is not None and args.policy is None and env != saved:
-        raise ValueError(f"{args.run} is a '{saved}' run; its policy cannot run --env {env} "
-                         f"(pass --env {saved}, or --policy joystick)")
-    if args.stage is not None:
-        if env != "obstacles":
-            raise ValueError("--stage applies to --env obstacles only")
-        if not 1 <= args.stage <= NUM_STAGES:
-            raise ValueError(f"--stage must be in 1..{NUM_STAGES}, got {args.stage}")
-    args.env = env
-    return env
+def _follow(args):
+    from ..rollout import follow
 
-
-def resolve_task_config(args: argparse.Namespace):
-    """The task's numbers: the run's own (config.json "task_config") when given, else the defaults."""
-    from dataclasses import fields
-
-    if resolve_env(args) == "obstacles":
-        from ..obstacles import ObstaclesConfig as Config
-    else:
-        from ..envs import PlaneConfig as Config
-
-    cfg = Config()
-    saved = _run_config(args.run)
-    if saved.get("task", args.env) != args.env:  # a scripted policy on another task: the defaults
-        return cfg
-    names = {f.name for f in fields(Config)}
-    for k, v in (saved.get("task_config") or {}).items():
-        if k in names:
-            setattr(cfg, k, v)
-    return cfg
-
-
-def _stage(args) -> int:
-    return NUM_STAGES if args.stage is None else args.stage
-
-
-def resolve_policy(args: argparse.Namespace, db):
-    from ..policies import JoystickPolicy
-
-    if args.policy is not None:
-        return JoystickPolicy.preset(db, args.policy), args.policy
-    if args.run is not None:
-        try:
-            ppo = importlib.import_module("mmrl.ppo")
-        except ModuleNotFoundError as e:
-            raise ValueError("this mmrl has no PPO module (mmrl.ppo) to load the run's policy; "
-                             "pass --policy joystick") from e
-        path = Path(args.run) / "latest.pt"
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no trained policy in this run directory")
-        return ppo.load_policy(path), str(path)
-    return JoystickPolicy.preset(db, "joystick"), "joystick"
-
-
-def _options(args):
-    return dict(ik=not args.no_ik, foot_locking=not args.no_ik,
-                inertialization_halflife=0.0 if args.no_inertialization else 0.1)
+    if not args.seconds > 0:
+        raise InputError("--seconds must be positive")
+    s = Setup(args)
+    return s, follow(s.task, s.db, s.policy, seconds=args.seconds, seed=args.seed, config=s.config, stage=s.stage,
+                     **s.options)
 
 
 # ---------------------------------------------------------------------- commands
 def cmd_eval(args: argparse.Namespace) -> int:
-    from ..rollouts import evaluate_full_path
+    from ..rollout import evaluate_full_path
 
     if args.episodes < 1:
-        raise ValueError("--episodes must be >= 1")
-    config = resolve_task_config(args)
-    db = resolve_database(args)
-    policy, name = resolve_policy(args, db)
+        raise InputError("--episodes must be >= 1")
+    s = Setup(args)
     t0 = time.perf_counter()
-    if args.env == "obstacles":
-        from ..obstacle_rollouts import evaluate_obstacles
-
-        res = evaluate_obstacles(db, policy, episodes=args.episodes, seed=args.seed, config=config,
-                                 stage=_stage(args), **_options(args))
-    else:
-        res = evaluate_full_path(db, policy, episodes=args.episodes, seed=args.seed, config=config,
-                                 **_options(args))
-    res.update({"policy": name, "env": args.env, "seed": args.seed, "ik": not args.no_ik,
+    res = evaluate_full_path(s.task, s.db, s.policy, episodes=args.episodes, seed=args.seed, config=s.config,
+                             stage=s.stage, **s.options)
+    res.update({"policy": s.policy_name, "env": s.task.name, "seed": args.seed, "ik": not args.no_ik,
                 "inertialization": not args.no_inertialization, "wall_time_s": time.perf_counter() - t0})
+    res["episode_results"] = res.pop("episode_results")  # keep the per-episode list last
     if args.json:
         json.dump(res, sys.stdout)
         sys.stdout.write("\n")
-    else:
-        fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
-        where = f" (stage {res['stage']})" if args.env == "obstacles" else ""
-        print(f"{name} on {args.env}{where}: {args.episodes} episodes")
-        keys = ["success_rate", "mean_time_to_target_s", "foot_sliding_cm_per_s", "max_pose_jump_cm",
-                "transitions_per_s"]
-        if args.env == "obstacles":
-            keys[1:1] = ["collision_rate"]
-        for k in keys:
-            print(f"  {k:<24} {fmt(res[k])}")
+        return 0
+    fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
+    where = f" (stage {res['stage']})" if "stage" in res else ""
+    print(f"{s.policy_name} on {s.task.name}{where}: {args.episodes} episodes")
+    rates = [k for k in res if k.endswith("_rate") and k != "success_rate"]
+    for k in ["success_rate", *rates, "mean_time_to_target_s", "foot_sliding_cm_per_s", "max_pose_jump_cm",
+              "transitions_per_s"]:
+        print(f"  {k:<24} {fmt(res[k])}")
     return 0
 
 
-def _follow(args):
-    from ..rollouts import follow_targets
-
-    if not args.seconds > 0:
-        raise ValueError("--seconds must be positive")
-    config = resolve_task_config(args)
-    db = resolve_database(args)
-    policy, _ = resolve_policy(args, db)
-    if args.env == "obstacles":
-        from ..obstacle_rollouts import follow_obstacles
-
-        return db, follow_obstacles(db, policy, seconds=args.seconds, seed=args.seed, config=config,
-                                    stage=_stage(args), **_options(args))
-    return db, follow_targets(db, policy, seconds=args.seconds, seed=args.seed, config=config, **_options(args))
-
-
 def cmd_render(args: argparse.Namespace) -> int:
-    from ..metrics import body_joints
-    from ..render import render_frame, render_video
-
     try:
         w, h = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
-        raise ValueError(f"--size expects WxH, got {args.size!r}") from None
+        raise InputError(f"--size expects WxH, got {args.size!r}") from None
     out = Path(args.output)
     if out.suffix.lower() not in (".mp4", ".gif"):
-        raise ValueError(f"{out}: the output must end in .mp4 or .gif")
-    db, rec = _follow(args)
-    obstacles = args.env == "obstacles"
-    t0 = time.perf_counter()
-    n = render_video(out, rec, db, width=w, height=h, still=args.still if obstacles else None)
-    dt = time.perf_counter() - t0
-    print(f"wrote {out}: {n} frames ({n / db.fps:.1f} s) rendered in {dt:.2f} s ({n / dt:.0f} frames/s)")
-    if obstacles:
-        names = {1: "success", 2: "collision", 3: "safety cap"}
-        print(f"stage {int(rec['stage'])}, episodes: " +
-              ", ".join(names.get(int(o), "running") for o in rec["outcomes"]))
-        if args.still:
-            print(f"wrote {args.still}")
-    elif args.still:
-        import imageio.v3 as iio
+        raise InputError(f"{out}: the output must end in .mp4 or .gif")
+    from ..render import render_video
 
-        t = n // 2
-        q = int(np.searchsorted(rec["query_frames"], t, side="right") - 1)
-        img = render_frame(rec["positions"][t], db.parents, body_joints=body_joints(db), joint_names=db.joint_names,
-                           targets=rec["targets"][t], query_points=rec["query_points"][q],
-                           query_directions=rec["query_directions"][q], width=w, height=h)
-        iio.imwrite(args.still, img)
+    s, rec = _follow(args)
+    t0 = time.perf_counter()
+    n = render_video(out, rec, s.db, width=w, height=h, still=args.still,
+                     success_radius=float(getattr(s.config, "success_radius", 0.5)))
+    dt = time.perf_counter() - t0
+    print(f"wrote {out}: {n} frames ({n / s.db.fps:.1f} s) rendered in {dt:.2f} s ({n / dt:.0f} frames/s)")
+    names = {0: "running", 1: "success", 2: "/".join(o for o in s.task.outcomes if o != "truncated") or "ended",
+             3: "safety cap"}
+    where = f"stage {int(rec['stage'])}, " if s.stage is not None or s.task.stages else ""
+    print(f"{where}episodes: " + ", ".join(names.get(int(o), "?") for o in rec["outcomes"]))
+    if args.still:
         print(f"wrote {args.still}")
     return 0
 
 
+#: Per-frame and per-episode recording keys written to the export's .npz besides the pose.
+EXPORT_KEYS = ("roots", "frames", "contacts", "targets", "episode", "outcomes", "obstacles")
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from .. import _core
+    from ..io import atomic_write_bytes, atomic_write_npz
 
     out = Path(args.output)
     if out.suffix.lower() != ".bvh":
-        raise ValueError(f"{out}: the output must end in .bvh")
-    db, rec = _follow(args)
+        raise InputError(f"{out}: the output must end in .bvh")
+    s, rec = _follow(args)
+    db = s.db
     motion = _core.motion_from_pose(db._db, np.ascontiguousarray(rec["local_translations"], np.float32),
                                     np.ascontiguousarray(rec["local_rotations"], np.float32), out.name)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(motion.to_bvh())
+    atomic_write_bytes(out, motion.to_bvh().encode())
     npz = out.with_suffix(".npz")
-    extra = {}
-    if args.env == "obstacles":  # per-frame obstacle corners and the episode index (episodes are cut together)
-        extra = {"obstacles": rec["obstacles"], "episode": rec["episode"], "outcomes": rec["outcomes"]}
-    np.savez(npz, positions=rec["positions"].astype(np.float32), joint_names=np.array(db.joint_names, np.str_),
-             parents=np.array(db.parents, np.int32), fps=np.float32(db.fps), roots=rec["roots"],
-             frames=rec["frames"], contacts=rec["contacts"], targets=rec["targets"], **extra)
+    atomic_write_npz(npz, positions=rec["positions"].astype(np.float32),
+                     joint_names=np.array(db.joint_names, np.str_), parents=np.array(db.parents, np.int32),
+                     fps=np.float32(db.fps), **{k: rec[k] for k in EXPORT_KEYS if k in rec})
     print(f"wrote {out} ({motion.num_frames} frames at {db.fps:g} fps) and {npz} (global joint positions, meters)")
     return 0

@@ -1,37 +1,33 @@
-"""``mmrl train`` and ``mmrl plot``."""
+"""``mmrl train TASK`` and ``mmrl plot``: argument parsing only; the work is in
+:mod:`mmrl.ppo`, :mod:`mmrl.tasks` and :mod:`mmrl.runs`."""
 from __future__ import annotations
 
 import argparse
-import json
-import os
-from dataclasses import asdict, fields
+from dataclasses import fields
 from pathlib import Path
+from typing import Any, Dict, List
 
-TASKS = ("plane", "obstacles")
-#: Snapshots kept for the paper's Figure 4 (trajectories at about 20k, 100k, 533k and 1M steps).
-FIGURE4_STEPS = (20_000, 100_000, 533_000, 1_000_000)
-
-
-def add_data_options(p: argparse.ArgumentParser) -> None:
-    g = p.add_mutually_exclusive_group()
-    g.add_argument("--data", nargs="+", metavar="DIR|FILE", help="BVH files or directories (default: synthetic data)")
-    g.add_argument("--db", metavar="FILE", help="a database saved by 'mmrl db build'")
-    p.add_argument("--mirror", action="store_true", help="with --data: add mirrored copies of the clips")
+from ..errors import InputError
+from ..tasks import Task, get_task, task_names
+from .common import add_data_options, data_spec_from_args
 
 
 def register_cli(sub) -> None:
+    tasks = task_names()
     t = sub.add_parser("train", help="train a policy with PPO",
                        description="Train a policy that writes motion-matching queries. Progress shows on the "
                        "terminal; metrics go to RUN/metrics.csv and TensorBoard (tensorboard --logdir RUN); "
-                       "checkpoints to RUN/latest.pt (atomic) and RUN/snapshot_<step>.pt.")
-    t.add_argument("task", choices=TASKS)
-    add_data_options(t)
+                       "checkpoints to RUN/latest.pt (atomic) and RUN/snapshot_<step>.pt. Tasks: " +
+                       "; ".join(f"{n}: {get_task(n).summary}" for n in tasks))
+    t.add_argument("task", choices=tasks)
+    add_data_options(t, mirror=True)
     budget = t.add_mutually_exclusive_group()
     budget.add_argument("--steps", type=int, default=None, help="env steps to train (default 1,000,000)")
     budget.add_argument("--seconds", type=float, default=None, help="wall-clock training budget")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--out", default=None, help="run directory (default runs/<task>-seed<K>)")
-    t.add_argument("--resume", metavar="RUN", default=None, help="continue the run in RUN")
+    t.add_argument("--resume", metavar="RUN", default=None,
+                   help="continue the run in RUN (its options, changed by any --set, which config.json records)")
     t.add_argument("--envs", type=int, default=None, help="parallel environments (default 64)")
     t.add_argument("--threads", type=int, default=0, help="C++ env threads (0 = all cores)")
     t.add_argument("--device", default="auto", help="torch device: auto, cpu, cuda")
@@ -39,11 +35,17 @@ def register_cli(sub) -> None:
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a PPOConfig field or a task option, e.g. --set learning_rate=3e-4 "
                         "--set max_steps=150 (repeatable)")
-    t.add_argument("--preset", choices=("paper", "mmrl"), default=None,
-                   help="obstacles: 'paper' (default: the paper's task as written) or 'mmrl' (bonus 1000, hit "
-                        "penalty, annealed learning rate; see docs/obstacles.md); --set overrides it")
-    t.add_argument("--no-hit-reward", action="store_true", help="obstacles: drop the hit reward (ablation)")
-    t.add_argument("--no-curriculum", action="store_true", help="obstacles: start at the hardest stage (ablation)")
+    presets = sorted({p for n in tasks for p in get_task(n).presets})
+    t.add_argument("--preset", choices=presets or None, default=None,
+                   help="a task's named set of options; " + "; ".join(
+                       f"{n}: {', '.join(get_task(n).presets)}" for n in tasks if get_task(n).presets) +
+                   " (see docs/obstacles.md); --set overrides it")
+    seen = set()
+    for name in tasks:
+        for flag in get_task(name).flags:
+            if flag.flag not in seen:
+                seen.add(flag.flag)
+                t.add_argument(flag.flag, action="store_true", help=f"{name}: {flag.help}")
     t.set_defaults(func=cmd_train)
 
     p = sub.add_parser("plot", help="plot a run's learning curves and checkpoint trajectories (PNG)")
@@ -54,31 +56,35 @@ def register_cli(sub) -> None:
     p.set_defaults(func=cmd_plot)
 
 
+# ---------------------------------------------------------------------- options
 def _coerce(value: str, like):
     if isinstance(like, bool):
         if value.lower() in ("1", "true", "yes", "on"):
             return True
         if value.lower() in ("0", "false", "no", "off"):
             return False
-        raise ValueError(f"--set: expected true or false, got {value!r}")
-    if isinstance(like, int):
-        return int(float(value))
+        raise InputError(f"--set: expected true or false, got {value!r}")
+    try:
+        if isinstance(like, int):
+            return int(float(value))
+        if isinstance(like, tuple):
+            return tuple(int(v) for v in value.split(",") if v)
+    except ValueError:
+        raise InputError(f"--set: cannot read {value!r} as {type(like).__name__}") from None
     if isinstance(like, float) or like is None:
         try:
             return float(value)
         except ValueError:
             return None if value.lower() == "none" else value
-    if isinstance(like, tuple):
-        return tuple(int(v) for v in value.split(",") if v)
     return value
 
 
-def split_overrides(items, *dataclasses_):
+def split_overrides(items, *dataclasses_) -> List[Dict[str, Any]]:
     """KEY=VALUE items -> one dict of overrides per dataclass instance (by field name)."""
-    out = [dict() for _ in dataclasses_]
+    out: List[Dict[str, Any]] = [dict() for _ in dataclasses_]
     for item in items:
         if "=" not in item:
-            raise ValueError(f"--set expects KEY=VALUE, got {item!r}")
+            raise InputError(f"--set expects KEY=VALUE, got {item!r}")
         k, v = item.split("=", 1)
         for d, o in zip(dataclasses_, out):
             if k in {f.name for f in fields(d)}:
@@ -86,124 +92,105 @@ def split_overrides(items, *dataclasses_):
                 break
         else:
             names = sorted({f.name for d in dataclasses_ for f in fields(d)})
-            raise ValueError(f"--set: unknown option {k!r}; options are {', '.join(names)}")
+            raise InputError(f"--set: unknown option {k!r}; options are {', '.join(names)}")
     return out
 
 
-def _data_spec(args) -> dict:
-    if getattr(args, "db", None):
-        return {"db": str(Path(args.db).resolve())}
-    if getattr(args, "data", None):
-        return {"data": [str(Path(d).resolve()) for d in args.data], "mirror": bool(args.mirror)}
-    return {"synthetic": True}
+def _apply(obj, values: Dict[str, Any]) -> None:
+    for k, v in values.items():
+        setattr(obj, k, tuple(v) if isinstance(getattr(obj, k), tuple) and v is not None else v)
 
 
-def load_database(spec: dict):
-    from ..envs import resolve_database
+def _configs(task: Task, args, saved: Dict[str, Any]):
+    """(task config, PPOConfig, callback options) from the task's defaults, a resumed run's
+    saved values, the preset, the task's flags and --set, in that order."""
+    from .. import ppo
 
-    if spec.get("db"):
-        return resolve_database(db=spec["db"])
-    if spec.get("data"):
-        return resolve_database(data=spec["data"], mirror=spec.get("mirror", False))
-    return resolve_database()
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    task_cfg = task.default_config()
+    cfg = ppo.PPOConfig(seed=args.seed)
+    _apply(cfg, dict(task.ppo_defaults))
+    if saved:
+        _apply(task_cfg, {k: v for k, v in saved.get("task_config", {}).items() if hasattr(task_cfg, k)})
+        _apply(cfg, {k: v for k, v in saved.get("ppo", {}).items() if hasattr(cfg, k)})
+    sets = list(args.set)
+    if args.preset is not None:
+        if args.preset not in task.presets:
+            raise InputError(f"--preset {args.preset}: the {task.name} task has presets "
+                             f"{', '.join(task.presets) or 'none'}")
+        if saved:
+            raise InputError("--preset: a resumed run keeps its configuration (change options with --set)")
+        sets = [f"{k}={v}" for k, v in task.presets[args.preset].items()] + sets
+    options: Dict[str, Any] = dict(saved.get("callback_options", {})) if saved else {}
+    own_flags = {f.flag for f in task.flags}
+    for name in task_names():
+        for flag in get_task(name).flags:
+            if getattr(args, flag.flag.lstrip("-").replace("-", "_")) and flag.flag not in own_flags:
+                raise InputError(f"{flag.flag} applies to the {name} task only")
+    for flag in task.flags:
+        if getattr(args, flag.flag.lstrip("-").replace("-", "_")):
+            if flag.target == "callbacks":
+                options[flag.option] = flag.value
+            else:
+                sets.append(f"{flag.option}={flag.value}")
+    ppo_over, task_over = split_overrides(sets, cfg, task_cfg)
+    _apply(cfg, ppo_over)
+    _apply(task_cfg, task_over)
+    return task_cfg, cfg, options
 
 
 def cmd_train(args: argparse.Namespace) -> int:
     from .. import ppo
-    from ..envs import PlaneConfig
+    from ..runs import RunDir
 
+    task = get_task(args.task)
+    saved: Dict[str, Any] = {}
     if args.resume:
-        out = Path(args.resume)
-        saved = json.loads((out / "config.json").read_text())
-        task, data_spec = saved["task"], saved["data"]
-        if task != args.task:
-            raise ValueError(f"{out} holds a '{task}' run, not '{args.task}'")
+        run = RunDir(args.resume)
+        saved = run.config
+        if not saved:
+            raise InputError(f"{run.path}: no config.json; not a run directory")
+        if run.task_name != task.name:
+            raise InputError(f"{run.path} holds a '{run.task_name}' run, not '{task.name}'")
+        out, data = run.path, run.data_spec
     else:
-        task, data_spec = args.task, _data_spec(args)
-        out = Path(args.out or f"runs/{task}-seed{args.seed}")
+        out = Path(args.out or f"runs/{task.name}-seed{args.seed}")
         if (out / "latest.pt").exists():
-            raise FileExistsError(f"{out} already holds a run; use --resume {out} or another --out")
-        saved = None
-
-    db = load_database(data_spec)
-    if task == "plane":
-        from ..envs import PlaneVectorEnv
-
-        task_cfg = PlaneConfig()
-        cfg = ppo.PPOConfig(seed=args.seed, snapshot_steps=FIGURE4_STEPS)
-    else:
-        from ..obstacles import OBSTACLE_MAP_RANGE, ObstaclesConfig
-
-        task_cfg = ObstaclesConfig()
-        # The binary sensor maps stay unnormalized. The CNN's update dominates the cost, so
-        # torch gets both cores during updates (the env's threads idle then), and each
-        # rollout gets 2 epochs of 2 large minibatches (~160 us per env step on 2 cores).
-        cfg = ppo.PPOConfig(seed=args.seed, obs_norm_exclude=OBSTACLE_MAP_RANGE, torch_threads=2, update_epochs=2,
-                            num_minibatches=2, learning_rate=1e-3)
-    if saved is not None:  # a resumed run keeps its configuration
-        for k, v in saved["task_config"].items():
-            setattr(task_cfg, k, v)
-        for k, v in saved["ppo"].items():
-            if hasattr(cfg, k):
-                setattr(cfg, k, tuple(v) if isinstance(getattr(cfg, k), tuple) else v)
-    sets = list(args.set)
-    if args.preset is not None:
-        if task != "obstacles":
-            raise ValueError("--preset applies to the obstacles task")
-        if saved is not None:
-            raise ValueError("--preset: a resumed run keeps its configuration")
-        from ..obstacles import OBSTACLE_PRESETS
-
-        sets = [f"{k}={v}" for k, v in OBSTACLE_PRESETS[args.preset].items()] + sets
-    ppo_over, task_over = split_overrides(sets, cfg, task_cfg)
-    for k, v in ppo_over.items():
-        setattr(cfg, k, v)
-    for k, v in task_over.items():
-        setattr(task_cfg, k, v)
+            raise InputError(f"{out} already holds a run; use --resume {out} or another --out")
+        data = data_spec_from_args(args)
+    task_cfg, cfg, options = _configs(task, args, saved)
     if args.steps is not None:
         cfg.total_steps, cfg.max_seconds = args.steps, None
     elif args.seconds is not None:
         cfg.total_steps, cfg.max_seconds = 10**12, args.seconds
     cfg.device = args.device
     cfg.progress = not args.no_progress
-    num_envs = args.envs or (saved or {}).get("num_envs") or 64
+    num_envs = args.envs or saved.get("num_envs") or 64
 
-    callbacks = []
-    policy_factory = None
-    if task == "plane":
-        envs = PlaneVectorEnv(num_envs, db=db, config=task_cfg, num_threads=args.threads)
-    else:
-        from ..obstacles import Curriculum, ObstaclesVectorEnv, obstacle_policy_factory
+    from ..sources import database_from_spec
 
-        if args.no_hit_reward:
-            task_cfg.hit_reward = False
-        envs = ObstaclesVectorEnv(num_envs, db=db, config=task_cfg, num_threads=args.threads)
-        curriculum = Curriculum(envs, enabled=not args.no_curriculum)
-        callbacks.append(curriculum)
-        policy_factory = obstacle_policy_factory(envs)
-
-    out.mkdir(parents=True, exist_ok=True)
-    if saved is None:
-        atomic_write_text(out / "config.json", json.dumps({
-            "task": task, "data": data_spec, "num_envs": num_envs, "task_config": asdict(task_cfg),
-            "ppo": asdict(cfg)}, indent=2, default=list))
-    result = ppo.train(envs, cfg, out, policy_factory=policy_factory, resume=bool(args.resume), callbacks=callbacks)
+    db = database_from_spec(data)
+    try:  # the options are the user's: a value the env refuses is bad input
+        envs = task.make_vector_env(num_envs, db=db, config=task_cfg, num_threads=args.threads)
+    except (ValueError, TypeError) as e:
+        raise InputError(f"{task.name} options: {e}") from e
+    callbacks = list(task.callbacks(envs, options)) if task.callbacks else []
+    policy_factory = task.policy_factory(envs) if task.policy_factory else None
+    # config.json always holds the options the run trains with now, so eval and render read them.
+    RunDir.create(out, task=task, data=data, num_envs=num_envs, task_config=task_cfg, ppo_config=cfg)
+    if options:
+        RunDir(out).update_config(callback_options=options)
+    try:
+        result = ppo.train(envs, cfg, out, policy_factory=policy_factory, resume=bool(args.resume),
+                           callbacks=callbacks)
+    finally:
+        envs.close()
     s = result.last_stats
     print(f"trained {result.global_step:,} steps in {result.wall_s:.1f} s ({result.stopped_by}); "
           f"success {s.get('success_rate', float('nan')):.3f}, return {s.get('episode_return', float('nan')):.1f}; "
           f"checkpoint {result.checkpoint}")
-    if callbacks:
-        cur = callbacks[0]
-        passed = f"all stages passed at step {cur.complete_step:,}" if cur.complete_step is not None else (
-            "all stages passed" if cur.complete else "the last stage not passed yet")
-        print(f"curriculum: stage {cur.stage} of {cur.num_stages}; {passed}")
-    envs.close()
+    for cb in callbacks:
+        if hasattr(cb, "describe"):
+            print(cb.describe())
     return 0
 
 

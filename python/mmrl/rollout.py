@@ -1,0 +1,446 @@
+"""The two episode loops, for every task and every policy.
+
+- **Fast path** (:func:`first_episodes`, :func:`evaluate_fast`): a batched vector env, one
+  episode per environment; success, outcomes and time to target. What training sees.
+- **Full path** (:class:`FullPath`, :func:`evaluate_full_path`, :func:`follow`): a 1-env
+  vector env (the task: starts, targets, obstacles, success, termination) and a full-path
+  :class:`~mmrl.controller.Controller` (poses, inertialization, foot locking, IK) stepped
+  side by side with the same start, root and actions. Both take the same decisions
+  (``controller.hpp``), so their roots agree and the env's scene is exactly the one the
+  character moves through.
+
+A *policy* is anything with ``act(obs[N, D], deterministic=True) -> actions[N, A]``:
+trained policies (:func:`mmrl.load_policy`) and the scripted joysticks
+(:mod:`mmrl.policies`).
+
+Each metric is defined once: time to target is ``episode_frames / fps``, the frames played
+in the episode up to the one that reached the target (``infos["episode_frames"]``); the
+motion-quality metrics are :func:`mmrl.metrics.quality`.
+"""
+from __future__ import annotations
+
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+from . import metrics
+from .controller import Controller
+from .database import POSE_DIM, Database
+from .tasks import Task
+
+#: Per-shown-frame keys of a controller recording (trimmed together).
+FRAME_KEYS = ("frames", "roots", "positions", "rotations", "local_translations", "local_rotations", "contacts",
+              "lock_weights")
+
+
+def policy_actions(policy, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
+    """``policy.act(obs, deterministic=...)`` (or ``policy.act(obs)`` for policies without the flag)."""
+    try:
+        actions = policy.act(obs, deterministic=deterministic)
+    except TypeError:
+        actions = policy.act(obs)
+    return np.asarray(actions, np.float32)
+
+
+def _check_episodes(episodes: int) -> int:
+    if int(episodes) < 1:
+        raise ValueError(f"episodes must be >= 1, got {episodes}")
+    return int(episodes)
+
+
+# ----------------------------------------------------------------------------- fast path
+def first_episodes(env, policy, seed: int, deterministic: bool = True) -> Dict[str, np.ndarray]:
+    """Run vector env ``env`` until each environment's first episode has ended.
+
+    Returns arrays (one entry per environment) of ``success``, ``length`` (steps),
+    ``frames`` (frames played) and every other boolean per-episode info the env reports
+    (``collision``...). Closes ``env``.
+    """
+    n = env.num_envs
+    obs, _ = env.reset(seed=seed)
+    done = np.zeros(n, bool)
+    out: Dict[str, np.ndarray] = {"success": np.zeros(n, bool), "length": np.zeros(n, np.int64),
+                                  "frames": np.zeros(n, np.int64)}
+    while not done.all():
+        obs, _, term, trunc, info = env.step(policy_actions(policy, obs, deterministic))
+        ended = (term | trunc) & ~done
+        if ended.any():
+            out["length"][ended] = info["episode_length"][ended]
+            out["frames"][ended] = info["episode_frames"][ended]
+            out.setdefault("truncated", np.zeros(n, bool))[ended] = (trunc & ~term)[ended]
+            for key, value in info.items():
+                if key.startswith("_") or key in out or np.asarray(value).dtype != bool:
+                    continue
+                out.setdefault(key, np.zeros(n, bool))
+            for key in out:
+                if out[key].dtype == bool and key in info:
+                    out[key][ended] = info[key][ended]
+            done |= ended
+    env.close()
+    out.setdefault("truncated", np.zeros(n, bool))
+    return out
+
+
+def summarize_outcomes(task: Task, success: np.ndarray, outcomes: Dict[str, np.ndarray]) -> Dict[str, float]:
+    """success_rate with its binomial standard error, and ``<outcome>_rate`` of the task's outcomes."""
+    p = float(np.mean(success))
+    out = {"success_rate": p, "success_stderr": float(np.sqrt(p * (1 - p) / len(success)))}
+    for key in task.outcomes:
+        rate_key = "truncation_rate" if key == "truncated" else f"{key}_rate"
+        out[rate_key] = float(np.mean(outcomes[key])) if key in outcomes else 0.0
+    return out
+
+
+def evaluate_fast(task: Task, db: Database, policy, *, episodes: int = 1000, seed: int = 12345, config=None,
+                  stage: Optional[int] = None, deterministic: bool = True, num_threads: int = 0) -> Dict[str, Any]:
+    """``episodes`` episodes of ``task`` on the fast path (one per environment of one batched env).
+
+    The same seed gives the same episodes (starts, targets, scenes) for every policy, so
+    policies can be compared. ``stage``: the task's curriculum stage (default: its last).
+    Returns ``episodes``, ``success_rate``, ``success_stderr``, ``mean_time_to_target_s``
+    (successful episodes, frame-exact), ``mean_steps``, the task's outcome rates, and
+    ``stage`` for tasks with stages.
+    """
+    episodes = _check_episodes(episodes)
+    env = task.make_vector_env(episodes, db=db, config=config, num_threads=num_threads)
+    stage = apply_stage(task, env, stage)
+    r = first_episodes(env, policy, seed, deterministic)
+    success = r["success"]
+    out: Dict[str, Any] = {"episodes": episodes}
+    if stage is not None:
+        out["stage"] = int(stage)
+    out.update(summarize_outcomes(task, success, r))
+    out["mean_time_to_target_s"] = float(r["frames"][success].mean() / db.fps) if success.any() else float("nan")
+    out["mean_steps"] = float(r["length"].mean())
+    return out
+
+
+def apply_stage(task: Task, env, stage: Optional[int]) -> Optional[int]:
+    """Put ``env`` at curriculum ``stage`` (default: the task's last); None for tasks without stages."""
+    if not task.stages:
+        if stage is not None:
+            raise ValueError(f"stage: the {task.name} task has no curriculum stages")
+        return None
+    stage = task.stages if stage is None else int(stage)
+    if not 1 <= stage <= task.stages:
+        raise ValueError(f"stage must be in 1..{task.stages}, got {stage}")
+    task.set_stage(env, stage)
+    return stage
+
+
+# ----------------------------------------------------------------------------- full path
+def _world_query(db: Database, action: np.ndarray, root) -> tuple:
+    """The three future positions and directions (3, 2) of a 12-d normalized action, world (x, z)."""
+    raw = db.denormalize(np.concatenate([np.zeros(POSE_DIM, np.float32), action]))[POSE_DIM:].reshape(3, 4)
+    x, z, yaw = root
+    c, s = np.cos(yaw), np.sin(yaw)
+    rot = np.array([[c, s], [-s, c]])  # character (x, z) -> world (x, z)
+    return raw[:, :2] @ rot.T + np.array([x, z]), raw[:, 2:] @ rot.T
+
+
+class FullPath:
+    """A task's 1-env vector env and the full-path controller stepped together.
+
+    Args:
+        task: the task; db: the database; config: the task's numbers; stage: curriculum
+            stage (tasks with stages; default the last); seed: the env's seed;
+        scene: also record the task's scene (obstacles, sensor maps, hit points) per step;
+        continuous: at an episode's end keep the character where it is (the caller then
+            calls :meth:`continue_from_character`) instead of moving it to the env's new start;
+        the rest: :class:`~mmrl.controller.Controller` options.
+    """
+
+    def __init__(self, task: Task, db: Database, *, config=None, stage: Optional[int] = None, seed: int = 0,
+                 ik: bool = True, foot_locking: bool = True, inertialization_halflife: float = 0.1,
+                 fast: bool = False, record: bool = True, scene: bool = False, continuous: bool = False):
+        self.task, self.db = task, db
+        self.continuous = bool(continuous)
+        self.env = task.make_vector_env(1, db=db, config=config, num_threads=1)
+        self.config = self.env.config
+        self.stage = apply_stage(task, self.env, stage)
+        self.ctrl = Controller(db, frames_per_step=self.config.frames_per_step,
+                               inertialization_halflife=inertialization_halflife, ik=ik, foot_locking=foot_locking,
+                               fast=fast, action_limit_std=self.config.action_limit_std, record=record)
+        self.scene = task.scene(self.env) if scene and task.scene is not None else None
+        obs, _ = self.env.reset(seed=int(seed))
+        self.obs = obs[0]
+        self.last_recording: Optional[Dict[str, np.ndarray]] = None
+        self._start_episode()
+
+    def _start_episode(self) -> None:
+        s = self.env.env_state(0)
+        self.ctrl.reset(int(s["frame"]), (float(s["x"]), float(s["z"])), float(s["yaw"]))
+        self.target = np.array(s["target"], np.float64)
+        self.episode_steps = 0
+
+    def set_target(self, x: float, z: float) -> None:
+        """Move the current episode's target (world meters)."""
+        self.obs = self.env.set_target(0, x, z)
+        self.target = np.array([x, z], np.float64)
+
+    def continue_from_character(self, target) -> None:
+        """Start the next episode where the character stands (same frame and root) with a new
+        world ``target``, instead of the env's fresh start: one continuous motion."""
+        x, z, yaw = self.ctrl.root
+        self.env.set_state(0, self.ctrl.frame, x, z, yaw)
+        self.set_target(float(target[0]), float(target[1]))
+        self.episode_steps = 0
+
+    def step(self, action: np.ndarray) -> Dict[str, Any]:
+        """One RL step of both. Returns the env's outcome, the controller's StepResult
+        (``res``), ``shown`` (frames of the step played before the episode ended), the task
+        scene's per-step values, and at an episode's end its infos."""
+        a = np.asarray(action, np.float32).reshape(1, -1)
+        out: Dict[str, Any] = {"target": self.target.copy()}
+        if self.scene is not None:
+            out.update(self.scene.before_step(a[0]))
+        obs, reward, term, trunc, info = self.env.step(a)
+        res = self.ctrl.step(a[0])
+        self.episode_steps += 1
+        done = bool(term[0] or trunc[0])
+        shown = int(self.env.step_frames[0])
+        out.update(res=res, reward=float(reward[0]), terminated=bool(term[0]), truncated=bool(trunc[0] and not term[0]),
+                   done=done, shown=shown, success=False)
+        if self.scene is not None:
+            out.update(self.scene.after_step(shown))
+        if done:
+            for key, value in info.items():
+                if not key.startswith("_") and key != "final_obs":
+                    out[key] = value[0].item()
+            # The env's last goal vector, read at the ending frame, against the controller's root there.
+            out["goal_error"] = self._goal_error(info["final_obs"][0, -2:], res.roots[shown - 1])
+            self.obs = obs[0]
+            if not self.continuous:
+                if self.ctrl._record:
+                    self.last_recording = self.recording(trim=res.frames.size - shown)
+                self._start_episode()
+        else:
+            self.obs = obs[0]
+        return out
+
+    def _goal_error(self, goal: np.ndarray, root: np.ndarray) -> float:
+        dx, dz = self.target[0] - root[0], self.target[1] - root[1]
+        c, s = np.cos(root[2]), np.sin(root[2])
+        return float(np.hypot(c * dx - s * dz - goal[0], s * dx + c * dz - goal[1]))
+
+    def recording(self, trim: int = 0) -> Dict[str, np.ndarray]:
+        """The controller's recording of the current episode without its last ``trim`` shown frames."""
+        rec = self.ctrl.recording()
+        if trim:
+            for k in FRAME_KEYS:
+                if k in rec:
+                    rec[k] = rec[k][:-trim]
+        return rec
+
+    def root_error(self) -> tuple:
+        """(|frame difference|, max |root difference|) between the env and the controller now."""
+        s = self.env.env_state(0)
+        d = np.abs(np.array([s["x"], s["z"]]) - np.array(self.ctrl.root[:2]))
+        dyaw = abs((s["yaw"] - self.ctrl.root[2] + np.pi) % (2 * np.pi) - np.pi)
+        return abs(int(s["frame"]) - self.ctrl.frame), float(max(d.max(), dyaw))
+
+
+class EpisodeSummary:
+    """Collects full-path episodes and their quality metrics into the summary ``mmrl eval`` prints."""
+
+    def __init__(self, task: Task, db: Database, fast: bool, stage: Optional[int]):
+        self.task, self.db, self.fast, self.stage = task, db, fast, stage
+        self.results: List[Dict[str, Any]] = []
+        self.sliding_sum = self.sliding_w = self.jump = 0.0
+        self.transitions = self.seconds = 0.0
+
+    def add(self, ep: Dict[str, Any], rec: Dict[str, np.ndarray], seconds: float) -> None:
+        """Adds one episode (``ep`` gets its quality metrics unless ``fast``)."""
+        if not self.fast:
+            q = metrics.quality(self.db, rec)
+            ep.update(q)
+            n = rec["frames"].size
+            self.sliding_sum += q["foot_sliding_cm_per_s"] * n
+            self.sliding_w += n
+            self.jump = max(self.jump, q["max_pose_jump_cm"])
+        self.transitions += int(rec["transitions"].sum())
+        self.seconds += seconds
+        self.results.append(ep)
+
+    def summary(self) -> Dict[str, Any]:
+        results = self.results
+        times = [e["time_to_target_s"] for e in results if e["success"]]
+        out: Dict[str, Any] = {"episodes": len(results)}
+        out.update(summarize_outcomes(self.task, np.array([e["success"] for e in results]),
+                                      {k: np.array([e.get(k, False) for e in results]) for k in self.task.outcomes}))
+        out.pop("success_stderr")
+        out.update({
+            "mean_time_to_target_s": float(np.mean(times)) if times else None,
+            "foot_sliding_cm_per_s": self.sliding_sum / self.sliding_w if self.sliding_w else None,
+            "max_pose_jump_cm": self.jump if not self.fast else None,
+            "transitions_per_s": self.transitions / self.seconds if self.seconds else 0.0,
+            "mean_steps": float(np.mean([e["steps"] for e in results])),
+        })
+        if self.stage is not None:
+            out["stage"] = self.stage
+        out["episode_results"] = results
+        return out
+
+
+def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, seed: int = 0, config=None,
+                       stage: Optional[int] = None, ik: bool = True, foot_locking: bool = True,
+                       inertialization_halflife: float = 0.1, fast: bool = False,
+                       target_distance: Optional[float] = None) -> Dict[str, Any]:
+    """Run ``episodes`` full-path episodes of ``task`` (back to back in one env, so the same
+    seed gives the same episodes for every policy).
+
+    ``target_distance`` (meters) puts every target at that distance from the start in a
+    uniformly random direction instead of the task's own draw.
+
+    Returns success_rate, mean_time_to_target_s (successful episodes), the task's outcome
+    rates, the quality metrics over all played frames (foot sliding and transitions
+    weighted by length, the pose jump a maximum), mean_steps and per-episode details.
+    """
+    episodes = _check_episodes(episodes)
+    run = FullPath(task, db, config=config, stage=stage, seed=seed, ik=ik, foot_locking=foot_locking,
+                   inertialization_halflife=inertialization_halflife, fast=fast, record=True)
+    rng = np.random.default_rng(seed)
+    summary = EpisodeSummary(task, db, fast, run.stage)
+    for _ in range(episodes):
+        start = np.array(run.ctrl.root[:2], np.float64)
+        if target_distance is not None:
+            angle = rng.uniform(-np.pi, np.pi)
+            run.set_target(*(start + float(target_distance) * np.array([np.sin(angle), np.cos(angle)])))
+        distance = float(np.hypot(*(run.target - start)))
+        while True:
+            out = run.step(policy_actions(policy, run.obs[None]).reshape(-1))
+            if out["done"]:
+                break
+        frames = int(out["episode_frames"])
+        ep = {"success": out["success"], "time_to_target_s": frames / db.fps if out["success"] else None,
+              "steps": int(out["episode_length"]), "distance_m": distance, "truncated": out["truncated"]}
+        for key in task.outcomes:
+            ep.setdefault(key, bool(out.get(key, False)))
+        summary.add(ep, run.last_recording, frames / db.fps)
+    return summary.summary()
+
+
+def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int = 0, config=None,
+           stage: Optional[int] = None, continuous: Optional[bool] = None, ik: bool = True,
+           foot_locking: bool = True, inertialization_halflife: float = 0.1) -> Dict[str, np.ndarray]:
+    """Drive the character for ``seconds`` of shown frames, for video and export.
+
+    ``continuous`` (default: tasks without a scene): when an episode ends the character
+    goes on where it stands, with a new target drawn around it like the task's, so the
+    motion never cuts (one episode index throughout). Otherwise episodes follow each other
+    with a cut at each new start.
+
+    Returns per shown frame (T): the controller's recording keys (``positions``, ``roots``,
+    ``frames``, ...), ``targets`` (T, 2), ``episode`` (T,) and the scene's per-frame keys
+    (``obstacles``); per step (S): ``query_frames`` (shown-frame index of each decision),
+    ``query_points`` / ``query_directions`` (S, 3, 2) world (x, z) of the clipped action, and
+    the scene's per-step keys; ``outcomes`` (E,) 0 running, 1 success, 2 other ending (a
+    task outcome such as a collision), 3 truncated; ``stage``; and the quality metrics.
+    """
+    if not seconds > 0:
+        raise ValueError(f"seconds must be positive, got {seconds!r}")
+    continuous = task.scene is None if continuous is None else bool(continuous)
+    run = FullPath(task, db, config=config, stage=stage, seed=seed, ik=ik, foot_locking=foot_locking,
+                   inertialization_halflife=inertialization_halflife, record=True, scene=True,
+                   continuous=continuous)
+    low, high = run.env.single_action_space.low, run.env.single_action_space.high
+    rng = np.random.default_rng(seed)
+    total = max(2, int(round(seconds * db.fps)))
+    log = _FollowLog(run)
+    while log.frames_so_far() < total:
+        action = policy_actions(policy, run.obs[None]).reshape(-1)
+        points, directions = _world_query(db, np.clip(action, low, high), run.ctrl.root)
+        out = run.step(action)
+        log.add_step(out, points, directions)
+        if out["done"]:
+            log.end_episode(out)
+            if continuous:
+                run.continue_from_character(_target_around(rng, run.config, run.ctrl.root))
+            elif log.frames_so_far() < total:
+                log.start_episode()
+    return log.result()
+
+
+def _target_around(rng: np.random.Generator, config, root) -> np.ndarray:
+    """A target drawn like the task's (uniform in the square, not too close), around ``root``."""
+    h = config.target_half_extent
+    while True:
+        t = rng.uniform(-h, h, size=2)
+        if np.hypot(t[0], t[1]) >= config.min_target_distance:
+            return t + np.array(root[:2], np.float64)
+
+
+class _FollowLog:
+    """The per-frame and per-step arrays of :func:`follow`."""
+
+    def __init__(self, run: FullPath):
+        self.run = run
+        self.episodes: List[Dict[str, np.ndarray]] = []
+        self.outcomes: List[int] = []
+        self.per_frame: Dict[str, list] = {"targets": []}
+        self.per_step: Dict[str, list] = {"query_frames": [], "query_points": [], "query_directions": []}
+        self.shown = 0  # frames of finished (cut) episodes
+        self.start_episode()
+
+    def frames_so_far(self) -> int:
+        return self.shown + self.in_episode
+
+    def start_episode(self) -> None:
+        """A new episode's reset pose: one shown frame."""
+        self.in_episode = 1
+        self._frame_values({"targets": self.run.target[None]})
+        if self.run.scene is not None:
+            self._frame_values(self.run.scene.start_frame())
+
+    def _frame_values(self, values: Dict[str, np.ndarray]) -> None:
+        for key, value in values.items():
+            self.per_frame.setdefault(key, []).append(np.asarray(value, np.float32))
+
+    def add_step(self, out: Dict[str, Any], points: np.ndarray, directions: np.ndarray) -> None:
+        self.per_step["query_frames"].append(self.frames_so_far() - 1)
+        self.per_step["query_points"].append(points.astype(np.float32))
+        self.per_step["query_directions"].append(directions.astype(np.float32))
+        for key, value in out.get("scene_step", {}).items():
+            self.per_step.setdefault(key, []).append(value)
+        # A continuous run shows the whole step; a cut one only up to the ending frame.
+        shown = out["res"].frames.size if self.run.continuous else out["shown"]
+        self._frame_values({"targets": np.repeat(out["target"][None], shown, 0)})
+        self._frame_values(out.get("scene_frames", {}))
+        self.in_episode += shown
+
+    def end_episode(self, out: Dict[str, Any]) -> None:
+        self.outcomes.append(1 if out["success"] else 3 if out["truncated"] else 2)
+        if not self.run.continuous:
+            self.episodes.append(self.run.last_recording)
+            self.shown += self.in_episode
+            self.in_episode = 0
+
+    def result(self) -> Dict[str, Any]:
+        run = self.run
+        if self.in_episode > 1 or not self.episodes:  # the episode still running
+            self.episodes.append(run.recording())
+            self.outcomes.append(0)
+        episodes = self.episodes
+        rec: Dict[str, Any] = {}
+        for k in FRAME_KEYS + ("transitions", "queries"):
+            if k in episodes[0]:
+                rec[k] = np.concatenate([e[k] for e in episodes])
+        rec["fps"] = np.float32(run.db.fps)
+        rec["frames_per_step"] = np.int32(run.config.frames_per_step)
+        rec["episode"] = np.concatenate([np.full(e["frames"].size, i, np.int32) for i, e in enumerate(episodes)])
+        for k, v in self.per_frame.items():
+            rec[k] = np.concatenate(v)
+        for k, v in self.per_step.items():
+            rec[k] = np.array(v)
+        rec["outcomes"] = np.array(self.outcomes, np.int32)
+        rec["stage"] = np.int32(run.stage or 0)
+        if rec["targets"].shape[0] != rec["frames"].shape[0]:
+            raise RuntimeError(f"follow: {rec['targets'].shape[0]} targets for {rec['frames'].shape[0]} frames")
+        # Quality within episodes only (a cut between episodes is no pose jump).
+        q = [metrics.quality(run.db, e) for e in episodes]
+        n = np.array([e["frames"].size for e in episodes], np.float64)
+        rec["foot_sliding_cm_per_s"] = np.float32(np.dot([v["foot_sliding_cm_per_s"] for v in q], n) / n.sum())
+        rec["max_pose_jump_cm"] = np.float32(max(v["max_pose_jump_cm"] for v in q))
+        rec["transitions_per_s"] = np.float32(metrics.transitions_per_second(
+            rec["transitions"], int(rec["frames_per_step"]), run.db.fps))
+        return rec

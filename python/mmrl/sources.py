@@ -1,0 +1,71 @@
+"""Where a database comes from: the one place that turns a user's choice into a Database.
+
+Every command and env resolves its database here: an object, a saved ``.npz``, BVH files or
+directories, a run's saved *data spec* (``config.json`` ``"data"``), or the package's
+synthetic locomotion (generated once into the cache).
+
+A data spec is a small JSON-able dict: ``{"db": FILE}``, ``{"data": [PATHS], "mirror":
+bool}`` or ``{"synthetic": true}`` (older runs may hold a bare path or list, also read).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Dict, Optional, Sequence, Union
+
+from .database import Database
+
+PathLike = Union[str, os.PathLike]
+_DEFAULT_DB: Optional[Database] = None
+
+
+def default_database() -> Database:
+    """The package's synthetic locomotion database (generated once into the cache)."""
+    global _DEFAULT_DB
+    if _DEFAULT_DB is None:
+        from . import synth
+
+        _DEFAULT_DB = Database.from_bvh(synth.default_dataset_dir())
+    return _DEFAULT_DB
+
+
+def resolve_database(db: Union[Database, PathLike, None] = None,
+                     data: Union[PathLike, Sequence[PathLike], None] = None, mirror: bool = False) -> Database:
+    """A Database from an object, a saved ``.npz``, BVH files/directories, or the default."""
+    if isinstance(db, Database):
+        return db
+    if db is not None:
+        return Database.load(db)
+    if data is not None:
+        return Database.from_bvh(data, mirror=mirror)
+    return default_database()
+
+
+def data_spec(db: Optional[PathLike] = None, data: Optional[Sequence[PathLike]] = None,
+              mirror: bool = False) -> Dict[str, Any]:
+    """The data spec of a command line's ``--db`` / ``--data`` / ``--mirror`` (absolute paths)."""
+    if db:
+        return {"db": str(Path(db).resolve())}
+    if data:
+        return {"data": [str(Path(d).resolve()) for d in data], "mirror": bool(mirror)}
+    return {"synthetic": True}
+
+
+def database_from_spec(spec: Any) -> Database:
+    """The Database a data spec names (see the module docstring)."""
+    if isinstance(spec, (str, list)):
+        spec = {"data": spec}
+    spec = spec if isinstance(spec, dict) else {}
+    if spec.get("db"):
+        return resolve_database(db=spec["db"])
+    if spec.get("data"):
+        return resolve_database(data=spec["data"], mirror=bool(spec.get("mirror", False)))
+    return resolve_database()
+
+
+def load_any(path: PathLike) -> Database:
+    """A database from a ``.npz`` file, or built from a BVH file or directory."""
+    p = Path(path)
+    if p.is_file() and p.suffix == ".npz":
+        return Database.load(p)
+    return Database.from_bvh(p)

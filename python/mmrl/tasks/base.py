@@ -1,0 +1,332 @@
+"""What every target-reaching task shares: its config, the vector env over a batched C++
+core, the single-env adapter, and the :class:`Task` record that plugs a task into the
+commands, evaluation, rendering and export.
+
+A task module (``mmrl.tasks.plane``, ``mmrl.tasks.obstacles``, or your own, see
+docs/architecture.md) declares a config dataclass (a :class:`TaskConfig`), a
+:class:`TargetVectorEnv` subclass naming its C++ core, and one :class:`Task`; registering
+that Task (``mmrl.tasks.register_task``) is the one line that makes ``mmrl train NAME``,
+``mmrl eval``, ``render`` and ``export-bvh`` work with it.
+
+The vector env contract (gymnasium 1.x, SAME_STEP autoreset): ``reset(seed=s)`` gives env i
+a random stream derived from (s, i); ``step`` returns ``(obs, rewards, terminated,
+truncated, infos)`` and, where episodes ended, ``infos`` holds ``final_obs``, ``success``,
+``episode_return``, ``episode_length`` and ``episode_frames`` (frames played in the episode,
+the last step counted up to the frame that ended it), each with its ``_key`` mask, plus
+the task's own keys (``Task.episode_infos``).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Tuple, Type, Union
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from ..database import Database
+from ..sources import resolve_database
+
+
+# ----------------------------------------------------------------------------- config
+class TaskConfig:
+    """Mixin of the tasks' config dataclasses: copies with overrides, and the C++ config."""
+
+    #: The task's name in error messages ("plane-task option ...").
+    task_label = "task"
+
+    def replace(self, **overrides) -> "TaskConfig":
+        """A copy with ``overrides`` applied; an unknown name raises TypeError listing the options."""
+        names = [f.name for f in fields(self)]
+        unknown = [k for k in overrides if k not in names]
+        if unknown:
+            raise TypeError(f"unknown {self.task_label} option {unknown[0]!r}; options are {names}")
+        values = asdict(self)
+        values.update(overrides)
+        return type(self)(**values)
+
+    def to_core(self, core_config_type):
+        """The matching C++ config struct (every field copied by name)."""
+        c = core_config_type()
+        for f in fields(self):
+            setattr(c, f.name, getattr(self, f.name))
+        return c
+
+
+def make_config(config_type, config=None, overrides: Optional[Mapping[str, Any]] = None):
+    """``config`` (or the defaults) with ``overrides`` applied, as a new ``config_type``."""
+    base = config_type(**asdict(config)) if config is not None else config_type()
+    return base.replace(**dict(overrides or {}))
+
+
+def check_actions(actions, shape) -> np.ndarray:
+    """``actions`` as a C-contiguous float32 array of ``shape``; refuses other shapes, ints and NaN."""
+    a = np.asarray(actions)
+    if a.shape != tuple(shape):
+        raise ValueError(f"actions: expected shape {tuple(shape)}, got {a.shape}")
+    if not np.issubdtype(a.dtype, np.floating):
+        raise TypeError(f"actions: expected a float array, got dtype {a.dtype}")
+    a = np.ascontiguousarray(a, dtype=np.float32)
+    if not np.isfinite(a).all():
+        raise ValueError("actions: contains NaN or inf")
+    return a
+
+
+# ----------------------------------------------------------------------------- vector env
+class TargetVectorEnv(VectorEnv):
+    """N characters of one task stepped together by a batched C++ core.
+
+    Subclasses set ``core_type`` (the ``_core`` class), ``config_type`` (a TaskConfig
+    dataclass) and ``core_config_type``, and may override :meth:`_observation_space`,
+    :meth:`_step_core` (extra per-env output buffers) and :meth:`_task_infos` (extra
+    per-episode infos). The Python side only holds spaces, buffers, autoreset bookkeeping
+    and infos; all work happens in C++ with the GIL released.
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": [], "render_fps": 30}
+    core_type: Any = None
+    core_config_type: Any = None
+    config_type: Any = None
+
+    def __init__(self, num_envs: int = 64, *, db: Union[Database, str, os.PathLike, None] = None,
+                 data=None, config=None, num_threads: int = 0, render_mode: Optional[str] = None, **overrides):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if int(num_envs) < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        self.db = resolve_database(db, data)
+        self.config = make_config(self.config_type, config, overrides)
+        self.num_envs = int(num_envs)
+        self.render_mode = render_mode
+        self._core = self.core_type(self.db._db, self.db.matcher, self.num_envs,
+                                    self.config.to_core(self.core_config_type), num_threads)
+        self.obs_dim, self.act_dim = int(self.core_type.obs_dim), int(self.core_type.action_dim)
+        self.single_observation_space = self._observation_space()
+        self.single_action_space = gym.spaces.Box(self._core.action_low, self._core.action_high, (self.act_dim,),
+                                                  np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        n = self.num_envs
+        self._obs = np.zeros((n, self.obs_dim), np.float32)
+        self._final_obs = np.zeros((n, self.obs_dim), np.float32)
+        self._rewards = np.zeros(n, np.float32)
+        self._terminated = np.zeros(n, np.uint8)
+        self._truncated = np.zeros(n, np.uint8)
+        self._success = np.zeros(n, np.uint8)
+        self._ep_return = np.zeros(n, np.float32)
+        self._ep_length = np.zeros(n, np.int32)
+        self._step_frames = np.zeros(n, np.int32)
+        self._ep_frames = np.zeros(n, np.int64)
+        self._seeded = False
+
+    # -- hooks -------------------------------------------------------------------------------
+    def _observation_space(self) -> gym.spaces.Box:
+        return gym.spaces.Box(-np.inf, np.inf, (self.obs_dim,), np.float32)
+
+    def _step_core(self, actions: np.ndarray) -> None:
+        """One C++ step writing every output buffer (subclasses add their own buffers)."""
+        self._core.step(actions, self._obs, self._rewards, self._terminated, self._truncated, self._success,
+                        self._final_obs, self._ep_return, self._ep_length)
+
+    def _task_infos(self, done: np.ndarray) -> Dict[str, np.ndarray]:
+        """Extra per-episode infos where ``done`` (each gets a ``_key`` mask)."""
+        return {}
+
+    def _on_reset(self, which: Optional[np.ndarray]) -> None:
+        """Called after envs were reset (``which`` None = all)."""
+
+    # -- gymnasium ---------------------------------------------------------------------------
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        if seed is None and not self._seeded:
+            seed = int(np.random.SeedSequence().generate_state(1, np.uint64)[0])
+        if seed is not None:
+            if isinstance(seed, (list, tuple)):
+                raise TypeError("seed: give one int; environment i derives its stream from (seed, i)")
+            self._core.reset(int(seed) & 0xFFFFFFFFFFFFFFFF, self._obs)
+            self._seeded = True
+        else:
+            for i in range(self.num_envs):
+                self._core.reset_env(i, self._obs)
+        self._ep_frames[:] = 0
+        self._on_reset(None)
+        return self._obs.copy(), {}
+
+    def step(self, actions):
+        a = check_actions(actions, (self.num_envs, self.act_dim))
+        self._step_core(a)
+        self._core.last_step_frames(self._step_frames)
+        self._ep_frames += self._step_frames
+        terminated = self._terminated.astype(bool)
+        truncated = self._truncated.astype(bool)
+        infos: Dict[str, Any] = {}
+        done = terminated | truncated
+        if done.any():
+            values = {
+                "final_obs": np.where(done[:, None], self._final_obs, 0.0).astype(np.float32),
+                "success": self._success.astype(bool),
+                "episode_return": np.where(done, self._ep_return, 0.0).astype(np.float32),
+                "episode_length": np.where(done, self._ep_length, 0).astype(np.int32),
+                "episode_frames": np.where(done, self._ep_frames, 0).astype(np.int64),
+            }
+            values.update(self._task_infos(done))
+            for key, value in values.items():
+                infos[key] = value
+                infos["_" + key] = done.copy()
+            self._ep_frames[done] = 0
+            self._on_reset(done)
+        return self._obs.copy(), self._rewards.copy(), terminated, truncated, infos
+
+    # -- inspection --------------------------------------------------------------------------
+    @property
+    def step_frames(self) -> np.ndarray:
+        """Frames each env played in the last step (up to the frame that ended an episode)."""
+        return self._step_frames.copy()
+
+    def env_state(self, i: int) -> dict:
+        """World-space state of env i: root x, z, yaw, database frame, target (and the task's own)."""
+        return self._core.state(int(i))
+
+    def current_frames(self) -> np.ndarray:
+        """Each env's current database frame (int64, N)."""
+        out = np.empty(self.num_envs, np.int64)
+        self._core.current_frames(out)
+        return out
+
+    def observe(self, i: int) -> np.ndarray:
+        """Env i's current observation, also written to the env's observation buffer."""
+        out = np.empty(self.obs_dim, np.float32)
+        self._core.observe(int(i), out)
+        self._obs[i] = out
+        return out
+
+    def set_target(self, i: int, x: float, z: float) -> np.ndarray:
+        """Move env i's target (world meters); returns its new observation."""
+        self._core.set_target(int(i), float(x), float(z))
+        return self.observe(i)
+
+    def set_state(self, i: int, frame: int, x: float, z: float, yaw: float) -> np.ndarray:
+        """Put env i's character on database ``frame`` at world (x, z) facing ``yaw`` (radians),
+        keeping its target and episode; returns its new observation."""
+        self._core.set_state(int(i), int(frame), float(x), float(z), float(yaw))
+        return self.observe(i)
+
+    def seconds_per_step(self) -> float:
+        return self.config.frames_per_step / self.db.fps
+
+
+class SingleEnv(gym.Env):
+    """One character of a task as a ``gymnasium.Env`` (the same C++ core with one env).
+
+    Subclasses set ``vector_type``. ``info`` of a finished episode holds the vector env's
+    per-episode infos as Python scalars; ``step_info_keys`` names per-step values read from
+    the vector env after every step (e.g. ``hits``).
+    """
+
+    metadata = {"render_modes": [], "render_fps": 30}
+    vector_type: Type[TargetVectorEnv] = TargetVectorEnv
+
+    def __init__(self, *, db=None, data=None, config=None, render_mode: Optional[str] = None, **overrides):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self._vec = self.vector_type(1, db=db, data=data, config=config, num_threads=1, **overrides)
+        self.db = self._vec.db
+        self.config = self._vec.config
+        self.render_mode = render_mode
+        self.observation_space = self._vec.single_observation_space
+        self.action_space = self._vec.single_action_space
+
+    def reset(self, *, seed: Optional[int] = None, options: Optional[dict] = None):
+        super().reset(seed=seed)
+        if seed is None and not self._vec._seeded:
+            seed = int(self.np_random.integers(0, 2**63 - 1))
+        obs, _ = self._vec.reset(seed=seed)
+        return obs[0], {}
+
+    def _step_info(self) -> Dict[str, Any]:
+        return {}
+
+    def step(self, action):
+        a = check_actions(action, self.action_space.shape)
+        obs, r, term, trunc, infos = self._vec.step(a[None])
+        info: Dict[str, Any] = self._step_info()
+        if term[0] or trunc[0]:
+            obs = infos["final_obs"]
+            for key, value in infos.items():
+                if not key.startswith("_") and key != "final_obs":
+                    info[key] = value[0].item()
+        return obs[0].copy(), float(r[0]), bool(term[0]), bool(trunc[0]), info
+
+    def env_state(self) -> dict:
+        return self._vec.env_state(0)
+
+
+# ----------------------------------------------------------------------------- the task record
+@dataclass(frozen=True)
+class TaskFlag:
+    """A task-specific ``mmrl train`` switch, e.g. ``--no-hit-reward``: it sets ``option`` to
+    ``value`` in the task's config (``target="config"``) or in the options handed to the
+    task's ``callbacks`` (``target="callbacks"``, e.g. ``--no-curriculum``)."""
+
+    flag: str
+    option: str
+    value: Any
+    help: str
+    target: str = "config"
+
+
+@dataclass(frozen=True)
+class Task:
+    """Everything the commands, evaluation, rendering and export need to know of one task.
+
+    Only ``name``, ``config_type``, ``vector_env`` and ``env`` are required.
+    """
+
+    name: str
+    """The name on the command line (``mmrl train NAME``) and in ``config.json``."""
+    config_type: type
+    """The task's config dataclass (a :class:`TaskConfig`)."""
+    vector_env: Type[TargetVectorEnv]
+    env: type
+    """The single-env class (``gymnasium.make``)."""
+    gym_id: Optional[str] = None
+    """Registered with gymnasium when set (e.g. ``mmrl/Plane-v0``)."""
+    summary: str = ""
+    """One line for ``mmrl train --help``."""
+    ppo_defaults: Mapping[str, Any] = field(default_factory=dict)
+    """PPOConfig fields this task trains best with (``--set`` overrides them)."""
+    presets: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    """``--preset NAME``: overrides of task options and PPOConfig fields."""
+    flags: Tuple[TaskFlag, ...] = ()
+    """Task-specific ``mmrl train`` switches."""
+    policy_factory: Optional[Callable[[TargetVectorEnv], Callable[[int, int], Any]]] = None
+    """``policy_factory(envs)(obs_dim, act_dim)`` builds the actor-critic (None: PPO's default MLP)."""
+    callbacks: Optional[Callable[[TargetVectorEnv, Mapping[str, Any]], Sequence[Any]]] = None
+    """``callbacks(envs, options)``: trainer callbacks (e.g. a curriculum); ``options`` holds
+    the ``mmrl train`` switches this task reads (``curriculum``)."""
+    stages: int = 0
+    """Curriculum stages (``--stage 1..stages`` for eval and render); 0 = none."""
+    set_stage: Optional[Callable[[TargetVectorEnv, int], None]] = None
+    """Put a vector env at stage k for its next resets."""
+    outcomes: Tuple[str, ...] = ()
+    """Episode outcomes besides success, as per-episode info keys and ``<key>_rate`` in the
+    evaluation summary (``collision``; ``truncated`` is available to every task)."""
+    scene: Optional[Callable[[TargetVectorEnv], Any]] = None
+    """``scene(env)`` -> a recorder of what the full path draws besides the character (see
+    ``mmrl.rollout.SceneRecorder``); None draws the character and targets only."""
+
+    def make_vector_env(self, num_envs: int, *, db, config=None, num_threads: int = 0, **overrides):
+        return self.vector_env(num_envs, db=db, config=config, num_threads=num_threads, **overrides)
+
+    def default_config(self):
+        return self.config_type()
+
+    def config_from_dict(self, values: Mapping[str, Any], *, strict: bool = False):
+        """The task's config from saved values (``config.json``); unknown keys are dropped
+        unless ``strict`` (then TypeError)."""
+        names = {f.name for f in fields(self.config_type)}
+        unknown = [k for k in values if k not in names]
+        if unknown and strict:
+            raise TypeError(f"unknown {self.name} option {unknown[0]!r}; options are {sorted(names)}")
+        return self.config_type(**{k: v for k, v in values.items() if k in names})
