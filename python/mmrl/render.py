@@ -5,7 +5,7 @@ A small perspective camera (numpy) projects everything; matplotlib's Agg canvas 
 few milliseconds. The camera looks at the character from a fixed direction and follows it
 with some lag. Shown: the figure (bones as shaded capsules, depth-sorted, with a ground
 shadow), the ground grid, the target(s) (discs of the success radius), obstacles (a list of
-rectangles, drawn as 1 m high boxes) and each query's three future trajectory points with
+rectangles, drawn as low boxes) and each query's three future trajectory points with
 their facing directions.
 
 - :func:`render_frame`: one RGB image (gymnasium ``render()``);
@@ -212,6 +212,7 @@ class Renderer:
         return polys, np.asarray(depth), np.asarray(index, np.int64)
 
     def _draw_obstacles(self, obstacles) -> None:
+        """Boxes OBSTACLE_HEIGHT high: the faces that look at the camera, depth-sorted far to near."""
         if obstacles is None or len(obstacles) == 0:
             self.obstacles.set_verts([])
             return
@@ -246,6 +247,7 @@ class Renderer:
         self.obstacles.set_facecolor(np.array([OBSTACLE_SIDE, OBSTACLE_TOP])[shade[index[order]]])
 
     def _draw_sensors(self, sensors) -> None:
+        """The sensor map's square outline, free sensors as dots, occupied cells as squares."""
         if sensors is None:
             self.sensor_cells.set_verts([])
             self.sensor_dots.set_offsets(np.zeros((0, 2)))
@@ -282,18 +284,34 @@ class Renderer:
         (n, 4, 2) array; sensors: ``{"positions": (16, 16, 2) world (x, z), "map": (16, 16)}``;
         hit_inside: (3,) bools coloring the query points (red inside an obstacle, green outside).
         """
-        cam = self.camera
         p = np.asarray(positions, np.float64)
+        self._follow(p, snap_camera)
+        self._draw_ground()
+        self._draw_targets(targets)
+        self._draw_obstacles(obstacles)
+        self._draw_sensors(sensors)
+        self._draw_queries(query_points, query_directions, hit_inside)
+        self._draw_figure(p)
+        self.text.set_text(text)
+
+        self.canvas.draw()
+        buf = np.asarray(self.canvas.buffer_rgba())
+        return buf[..., :3].copy()
+
+    def _follow(self, p: np.ndarray, snap: bool) -> None:
+        """Aim the camera 0.9 m above the body's ground centre, with lag unless `snap`."""
         body = p[self.body]
         root = np.array([body[:, 0].mean(), 0.0, body[:, 2].mean()])
         focus = root + np.array([0.0, 0.9, 0.0])
-        if self._focus is None or snap_camera:
+        if self._focus is None or snap:
             self._focus = focus
         else:
             self._focus = self.follow_lag * self._focus + (1 - self.follow_lag) * focus
-        cam.look_at(self._focus)
+        self.camera.look_at(self._focus)
 
-        # Ground and grid: a 40 m square around the focus, lines every meter.
+    def _draw_ground(self) -> None:
+        """Ground and grid: a 40 m square around the focus, lines every meter."""
+        cam = self.camera
         cx, cz = np.round(self._focus[[0, 2]])
         R = 20.0
         quad = np.array([[cx - R, 0, cz - R], [cx + R, 0, cz - R], [cx + R, 0, cz + R], [cx - R, 0, cz + R]])
@@ -306,41 +324,39 @@ class Renderer:
                             np.stack([np.full_like(k, cx + R), np.zeros_like(k), cz + k], 1)])
         self.grid.set_segments(cam.segments(a, b))
 
-        # Targets.
+    def _draw_targets(self, targets) -> None:
         polys = []
         for t in ([] if targets is None else np.asarray(targets, np.float64).reshape(-1, 2)):
-            pp = cam.polygon(self._circle(t, self.success_radius))
+            pp = self.camera.polygon(self._circle(t, self.success_radius))
             if pp is not None:
                 polys.append(pp)
         self.targets.set_verts(polys)
 
-        # Obstacles: boxes 1 m high; the faces that look at the camera, depth-sorted far to near.
-        self._draw_obstacles(obstacles)
-
-        # Sensors: the map's square outline, free sensors as dots, occupied cells as squares.
-        self._draw_sensors(sensors)
-
-        # Queries: three future points and their facing directions.
-        if query_points is not None:
-            qp = np.asarray(query_points, np.float64).reshape(-1, 2)
-            q3 = np.column_stack([qp[:, 0], np.full(len(qp), 0.02), qp[:, 1]])
-            qc = cam.to_camera(q3)
-            vis = qc[:, 2] > cam.near
-            self.query_pts.set_offsets(cam.project(qc[vis]) if vis.any() else np.zeros((0, 2)))
-            if hit_inside is None:
-                self.query_pts.set_facecolors([QUERY])
-            else:  # hit points: red inside an obstacle, green outside
-                inside = np.asarray(hit_inside, bool).reshape(-1)[vis]
-                self.query_pts.set_facecolors(np.where(inside[:, None], HIT_INSIDE, HIT_OUTSIDE))
-            if query_directions is not None:
-                qd = np.asarray(query_directions, np.float64).reshape(-1, 2)
-                tips = q3 + 0.35 * np.column_stack([qd[:, 0], np.zeros(len(qd)), qd[:, 1]])
-                self.query.set_segments(cam.segments(q3, tips))
-        else:
+    def _draw_queries(self, query_points, query_directions, hit_inside) -> None:
+        """Queries: three future points and their facing directions."""
+        cam = self.camera
+        if query_points is None:
             self.query_pts.set_offsets(np.zeros((0, 2)))
             self.query.set_segments([])
+            return
+        qp = np.asarray(query_points, np.float64).reshape(-1, 2)
+        q3 = np.column_stack([qp[:, 0], np.full(len(qp), 0.02), qp[:, 1]])
+        qc = cam.to_camera(q3)
+        vis = qc[:, 2] > cam.near
+        self.query_pts.set_offsets(cam.project(qc[vis]) if vis.any() else np.zeros((0, 2)))
+        if hit_inside is None:
+            self.query_pts.set_facecolors([QUERY])
+        else:  # hit points: red inside an obstacle, green outside
+            inside = np.asarray(hit_inside, bool).reshape(-1)[vis]
+            self.query_pts.set_facecolors(np.where(inside[:, None], HIT_INSIDE, HIT_OUTSIDE))
+        if query_directions is not None:
+            qd = np.asarray(query_directions, np.float64).reshape(-1, 2)
+            tips = q3 + 0.35 * np.column_stack([qd[:, 0], np.zeros(len(qd)), qd[:, 1]])
+            self.query.set_segments(cam.segments(q3, tips))
 
-        # Figure: shadow, then bones far to near, outline under fill; widths by perspective.
+    def _draw_figure(self, p: np.ndarray) -> None:
+        """Figure: shadow, then bones far to near, outline under fill; widths by perspective."""
+        cam = self.camera
         bones = self.bones
         pa, pb = p[bones[:, 0]], p[bones[:, 1]]
         shadow_a, shadow_b = pa * [1, 0, 1] + [0, 0.005, 0], pb * [1, 0, 1] + [0, 0.005, 0]
@@ -366,12 +382,6 @@ class Renderer:
             hc = cam.to_camera(p[self.head][None] + [0, 0.08, 0])
             self.head_patch.set_offsets(cam.project(hc))
             self.head_patch.set_sizes([(cam.focal * 0.2 / max(hc[0, 2], cam.near)) ** 2])
-        self.text.set_text(text)
-
-        self.canvas.draw()
-        buf = np.asarray(self.canvas.buffer_rgba())
-        return buf[..., :3].copy()
-
 
 def render_frame(positions: np.ndarray, parents: Sequence[int], *, body_joints=None, joint_names=None,
                  targets=None, query_points=None, query_directions=None, obstacles=None,
