@@ -20,9 +20,11 @@ below against hand-counted answers on small sources.
 from __future__ import annotations
 
 import ast
+import bisect
 import io
 import re
 import tokenize
+import warnings
 from pathlib import Path
 from typing import List, NamedTuple, Optional
 
@@ -65,7 +67,9 @@ def python_comments(source: str) -> dict:
 
 
 def python_functions(source: str) -> List[Function]:
-    tree = ast.parse(source)
+    with warnings.catch_warnings():  # an invalid escape in the source is not this test's business
+        warnings.simplefilter("ignore")
+        tree = ast.parse(source)
     out = []
     for node in ast.walk(tree):
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
@@ -168,6 +172,7 @@ def _matching_brace(masked: str, i: int) -> int:
 
 _ACCESS_RE = re.compile(r"^(?:\s*(?:public|private|protected)\s*:(?!:))+")
 _TEMPLATE_RE = re.compile(r"^template\s*<")
+_NON_SPACE = re.compile(r"\S")
 _CONTROL = {"if", "for", "while", "switch", "catch", "do", "else", "try", "return"}
 
 
@@ -220,7 +225,8 @@ def cpp_functions(source: str) -> List[Function]:
                 segment = i + 1  # scan the inside: its `}` closes it like any other
             else:
                 close = _matching_brace(masked, i)
-                after = masked[close + 1:].lstrip()[:1]
+                nxt = _NON_SPACE.search(masked, close + 1)
+                after = nxt.group(0) if nxt else ""
                 # A brace followed by `,`, `{`, `(` or `)` is a member initializer (`x_{a},
                 # y_{b} {`) or a lambda called in one (`tree_([&] {...}()) {`), not the body:
                 # the declaration goes on. Other braces (enums, initializers) are skipped whole
@@ -237,19 +243,9 @@ def cpp_functions(source: str) -> List[Function]:
 
 
 def _line_index(text: str):
+    """A function from a character offset to its 1-based line."""
     starts = [0] + [k + 1 for k, ch in enumerate(text) if ch == "\n"]
-
-    def line_of(offset: int) -> int:
-        lo, hi = 0, len(starts)
-        while hi - lo > 1:
-            mid = (lo + hi) // 2
-            if starts[mid] <= offset:
-                lo = mid
-            else:
-                hi = mid
-        return lo + 1
-
-    return line_of
+    return lambda offset: bisect.bisect_right(starts, offset)
 
 
 # ------------------------------------------------------------------------------------------
