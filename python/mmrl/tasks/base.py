@@ -31,11 +31,31 @@ from ..sources import resolve_database
 
 
 # ----------------------------------------------------------------------------- config
+@dataclass
 class TaskConfig:
-    """Mixin of the tasks' config dataclasses: copies with overrides, and the C++ config."""
+    """The numbers every target-reaching task has; each task's config dataclass extends it
+    (and may change a default by redeclaring the field). Copies with overrides, and the
+    C++ config struct, by field name."""
 
     #: The task's name in error messages ("plane-task option ...").
     task_label = "task"
+
+    frames_per_step: int = 6
+    """Frames played per RL step (6 = 0.2 s at 30 fps)."""
+    target_half_extent: float = 5.0
+    """Targets are uniform in a square of side 2 * this (meters) around the start."""
+    min_target_distance: float = 0.6
+    """Targets closer than this (meters) to the start are redrawn, so no episode starts solved."""
+    success_radius: float = 0.5
+    """Reaching within this distance (meters) of the target is success."""
+    success_bonus: float = 1000.0
+    """Reward added on success."""
+    max_steps: int = 100
+    """Steps before truncation (100 steps = 20 s)."""
+    action_limit_std: float = 3.0
+    """Half-width of the action box in standard deviations of each normalized trajectory feature."""
+    random_heading: bool = True
+    """Start with a uniformly random heading (else facing +Z)."""
 
     def replace(self, **overrides) -> "TaskConfig":
         """A copy with ``overrides`` applied; an unknown name raises TypeError listing the options."""

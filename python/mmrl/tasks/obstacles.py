@@ -76,18 +76,13 @@ class ObstaclesConfig(TaskConfig):
 
     task_label = "moving-obstacles"
 
-    frames_per_step: int = 6
-    """Frames played per RL step (6 = 0.2 s at 30 fps)."""
+    # Redeclared: other defaults or meaning than TaskConfig's.
     target_half_extent: float = 5.0
     """Stage before any ``set_stage``: targets uniform in a square of side 2 * this (meters)."""
     obstacle_max_speed: float = 0.5
     """Stage before any ``set_stage``: obstacle speeds uniform in [0, this] m/s."""
     speed_cap: float = 2.0
     """The largest max speed (m/s) ``set_stage`` accepts; sizes the collision grid's margin."""
-    min_target_distance: float = 0.6
-    """Targets closer than this (meters) to the start are redrawn."""
-    success_radius: float = 0.5
-    """Reaching within this distance (meters) of the target is success."""
     success_bonus: float = 10.0
     """Reward added on success. The paper says 10 (section 4) and none (section 5); 10 here."""
     hit_reward: bool = True
@@ -112,10 +107,6 @@ class ObstaclesConfig(TaskConfig):
     action's points either way."""
     max_steps: int = 1500
     """Safety cap on the episode length (truncation; 1500 steps = 300 s). The paper has none."""
-    action_limit_std: float = 3.0
-    """Half-width of the action box in standard deviations of each normalized trajectory feature."""
-    random_heading: bool = True
-    """Start with a uniformly random heading (else facing +Z)."""
     num_obstacles: int = 100
     """Rectangles per environment."""
     obstacle_square_half: float = 10.0

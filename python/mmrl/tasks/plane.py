@@ -27,26 +27,10 @@ from .base import SingleEnv, TargetVectorEnv, Task, TaskConfig
 
 @dataclass
 class PlaneConfig(TaskConfig):
-    """Numbers of the plane task (all configurable)."""
+    """Numbers of the plane task (all configurable): exactly the shared ones of
+    :class:`~mmrl.tasks.base.TaskConfig`, with its defaults."""
 
     task_label = "plane-task"
-
-    frames_per_step: int = 6
-    """Frames played per RL step (6 = 0.2 s at 30 fps)."""
-    target_half_extent: float = 5.0
-    """Targets are uniform in a square of side 2 * this (meters) around the start."""
-    min_target_distance: float = 0.6
-    """Targets closer than this (meters) to the start are redrawn, so no episode starts solved."""
-    success_radius: float = 0.5
-    """Reaching within this distance (meters) of the target is success."""
-    success_bonus: float = 1000.0
-    """Reward added on success."""
-    max_steps: int = 100
-    """Steps before truncation (100 steps = 20 s)."""
-    action_limit_std: float = 3.0
-    """Half-width of the action box in standard deviations of each normalized trajectory feature."""
-    random_heading: bool = True
-    """Start with a uniformly random heading (else facing +Z)."""
 
     def to_core(self, core_config_type=_core.TargetTaskConfig):
         return super().to_core(core_config_type)
