@@ -1,11 +1,10 @@
 #include "bindings.hpp"
 #include "mmrl/database.hpp"
+#include "mmrl/database_io.hpp"
 
 namespace mmrl {
 
 namespace {
-
-const char* kChannelNames[6] = {"Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"};
 
 std::array<float, kNumBlocks> weights_from(const std::vector<float>& w) {
   if (w.size() != kNumBlocks) throw py::value_error("weights: expected 5 block weights, got " + std::to_string(w.size()));
@@ -14,11 +13,23 @@ std::array<float, kNumBlocks> weights_from(const std::vector<float>& w) {
   return a;
 }
 
+// The dict entry `key` as a stored array: a C-contiguous numpy array of dtype T, copied with
+// its shape (database_from_state checks the shapes).
 template <class T>
-std::vector<T> take(const py::dict& s, const char* key, std::initializer_list<py::ssize_t> shape) {
+StateArray<T> take(const py::dict& s, const char* key) {
   if (!s.contains(key)) throw py::value_error(std::string("database state: missing '") + key + "'");
-  auto a = check_array<T>(s[key], key, shape);
-  return std::vector<T>(a.data(), a.data() + a.size());
+  const py::handle obj = s[key];
+  if (!py::isinstance<py::array>(obj))
+    throw py::type_error(std::string(key) + ": expected a numpy array, got " +
+                         std::string(py::str(py::type::of(obj).attr("__name__"))));
+  auto arr = py::reinterpret_borrow<py::array>(obj);
+  if (!arr.dtype().is(py::dtype::of<T>()))
+    throw py::type_error(std::string(key) + ": expected dtype " + std::string(py::str(py::dtype::of<T>())) +
+                         ", got " + std::string(py::str(arr.dtype())));
+  if (!(arr.flags() & py::array::c_style))
+    throw py::value_error(std::string(key) + ": array must be C-contiguous (use np.ascontiguousarray)");
+  const T* data = static_cast<const T*>(arr.data());
+  return StateArray<T>{std::vector<T>(data, data + arr.size()), std::vector<int64_t>(arr.shape(), arr.shape() + arr.ndim())};
 }
 
 py::dict database_state(py::object self) {
@@ -33,13 +44,7 @@ py::dict database_state(py::object self) {
   for (py::ssize_t j = 0; j < J; ++j)
     for (int k = 0; k < 3; ++k) es.mutable_at(j, k) = db.skeleton.end_sites[j][k];
   s["end_sites"] = es;
-  std::vector<std::string> channels;
-  for (const auto& ch : db.skeleton.channels) {
-    std::string t;
-    for (Channel c : ch) t += (t.empty() ? "" : " ") + std::string(kChannelNames[static_cast<int>(c)]);
-    channels.push_back(t);
-  }
-  s["channels"] = channels;
+  s["channels"] = skeleton_channels_text(db.skeleton);
   s["roles"] = joint_roles_as_list(db.roles);
   s["fps"] = db.fps;
   s["source_scale"] = db.source_scale;
@@ -59,71 +64,32 @@ py::dict database_state(py::object self) {
   return s;
 }
 
-Database database_from_state(const py::dict& s) {
-  Database db;
-  auto names = s["joint_names"].cast<std::vector<std::string>>();
-  const py::ssize_t J = static_cast<py::ssize_t>(names.size());
-  db.skeleton.names = names;
-  auto parents = take<int32_t>(s, "parents", {J});
-  db.skeleton.parents.assign(parents.begin(), parents.end());
-  for (py::ssize_t j = 0; j < J; ++j)
-    if (db.skeleton.parents[j] >= j || db.skeleton.parents[j] < -1)
-      throw py::value_error("database state: parents must precede their children");
-  auto off = take<float>(s, "offsets", {J, 3});
-  auto es = take<float>(s, "end_sites", {J, 3});
-  db.skeleton.has_end_site = take<uint8_t>(s, "has_end_site", {J});
-  auto channels = s["channels"].cast<std::vector<std::string>>();
-  if (static_cast<py::ssize_t>(channels.size()) != J) throw py::value_error("database state: channels size mismatch");
-  for (py::ssize_t j = 0; j < J; ++j) {
-    db.skeleton.offsets.emplace_back(off[j * 3], off[j * 3 + 1], off[j * 3 + 2]);
-    db.skeleton.end_sites.emplace_back(es[j * 3], es[j * 3 + 1], es[j * 3 + 2]);
-    std::vector<Channel> ch;
-    std::istringstream is(channels[j]);
-    std::string t;
-    while (is >> t) {
-      int k = 0;
-      while (k < 6 && t != kChannelNames[k]) ++k;
-      if (k == 6) throw py::value_error("database state: unknown channel '" + t + "'");
-      ch.push_back(static_cast<Channel>(k));
-    }
-    db.skeleton.channels.push_back(ch);
-  }
-  auto roles = s["roles"].cast<std::vector<int>>();
-  if (roles.size() != 9) throw py::value_error("database state: roles must have 9 entries");
-  for (int r : roles)
-    if (r < 0 || r >= J) throw py::value_error("database state: role index out of range");
-  db.roles.hips = roles[0];
-  for (int side = 0; side < 2; ++side) {
-    db.roles.upper_leg[side] = roles[1 + side * 4];
-    db.roles.lower_leg[side] = roles[2 + side * 4];
-    db.roles.foot[side] = roles[3 + side * 4];
-    db.roles.toe[side] = roles[4 + side * 4];
-  }
-  db.num_joints = static_cast<int>(J);
-  db.fps = s["fps"].cast<float>();
-  db.source_scale = s["source_scale"].cast<float>();
-  if (!(db.fps > 0)) throw py::value_error("database state: fps must be positive");
-  db.clip_names = s["clip_names"].cast<std::vector<std::string>>();
-  const py::ssize_t C = static_cast<py::ssize_t>(db.clip_names.size());
-  db.clip_ranges = take<int32_t>(s, "clip_ranges", {C, 2});
-  db.clip_mirrored = take<uint8_t>(s, "clip_mirrored", {C});
-  const py::ssize_t N = C > 0 ? db.clip_ranges[C * 2 - 1] : 0;
-  db.num_frames = static_cast<int>(N);
-  db.bone_translations = take<float>(s, "bone_translations", {N, J, 3});
-  db.bone_rotations = take<float>(s, "bone_rotations", {N, J, 4});
-  db.root_positions = take<float>(s, "root_positions", {N, 3});
-  db.root_yaws = take<float>(s, "root_yaws", {N});
-  db.root_deltas = take<float>(s, "root_deltas", {N, 3});
-  db.features = take<float>(s, "features", {N, kFeatureDim});
-  db.contacts = take<uint8_t>(s, "contacts", {N, 2});
-  auto mean = take<float>(s, "feature_mean", {kFeatureDim});
-  auto bs = take<float>(s, "block_scale", {kNumBlocks});
-  std::copy(mean.begin(), mean.end(), db.normalization.mean.begin());
-  std::copy(bs.begin(), bs.end(), db.normalization.block_scale.begin());
-  db.validate();
-  db.index_clips();
-  db.set_weights(weights_from(take<float>(s, "weights", {kNumBlocks})));
-  return db;
+// Converts the dict to a DatabaseState and forwards (the checks and rules: database_io.hpp).
+Database database_from_dict(const py::dict& s) {
+  DatabaseState st;
+  st.joint_names = s["joint_names"].cast<std::vector<std::string>>();
+  st.parents = take<int32_t>(s, "parents");
+  st.offsets = take<float>(s, "offsets");
+  st.end_sites = take<float>(s, "end_sites");
+  st.has_end_site = take<uint8_t>(s, "has_end_site");
+  st.channels = s["channels"].cast<std::vector<std::string>>();
+  st.roles = s["roles"].cast<std::vector<int>>();
+  st.fps = s["fps"].cast<float>();
+  st.source_scale = s["source_scale"].cast<float>();
+  st.clip_names = s["clip_names"].cast<std::vector<std::string>>();
+  st.clip_ranges = take<int32_t>(s, "clip_ranges");
+  st.clip_mirrored = take<uint8_t>(s, "clip_mirrored");
+  st.bone_translations = take<float>(s, "bone_translations");
+  st.bone_rotations = take<float>(s, "bone_rotations");
+  st.root_positions = take<float>(s, "root_positions");
+  st.root_yaws = take<float>(s, "root_yaws");
+  st.root_deltas = take<float>(s, "root_deltas");
+  st.features = take<float>(s, "features");
+  st.contacts = take<uint8_t>(s, "contacts");
+  st.feature_mean = take<float>(s, "feature_mean");
+  st.block_scale = take<float>(s, "block_scale");
+  st.weights = take<float>(s, "weights");
+  return database_from_state(std::move(st));
 }
 
 }  // namespace
@@ -143,7 +109,7 @@ void bind_database(py::module_& m) {
           },
           py::arg("clips"), py::arg("mirror") = false, py::arg("roles") = std::map<std::string, std::string>(),
           py::arg("weights") = std::vector<float>{0.75f, 1.0f, 1.0f, 1.0f, 1.5f})
-      .def_static("from_state", &database_from_state, py::arg("state"))
+      .def_static("from_state", &database_from_dict, py::arg("state"))
       .def("state", &database_state, "All arrays as a dict of read-only views (for saving).")
       .def_readonly("num_frames", &Database::num_frames)
       .def_readonly("num_joints", &Database::num_joints)

@@ -1,5 +1,7 @@
+// Bindings of the plane task (tasks/plane.hpp): checks, GIL release, writes into caller-owned
+// numpy buffers. No logic.
 #include "bindings.hpp"
-#include "mmrl/vecenv.hpp"
+#include "mmrl/tasks/plane.hpp"
 #include "py_matcher.hpp"
 
 namespace mmrl {
@@ -14,7 +16,7 @@ struct PyPlaneVecEnv {
 }  // namespace
 
 void bind_env(py::module_& m) {
-  py::class_<TargetTaskConfig>(m, "TargetTaskConfig", "Numbers of the target-reaching tasks (see vecenv.hpp).")
+  py::class_<TargetTaskConfig>(m, "TargetTaskConfig", "Numbers of the plane task (see tasks/plane.hpp).")
       .def(py::init<>())
       .def_readwrite("frames_per_step", &TargetTaskConfig::frames_per_step)
       .def_readwrite("target_half_extent", &TargetTaskConfig::target_half_extent)
@@ -91,6 +93,7 @@ void bind_env(py::module_& m) {
             d["steps"] = st.steps;
             d["last_match"] = st.last_match;
             d["last_transition"] = st.last_transition;
+            d["last_step_frames"] = st.last_step_frames;
             return d;
           },
           py::arg("index"), "The world-space state of environment i (root, frame, target).")
@@ -105,15 +108,21 @@ void bind_env(py::module_& m) {
       .def(
           "current_frames",
           [](const PyPlaneVecEnv& s, const py::handle& out) {
-            int64_t* o = writable_buffer<int64_t>(out, "out", {s.env.num_envs()});
-            for (int i = 0; i < s.env.num_envs(); ++i) o[i] = s.env.state(i).frame;
+            s.env.current_frames(writable_buffer<int64_t>(out, "out", {s.env.num_envs()}));
           },
           py::arg("out"), "Writes each environment's current database frame into out (int64, N).")
+      .def(
+          "last_step_frames",
+          [](const PyPlaneVecEnv& s, const py::handle& out) {
+            s.env.last_step_frames(writable_buffer<int32_t>(out, "out", {s.env.num_envs()}));
+          },
+          py::arg("out"),
+          "Writes into out (int32, N) how many frames of the last step each environment played before its episode "
+          "ended: the index of the first frame within success_radius + 1, else frames_per_step (0 after reset).")
       .def(
           "set_target",
           [](PyPlaneVecEnv& s, int i, float x, float z) {
             if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
-            if (!std::isfinite(x) || !std::isfinite(z)) throw py::value_error("target must be finite");
             s.env.set_target(i, x, z);
           },
           py::arg("index"), py::arg("x"), py::arg("z"));

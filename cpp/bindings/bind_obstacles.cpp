@@ -1,7 +1,7 @@
-// Bindings of the moving-obstacles task core (obstacles_env.hpp, grid.hpp): checks, GIL
+// Bindings of the moving-obstacles task core (tasks/obstacles.hpp, grid.hpp): checks, GIL
 // release, writes into caller-owned numpy buffers. No logic.
 #include "bindings.hpp"
-#include "mmrl/obstacles_env.hpp"
+#include "mmrl/tasks/obstacles.hpp"
 #include "py_matcher.hpp"
 
 namespace mmrl {
@@ -19,17 +19,34 @@ int checked_index(const PyObstacleVecEnv& s, int i) {
   return i;
 }
 
+constexpr int kNow = -1;  // obstacle_dict: the obstacles as they are
+
 py::array_t<uint8_t> map_copy(const uint8_t* map) {
   py::array_t<uint8_t> out({kMapSide, kMapSide});
   std::copy(map, map + kMapCells, out.mutable_data());
   return out;
 }
 
+// The obstacles() dict: centres (n, 2), half_sizes (n, 2), angles (n), velocities (n, 2),
+// now or (frames_after >= 0) after that many played frames.
+py::dict obstacle_dict(const ObstacleVecEnv& env, int i, int frames_after) {
+  const py::ssize_t n = env.obstacle_count(i);
+  py::array_t<float> c({n, py::ssize_t{2}}), h({n, py::ssize_t{2}}), a(n), v({n, py::ssize_t{2}});
+  env.obstacles(i, c.mutable_data(), h.mutable_data(), a.mutable_data(), v.mutable_data());
+  if (frames_after != kNow) env.obstacles_after(i, frames_after, c.mutable_data(), v.mutable_data());
+  py::dict d;
+  d["centres"] = c;
+  d["half_sizes"] = h;
+  d["angles"] = a;
+  d["velocities"] = v;
+  return d;
+}
+
 }  // namespace
 
 void bind_obstacles(py::module_& m) {
   m.attr("OBSTACLE_MAP_SIDE") = kMapSide;
-  py::class_<ObstacleTaskConfig>(m, "ObstacleTaskConfig", "Numbers of the moving-obstacles task (obstacles_env.hpp).")
+  py::class_<ObstacleTaskConfig>(m, "ObstacleTaskConfig", "Numbers of the moving-obstacles task (tasks/obstacles.hpp).")
       .def(py::init<>())
       .def_readwrite("frames_per_step", &ObstacleTaskConfig::frames_per_step)
       .def_readwrite("target_half_extent", &ObstacleTaskConfig::target_half_extent)
@@ -169,32 +186,25 @@ void bind_obstacles(py::module_& m) {
             d["hit_points"] = pts;
             d["hit_inside"] = py::make_tuple(bool(st.hit_inside[0]), bool(st.hit_inside[1]), bool(st.hit_inside[2]));
             d["collided"] = st.collided;
+            d["last_step_frames"] = st.last_step_frames;
             return d;
           },
           py::arg("index"), "World-space state of env i: root, frame, target, stage, last action's hit points.")
       .def(
-          "obstacles",
-          [](const PyObstacleVecEnv& s, int i) {
-            checked_index(s, i);
-            const ObstacleField& f = s.env.field();
-            const py::ssize_t n = f.count(i);
-            py::array_t<float> c({n, py::ssize_t{2}}), h({n, py::ssize_t{2}}), a(n), v({n, py::ssize_t{2}});
-            for (int k = 0; k < n; ++k) {
-              c.mutable_at(k, 0) = f.centre(i, k).x(), c.mutable_at(k, 1) = f.centre(i, k).y();
-              h.mutable_at(k, 0) = f.half_size(i, k).x(), h.mutable_at(k, 1) = f.half_size(i, k).y();
-              a.mutable_at(k) = f.angle(i, k);
-              v.mutable_at(k, 0) = f.velocity(i, k).x(), v.mutable_at(k, 1) = f.velocity(i, k).y();
-            }
-            py::dict d;
-            d["centres"] = c;
-            d["half_sizes"] = h;
-            d["angles"] = a;
-            d["velocities"] = v;
-            return d;
-          },
+          "obstacles", [](const PyObstacleVecEnv& s, int i) { return obstacle_dict(s.env, checked_index(s, i), kNow); },
           py::arg("index"),
           "Obstacles of env i (world meters): centres (n,2) as (x,z), half_sizes (n,2) along the obstacle's own X/Z, "
           "angles (n) in radians (yaw convention), velocities (n,2) m/s.")
+      .def(
+          "obstacles_after",
+          [](const PyObstacleVecEnv& s, int i, int frames) {
+            if (frames < 0) throw py::value_error("frames: must be >= 0, got " + std::to_string(frames));
+            return obstacle_dict(s.env, checked_index(s, i), frames);
+          },
+          py::arg("index"), py::arg("frames"),
+          "Env i's obstacles (the obstacles() dict) after `frames` more played frames of the env's own motion "
+          "(constant velocity, bounce at the square's border), bit for bit as steps move them. Called at a step's "
+          "start with frames = last_step_frames, it gives the obstacles at the step's end.")
       .def(
           "set_obstacles",
           [](PyObstacleVecEnv& s, int i, const py::handle& centres, const py::handle& half_sizes,
@@ -202,23 +212,10 @@ void bind_obstacles(py::module_& m) {
             checked_index(s, i);
             auto c = check_array<float>(centres, "centres", {-1, 2});
             const py::ssize_t n = c.shape(0);
-            if (n > s.env.config().num_obstacles)
-              throw py::value_error("centres: at most num_obstacles = " + std::to_string(s.env.config().num_obstacles) +
-                                    " obstacles, got " + std::to_string(n));
             auto h = check_array<float>(half_sizes, "half_sizes", {n, 2});
             auto a = check_array<float>(angles, "angles", {n});
             auto v = check_array<float>(velocities, "velocities", {n, 2});
-            check_finite(c.data(), c.size(), "centres");
-            check_finite(h.data(), h.size(), "half_sizes");
-            check_finite(a.data(), a.size(), "angles");
-            check_finite(v.data(), v.size(), "velocities");
-            for (py::ssize_t k = 0; k < h.size(); ++k)
-              if (!(h.data()[k] >= 0)) throw py::value_error("half_sizes: must be >= 0");
-            try {
-              s.env.set_obstacles(i, static_cast<int>(n), c.data(), h.data(), a.data(), v.data());
-            } catch (const std::invalid_argument& e) {
-              throw py::value_error(e.what());
-            }
+            s.env.set_obstacles(i, static_cast<int>(n), c.data(), h.data(), a.data(), v.data());
           },
           py::arg("index"), py::arg("centres"), py::arg("half_sizes"), py::arg("angles"), py::arg("velocities"),
           "Replace env i's obstacles (float32 arrays); refreshes its grid and current sensor map.")
@@ -233,9 +230,8 @@ void bind_obstacles(py::module_& m) {
           "sensor_map_bruteforce",
           [](const PyObstacleVecEnv& s, int i) {
             checked_index(s, i);
-            const ObstacleEnvState& st = s.env.state(i);
             py::array_t<uint8_t> out({kMapSide, kMapSide});
-            s.env.field().sensor_map_bruteforce(i, st.root.x, st.root.z, st.root.yaw, out.mutable_data());
+            s.env.sensor_map_bruteforce(i, out.mutable_data());
             return out;
           },
           py::arg("index"), "Env i's map now, every sensor tested against every obstacle (reference).")
@@ -243,14 +239,8 @@ void bind_obstacles(py::module_& m) {
           "sensor_positions",
           [](const PyObstacleVecEnv& s, int i) {
             checked_index(s, i);
-            const ObstacleEnvState& st = s.env.state(i);
             py::array_t<float> out({kMapSide, kMapSide, 2});
-            for (int r = 0; r < kMapSide; ++r)
-              for (int c = 0; c < kMapSide; ++c) {
-                const Vec2 p = s.env.field().sensor_position(st.root.x, st.root.z, st.root.yaw, r, c);
-                out.mutable_at(r, c, 0) = p.x();
-                out.mutable_at(r, c, 1) = p.y();
-              }
+            s.env.sensor_positions(i, out.mutable_data());
             return out;
           },
           py::arg("index"), "World (x, z) of env i's sensors, (16, 16, 2) [row][col].")
@@ -270,28 +260,35 @@ void bind_obstacles(py::module_& m) {
       .def(
           "collides",
           [](const PyObstacleVecEnv& s, int i, float x, float z) {
-            checked_index(s, i);
-            if (!std::isfinite(x) || !std::isfinite(z)) throw py::value_error("position must be finite");
-            return s.env.field().disc_overlaps_any(i, x, z, s.env.config().body_radius);
+            return s.env.collides(checked_index(s, i), x, z);
           },
           py::arg("index"), py::arg("x"), py::arg("z"), "Whether the body disc at world (x, z) overlaps an obstacle.")
       .def(
           "set_target",
           [](PyObstacleVecEnv& s, int i, float x, float z) {
-            checked_index(s, i);
-            if (!std::isfinite(x) || !std::isfinite(z)) throw py::value_error("target must be finite");
-            s.env.set_target(i, x, z);
+            s.env.set_target(checked_index(s, i), x, z);
           },
           py::arg("index"), py::arg("x"), py::arg("z"))
       .def(
           "set_root",
           [](PyObstacleVecEnv& s, int i, float x, float z, float yaw) {
-            checked_index(s, i);
-            if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw))
-              throw py::value_error("root must be finite");
-            s.env.set_root(i, x, z, yaw);
+            s.env.set_root(checked_index(s, i), x, z, yaw);
           },
-          py::arg("index"), py::arg("x"), py::arg("z"), py::arg("yaw"));
+          py::arg("index"), py::arg("x"), py::arg("z"), py::arg("yaw"))
+      .def(
+          "current_frames",
+          [](const PyObstacleVecEnv& s, const py::handle& out) {
+            s.env.current_frames(writable_buffer<int64_t>(out, "out", {s.env.num_envs()}));
+          },
+          py::arg("out"), "Writes each environment's current database frame into out (int64, N).")
+      .def(
+          "last_step_frames",
+          [](const PyObstacleVecEnv& s, const py::handle& out) {
+            s.env.last_step_frames(writable_buffer<int32_t>(out, "out", {s.env.num_envs()}));
+          },
+          py::arg("out"),
+          "Writes into out (int32, N) how many frames of the last step each environment played before its episode "
+          "ended: the index of the frame that succeeded or collided + 1, else frames_per_step (0 after reset).");
 }
 
 }  // namespace mmrl

@@ -148,18 +148,38 @@ void ObstacleField::set(int env, int n, const float* centres, const float* half_
   }
 }
 
+namespace {
+// One frame of one centre coordinate c (meters) moving at v (m/s) for dt seconds in
+// [-h, h]: a centre that crosses the border is mirrored back inside and v flips (a frame
+// is far shorter than the square, so once is enough).
+inline void bounce_step(float& c, float& v, float dt, float h) {
+  float x = c + v * dt;
+  if (x > h) x = 2 * h - x, v = -v;
+  else if (x < -h) x = -2 * h - x, v = -v;
+  c = x;
+}
+}  // namespace
+
 void ObstacleField::move(int env, float dt) {
   const float h = config_.square_half;
   const size_t b = at(env, 0), e = b + count_[env];
   for (size_t a = b; a < e; ++a) {
-    float x = cx_[a] + vx_[a] * dt, z = cz_[a] + vz_[a] * dt;
-    // Mirror back across the border (a step is far shorter than the square, so once is enough).
-    if (x > h) x = 2 * h - x, vx_[a] = -vx_[a];
-    else if (x < -h) x = -2 * h - x, vx_[a] = -vx_[a];
-    if (z > h) z = 2 * h - z, vz_[a] = -vz_[a];
-    else if (z < -h) z = -2 * h - z, vz_[a] = -vz_[a];
-    cx_[a] = x;
-    cz_[a] = z;
+    bounce_step(cx_[a], vx_[a], dt, h);
+    bounce_step(cz_[a], vz_[a], dt, h);
+  }
+}
+
+void ObstacleField::moved(int env, int frames, float dt, float* centres, float* velocities) const {
+  const float h = config_.square_half;
+  for (int k = 0; k < count_[env]; ++k) {
+    const size_t a = at(env, k);
+    float x = cx_[a], z = cz_[a], vx = vx_[a], vz = vz_[a];
+    for (int f = 0; f < frames; ++f) {
+      bounce_step(x, vx, dt, h);
+      bounce_step(z, vz, dt, h);
+    }
+    if (centres) centres[2 * k] = x, centres[2 * k + 1] = z;
+    if (velocities) velocities[2 * k] = vx, velocities[2 * k + 1] = vz;
   }
 }
 

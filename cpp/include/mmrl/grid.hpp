@@ -85,6 +85,9 @@ class ObstacleField {
            const float* velocities);
   // Advances env's obstacles by dt seconds with bouncing.
   void move(int env, float dt);
+  // Env's centres and velocities (count(env) x 2 each, either may be null) after `frames`
+  // calls of move(env, dt), without moving anything: the same arithmetic, bit for bit.
+  void moved(int env, int frames, float dt, float* centres, float* velocities) const;
   // Rebuilds env's grid with the given margin (meters, <= config.max_margin).
   void rebuild(int env, float margin);
 

@@ -1,21 +1,32 @@
-// Batched environment cores: N characters step in one call over a thread pool, writing
+// The batched target-reaching environment, shared by every task (tasks/plane.hpp,
+// tasks/obstacles.hpp): N characters step in one call over a thread pool, writing
 // observations, rewards and flags into caller-owned buffers (numpy arrays in Python).
 // Nothing is allocated per step.
 //
-// Plane task (paper, section 3):
-//   observation  [c_t (15): normalized pose features of the current frame,
-//                 g_t (2): target (x, z) in the character frame, meters]
-//   action       12-d trajectory feature in the database's normalized units, clipped to a
-//                per-dimension box of mean +- action_limit_std * std over valid frames
-//   reward       exp(-|g_t|) after the step, + success_bonus on success
-//   terminated   the root came within success_radius of the target on any played frame
-//   truncated    max_steps steps without success
-// Autoreset is SAME_STEP: a finished environment's last observation goes to final_obs and
-// the environment is reset at once, its first observation written to obs.
+// What every task shares, and this template owns:
+//   - the database and matcher (borrowed), the config, one state per environment;
+//   - one RNG per environment, seeded from (seed, index): results never depend on the
+//     thread count or on scheduling;
+//   - the valid start frames and the action box (mean +- action_limit_std * std of the
+//     trajectory features over the valid frames, normalized units);
+//   - the constructor checks common to all tasks;
+//   - SAME_STEP autoreset: an environment whose episode ended writes its last observation
+//     to final_obs, its return and length, and is reset at once, its first observation in obs;
+//   - the bookkeeping: steps, truncation at max_steps, episode return, frames played.
+//
+// A task is a class Task deriving from TargetVecEnv<Task, Config, State> (CRTP) that defines
+//   static constexpr int kObsDim, kActionDim;
+//   void observe(int i, float* obs_row) const;        // env i's observation now
+//   void begin_episode(int i);                         // draws env i's episode (its RNG only)
+//   TaskStep advance(int i, const float* action);     // one RL step of env i, no autoreset
+// and nothing else of the loop. Config needs frames_per_step, max_steps, action_limit_std,
+// random_heading and min_target_distance; State derives from TargetEnvState.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <stdexcept>
 #include <vector>
 
 #include "mmrl/controller.hpp"
@@ -24,26 +35,42 @@
 
 namespace mmrl {
 
-struct TargetTaskConfig {
-  int frames_per_step = 6;           // frames played per RL step (0.2 s at 30 fps)
-  float target_half_extent = 5.0f;   // targets uniform in a (2h x 2h) m square around the start
-  float min_target_distance = 0.6f;  // targets closer than this to the start are redrawn
-  float success_radius = 0.5f;       // meters
-  float success_bonus = 1000.0f;
-  int max_steps = 100;               // truncation (20 s at 6 frames per step, 30 fps)
-  float action_limit_std = 3.0f;     // action box half-width, in standard deviations
-  bool random_heading = true;        // start heading uniform in [-pi, pi)
-};
-
+// Per-environment state every target task keeps (world meters, radians).
 struct TargetEnvState {
   RootState root;
-  int64_t frame = 0;        // current database frame
+  int64_t frame = 0;  // current database frame
   float target_x = 0, target_z = 0;
   int steps = 0;
   double episode_return = 0;
   int64_t last_match = -1;  // frame chosen by the last match
   bool last_transition = false;
+  // Frames the last step played before its episode ended: the index of the frame of the
+  // ending event + 1, or frames_per_step when the step did not end the episode (truncation
+  // included). Kept through the autoreset, so it describes the step just returned; 0 after
+  // reset(seed).
+  int last_step_frames = 0;
   Rng rng;
+};
+
+// One task step's outcome (before truncation, which the template decides).
+struct TaskStep {
+  float reward = 0;
+  bool terminated = false;
+  bool success = false;
+  int frames_played = 0;  // see TargetEnvState::last_step_frames
+};
+
+// The step outputs every task writes, N rows each (obs and final_obs: N x kObsDim).
+// final_obs, episode_return and episode_length rows are written only where an episode ended.
+struct TargetStepBuffers {
+  float* obs;
+  float* rewards;
+  uint8_t* terminated;
+  uint8_t* truncated;
+  uint8_t* success;
+  float* final_obs;
+  float* episode_return;
+  int32_t* episode_length;
 };
 
 // Draws an episode start shared by the target tasks: a uniformly random valid frame, the
@@ -61,47 +88,147 @@ inline void draw_episode_start(Rng& rng, const std::vector<int64_t>& valid_frame
   } while (std::hypot(*target_x, *target_z) < min_target_distance);
 }
 
-class PlaneVecEnv {
+// The checks every target task makes (std::invalid_argument): num_envs >= 1, frames_per_step
+// in [1, 30] (playback never leaves a valid frame's clip), the matcher built over db, and at
+// least one valid frame. Returns the valid frames (the episode starts).
+std::vector<int64_t> target_env_check(const Database& db, const Matcher& matcher, int num_envs, int frames_per_step);
+
+template <class Task, class Config, class State>
+class TargetVecEnv {
  public:
-  static constexpr int kObsDim = kPoseDim + 2;
-  static constexpr int kActionDim = kTrajectoryDim;
-
-  // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
-  PlaneVecEnv(const Database& db, const Matcher& matcher, int num_envs, const TargetTaskConfig& config,
-              int num_threads = 0);
-
   int num_envs() const { return static_cast<int>(envs_.size()); }
-  const TargetTaskConfig& config() const { return config_; }
+  const Config& config() const { return config_; }
   const float* action_low() const { return low_; }
   const float* action_high() const { return high_; }
+  State& state(int i) { return envs_[i]; }
+  const State& state(int i) const { return envs_[i]; }
 
-  // Reseeds every environment's RNG from (seed, index) and resets all; obs: N x kObsDim.
-  void reset(uint64_t seed, float* obs);
-  // Resets environment i from its own RNG stream; writes its observation row.
-  void reset_env(int i, float* obs_row);
+  // Reseeds every environment's RNG from (seed, index) and resets all; obs: N x kObsDim (or null).
+  void reset(uint64_t seed, float* obs) {
+    for (int i = 0; i < num_envs(); ++i) {
+      envs_[i].rng = Rng(seed, static_cast<uint64_t>(i));
+      envs_[i].last_step_frames = 0;
+    }
+    pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
+      for (int64_t i = b; i < e; ++i) reset_env(static_cast<int>(i), obs ? obs + i * Task::kObsDim : nullptr);
+    });
+  }
 
-  // actions: N x 12 (finite; checked by the caller). Outputs are N rows each. final_obs rows
-  // are written only where an episode ended; episode_return/length likewise.
-  void step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
-            uint8_t* success, float* final_obs, float* episode_return, int32_t* episode_length);
+  // Resets environment i from its own RNG stream; writes its observation row (if not null).
+  void reset_env(int i, float* obs_row) {
+    task().begin_episode(i);
+    State& s = envs_[i];
+    s.steps = 0;
+    s.episode_return = 0;
+    s.last_match = -1;
+    s.last_transition = false;
+    if (obs_row) task().observe(i, obs_row);
+  }
 
-  TargetEnvState& state(int i) { return envs_[i]; }
-  const TargetEnvState& state(int i) const { return envs_[i]; }
-  void observe(int i, float* obs_row) const;
-  // Moves env i's target (world meters), e.g. for evaluation sequences.
-  void set_target(int i, float x, float z);
+  // Moves env i's target (world meters; finite, else std::invalid_argument).
+  void set_target(int i, float x, float z) {
+    if (!std::isfinite(x) || !std::isfinite(z)) throw std::invalid_argument("target must be finite");
+    envs_[i].target_x = x;
+    envs_[i].target_z = z;
+  }
 
- private:
-  // One RL step of env i without autoreset; returns true on success.
-  bool advance(int i, const float* action, float* reward, bool* terminated, bool* truncated);
+  // Each environment's current database frame (N).
+  void current_frames(int64_t* out) const {
+    for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].frame;
+  }
+  // Each environment's frames played in the last step (N; see TargetEnvState::last_step_frames).
+  void last_step_frames(int32_t* out) const {
+    for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].last_step_frames;
+  }
+
+ protected:
+  // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
+  TargetVecEnv(const Database& db, const Matcher& matcher, int num_envs, const Config& config, int num_threads)
+      : db_(db),
+        matcher_(matcher),
+        config_(config),
+        valid_frames_(target_env_check(db, matcher, num_envs, config.frames_per_step)),
+        envs_(static_cast<size_t>(num_envs)),
+        pool_(num_threads) {
+    trajectory_action_box(db, config.action_limit_std, low_, high_);
+    for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
+  }
+
+  // The autoreset loop (see the header comment). actions: N x kActionDim. after_step(i) runs
+  // once per env after its step and before any reset (a task writes its extra outputs there).
+  // grain: the smallest chunk of envs per thread.
+  template <class AfterStep>
+  void step_envs(const float* actions, const TargetStepBuffers& out, int64_t grain, AfterStep&& after_step) {
+    pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
+      for (int64_t i = b; i < e; ++i) {
+        const int env = static_cast<int>(i);
+        State& s = envs_[i];
+        const TaskStep r = task().advance(env, actions + i * Task::kActionDim);
+        s.steps += 1;
+        s.episode_return += r.reward;
+        s.last_step_frames = r.frames_played;
+        const bool truncated = !r.terminated && s.steps >= config_.max_steps;
+        out.rewards[i] = r.reward;
+        out.terminated[i] = r.terminated;
+        out.truncated[i] = truncated;
+        out.success[i] = r.success;
+        after_step(env);
+        float* row = out.obs + i * Task::kObsDim;
+        if (r.terminated || truncated) {
+          task().observe(env, out.final_obs + i * Task::kObsDim);
+          out.episode_return[i] = static_cast<float>(s.episode_return);
+          out.episode_length[i] = s.steps;
+          reset_env(env, row);
+        } else {
+          task().observe(env, row);
+        }
+      }
+    }, grain);
+  }
+
+  // Draws env i's episode start (frame, root, target in the square of half_extent meters).
+  void draw_start(int i, float half_extent) {
+    State& s = envs_[i];
+    draw_episode_start(s.rng, valid_frames_, config_.random_heading, half_extent, config_.min_target_distance,
+                       &s.frame, &s.root, &s.target_x, &s.target_z);
+  }
+
+  // The decision of env i's step: the frame to play from; records last_match / last_transition.
+  int64_t decide(int i, const float* action) {
+    State& s = envs_[i];
+    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_);
+    s.last_transition = (j != s.frame);
+    s.last_match = j;
+    return j;
+  }
+
+  // Distance (meters) from env i's root to its target.
+  float target_distance(const State& s) const { return std::hypot(s.target_x - s.root.x, s.target_z - s.root.z); }
+
+  // The goal g_t: the target in the character frame (meters), written to two floats.
+  void observe_goal(const State& s, float* out) const {
+    const Vec2 g = world_to_local_xz(s.target_x - s.root.x, s.target_z - s.root.z, s.root.yaw);
+    out[0] = g.x();
+    out[1] = g.y();
+  }
+
+  // c_t: the normalized pose features of env i's current frame (kPoseDim floats).
+  void observe_pose(const State& s, float* out) const {
+    const float* pose = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
+    for (int k = 0; k < kPoseDim; ++k) out[k] = pose[k];
+  }
 
   const Database& db_;
   const Matcher& matcher_;
-  TargetTaskConfig config_;
-  std::vector<TargetEnvState> envs_;
+  Config config_;
   std::vector<int64_t> valid_frames_;
+  std::vector<State> envs_;
   float low_[kTrajectoryDim], high_[kTrajectoryDim];
   ThreadPool pool_;
+
+ private:
+  Task& task() { return static_cast<Task&>(*this); }
+  const Task& task() const { return static_cast<const Task&>(*this); }
 };
 
 }  // namespace mmrl

@@ -1,5 +1,4 @@
-#include "mmrl/obstacles_env.hpp"
-#include "mmrl/vecenv.hpp"  // draw_episode_start
+#include "mmrl/tasks/obstacles.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -52,25 +51,13 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
 
 ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int num_envs,
                                const ObstacleTaskConfig& config, int num_threads)
-    : db_(db),
-      matcher_(matcher),
-      config_(config),
-      envs_(static_cast<size_t>(std::max(1, num_envs))),
+    : TargetVecEnv(db, matcher, num_envs, config, num_threads),
       field_(num_envs, field_config(db, config)),
       map_slots_(config.previous_map_lag + 1),
-      maps_(static_cast<size_t>(std::max(1, num_envs)) * (config.previous_map_lag + 1) * kMapCells, 0),
+      maps_(static_cast<size_t>(num_envs) * (config.previous_map_lag + 1) * kMapCells, 0),
       stage_max_speed_(config.obstacle_max_speed),
       stage_half_extent_(config.target_half_extent),
-      frame_dt_(1.0f / db.fps),
-      pool_(num_threads) {
-  if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("matcher was not built over this database");
-  for (int64_t i = 0; i < db.num_frames; ++i)
-    if (db.valid[i]) valid_frames_.push_back(i);
-  if (valid_frames_.empty())
-    throw std::invalid_argument("the database has no valid frames (every clip is shorter than 31 frames)");
-  trajectory_action_box(db, config.action_limit_std, low_, high_);
-  for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
-}
+      frame_dt_(1.0f / db.fps) {}
 
 void ObstacleVecEnv::set_stage(float max_speed, float target_half_extent) {
   if (!(max_speed >= 0) || !(max_speed <= config_.speed_cap))
@@ -116,43 +103,26 @@ void ObstacleVecEnv::observe(int i, float* obs) const {
   const uint8_t* prev = previous_sensor_map(i);
   for (int k = 0; k < kMapCells; ++k) obs[kMapOffset + k] = cur[k];
   for (int k = 0; k < kMapCells; ++k) obs[kPrevMapOffset + k] = prev[k];
-  const float* pose = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
-  for (int k = 0; k < kPoseDim; ++k) obs[kPoseOffset + k] = pose[k];
-  const Vec2 g = world_to_local_xz(s.target_x - s.root.x, s.target_z - s.root.z, s.root.yaw);
-  obs[kGoalOffset] = g.x();
-  obs[kGoalOffset + 1] = g.y();
+  observe_pose(s, obs + kPoseOffset);
+  observe_goal(s, obs + kGoalOffset);
 }
 
-void ObstacleVecEnv::reset_env(int i, float* obs_row) {
+void ObstacleVecEnv::begin_episode(int i) {
   ObstacleEnvState& s = envs_[i];
   s.max_speed = stage_max_speed_;
   s.target_half_extent = stage_half_extent_;
-  draw_episode_start(s.rng, valid_frames_, config_.random_heading, s.target_half_extent,
-                     config_.min_target_distance, &s.frame, &s.root, &s.target_x, &s.target_z);
+  draw_start(i, s.target_half_extent);
   const ClearDisc clear[2] = {{0.0f, 0.0f, config_.body_radius + config_.start_clearance},
                               {s.target_x, s.target_z, config_.target_clearance}};
   field_.spawn(i, s.rng, s.max_speed, clear, 2);
-  s.steps = 0;
-  s.episode_return = 0;
-  s.last_match = -1;
-  s.last_transition = false;
   s.last_hits = 0;
   std::fill(s.hit_points, s.hit_points + 6, 0.0f);
   std::fill(s.hit_inside, s.hit_inside + 3, uint8_t{0});
   s.collided = false;
   refresh(i, false, true);
-  if (obs_row) observe(i, obs_row);
-}
-
-void ObstacleVecEnv::reset(uint64_t seed, float* obs) {
-  for (int i = 0; i < num_envs(); ++i) envs_[i].rng = Rng(seed, static_cast<uint64_t>(i));
-  pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
-    for (int64_t i = b; i < e; ++i) reset_env(static_cast<int>(i), obs ? obs + i * kObsDim : nullptr);
-  });
 }
 
 int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8_t* inside) const {
-  const ObstacleEnvState& s = envs_[i];
   float clipped[kTrajectoryDim], raw[kTrajectoryDim];
   for (int k = 0; k < kTrajectoryDim; ++k) clipped[k] = std::min(high_[k], std::max(low_[k], action[k]));
   trajectory_denormalize(db_, clipped, raw);
@@ -178,22 +148,19 @@ int ObstacleVecEnv::trajectory_hits(int i, const float* raw, float* points, uint
   return hits;
 }
 
-bool ObstacleVecEnv::advance(int i, const float* action, float* reward, bool* terminated, bool* truncated,
-                             bool* collided, int* hits) {
+TaskStep ObstacleVecEnv::advance(int i, const float* action) {
   ObstacleEnvState& s = envs_[i];
-  const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_);
+  const int64_t j = decide(i, action);
   // Both tests use the root and the obstacles at the step's start, before anything moves.
   s.last_hits = config_.hit_played
                     ? trajectory_hits(i, &db_.features[static_cast<size_t>(j) * kFeatureDim + kPoseDim], s.hit_points,
                                       s.hit_inside)
                     : action_hits(i, action, s.hit_points, s.hit_inside);
-  *hits = s.last_hits;
-  s.last_transition = (j != s.frame);
-  s.last_match = j;
   const float r2 = config_.success_radius * config_.success_radius;
   const bool moving = s.max_speed > 0;
   bool success = false, collision = false;
-  for (int k = 0; k < config_.frames_per_step && !success && !collision; ++k) {
+  int k = 0;
+  for (; k < config_.frames_per_step && !success && !collision; ++k) {
     if (moving) field_.move(i, frame_dt_);
     root_advance(s.root, &db_.root_deltas[static_cast<size_t>(j + k) * 3]);
     collision = field_.disc_overlaps_any(i, s.root.x, s.root.z, config_.body_radius);
@@ -201,69 +168,99 @@ bool ObstacleVecEnv::advance(int i, const float* action, float* reward, bool* te
     success = !collision && dx * dx + dz * dz <= r2;
   }
   s.frame = j + config_.frames_per_step;
-  s.steps += 1;
   s.collided = collision;
-  const float dist = std::hypot(s.target_x - s.root.x, s.target_z - s.root.z);
-  float r = std::exp(-dist);
+  TaskStep out;
+  out.frames_played = k;
+  out.reward = std::exp(-target_distance(s));
   if (config_.hit_reward)
-    r += config_.hit_weight * (std::exp(-static_cast<float>(s.last_hits)) - (config_.hit_penalty ? 1.0f : 0.0f));
-  if (success) r += config_.success_bonus;
-  *reward = r;
-  *terminated = success || collision;
-  *truncated = !*terminated && s.steps >= config_.max_steps;
-  *collided = collision;
-  s.episode_return += r;
-  return success;
+    out.reward += config_.hit_weight * (std::exp(-static_cast<float>(s.last_hits)) - (config_.hit_penalty ? 1.0f : 0.0f));
+  if (success) out.reward += config_.success_bonus;
+  out.terminated = success || collision;
+  out.success = success;
+  // The observation after the step: the grid when due, and the sensor map at the new root.
+  s.grid_age += 1;
+  refresh(i, true, false);
+  return out;
 }
 
 void ObstacleVecEnv::step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
                           uint8_t* success, uint8_t* collision, int32_t* hits, float* final_obs,
                           float* episode_return, int32_t* episode_length) {
-  pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
-    for (int64_t i = b; i < e; ++i) {
-      const int env = static_cast<int>(i);
-      bool term = false, trunc = false, coll = false;
-      int h = 0;
-      const bool ok = advance(env, actions + i * kActionDim, &rewards[i], &term, &trunc, &coll, &h);
-      terminated[i] = term;
-      truncated[i] = trunc;
-      success[i] = ok;
-      collision[i] = coll;
-      hits[i] = h;
-      float* row = obs + i * kObsDim;
-      envs_[i].grid_age += 1;
-      if (term || trunc) {
-        refresh(env, true, false);
-        observe(env, final_obs + i * kObsDim);
-        episode_return[i] = static_cast<float>(envs_[i].episode_return);
-        episode_length[i] = envs_[i].steps;
-        reset_env(env, row);
-      } else {
-        refresh(env, true, false);
-        observe(env, row);
-      }
-    }
-  }, 2);
+  const TargetStepBuffers out{obs, rewards, terminated, truncated, success, final_obs, episode_return, episode_length};
+  step_envs(actions, out, 2, [&](int i) {
+    collision[i] = envs_[i].collided;
+    hits[i] = envs_[i].last_hits;
+  });
 }
 
-void ObstacleVecEnv::set_target(int i, float x, float z) {
-  envs_[i].target_x = x;
-  envs_[i].target_z = z;
+void ObstacleVecEnv::sensor_map_bruteforce(int i, uint8_t* map) const {
+  const ObstacleEnvState& s = envs_[i];
+  field_.sensor_map_bruteforce(i, s.root.x, s.root.z, s.root.yaw, map);
+}
+
+void ObstacleVecEnv::sensor_positions(int i, float* out) const {
+  const ObstacleEnvState& s = envs_[i];
+  for (int r = 0; r < kMapSide; ++r)
+    for (int c = 0; c < kMapSide; ++c) {
+      const Vec2 p = field_.sensor_position(s.root.x, s.root.z, s.root.yaw, r, c);
+      out[(r * kMapSide + c) * 2] = p.x();
+      out[(r * kMapSide + c) * 2 + 1] = p.y();
+    }
+}
+
+bool ObstacleVecEnv::collides(int i, float x, float z) const {
+  if (!std::isfinite(x) || !std::isfinite(z)) throw std::invalid_argument("position must be finite");
+  return field_.disc_overlaps_any(i, x, z, config_.body_radius);
+}
+
+void ObstacleVecEnv::obstacles(int i, float* centres, float* half_sizes, float* angles, float* velocities) const {
+  for (int k = 0; k < field_.count(i); ++k) {
+    if (centres) centres[2 * k] = field_.centre(i, k).x(), centres[2 * k + 1] = field_.centre(i, k).y();
+    if (half_sizes) half_sizes[2 * k] = field_.half_size(i, k).x(), half_sizes[2 * k + 1] = field_.half_size(i, k).y();
+    if (angles) angles[k] = field_.angle(i, k);
+    if (velocities) velocities[2 * k] = field_.velocity(i, k).x(), velocities[2 * k + 1] = field_.velocity(i, k).y();
+  }
+}
+
+void ObstacleVecEnv::obstacles_after(int i, int frames, float* centres, float* velocities) const {
+  if (frames < 0) throw std::invalid_argument("frames must be >= 0");
+  // Static episodes never move (advance skips move() when the stage's max speed is 0).
+  field_.moved(i, envs_[i].max_speed > 0 ? frames : 0, frame_dt_, centres, velocities);
 }
 
 void ObstacleVecEnv::set_root(int i, float x, float z, float yaw) {
+  if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw)) throw std::invalid_argument("root must be finite");
   envs_[i].root.x = x;
   envs_[i].root.z = z;
   envs_[i].root.yaw = wrap_angle(yaw);
   refresh(i, false, true);
 }
 
+namespace {
+
+void check_finite(const float* v, int n, const char* name) {
+  for (int k = 0; k < n; ++k)
+    if (!std::isfinite(v[k]))
+      throw std::invalid_argument(std::string(name) + ": contains NaN or inf (at flat index " + std::to_string(k) + ")");
+}
+
+}  // namespace
+
 void ObstacleVecEnv::set_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
                                    const float* velocities) {
+  if (n < 0 || n > config_.num_obstacles)
+    throw std::invalid_argument("centres: at most num_obstacles = " + std::to_string(config_.num_obstacles) +
+                                " obstacles, got " + std::to_string(n));
+  check_finite(centres, 2 * n, "centres");
+  check_finite(half_sizes, 2 * n, "half_sizes");
+  check_finite(angles, n, "angles");
+  check_finite(velocities, 2 * n, "velocities");
+  for (int k = 0; k < 2 * n; ++k)
+    if (!(half_sizes[k] >= 0)) throw std::invalid_argument("half_sizes: must be >= 0");
   // The margin follows the fastest given obstacle, so moving hand-built scenes stay exact.
   float fastest = 0;
   for (int k = 0; k < n; ++k) fastest = std::max(fastest, std::hypot(velocities[2 * k], velocities[2 * k + 1]));
-  if (fastest > config_.speed_cap) throw std::invalid_argument("obstacle speed exceeds speed_cap");
+  if (fastest > config_.speed_cap) throw std::invalid_argument("velocities: obstacle speed exceeds speed_cap");
   field_.set(i, n, centres, half_sizes, angles, velocities);
   envs_[i].max_speed = fastest;
   refresh(i, false, true);

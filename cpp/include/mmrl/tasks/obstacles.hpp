@@ -1,5 +1,6 @@
-// The moving-obstacles task (paper, sections 4 and 5) as a batched C++ core with the same
-// step / reset / SAME_STEP autoreset contract as PlaneVecEnv (vecenv.hpp).
+// The moving-obstacles task (paper, sections 4 and 5) on the batched target-reaching env
+// (vecenv.hpp: pool, RNGs, valid frames, SAME_STEP autoreset, bookkeeping). This file holds
+// the task's observation, its step and its scene (obstacles, sensor maps, hits).
 //
 // observation (kObsDim = 529 floats, flat):
 //   [0, 256)    current sensor map, row-major [row][col] (grid.hpp: row along the
@@ -26,7 +27,8 @@
 // terminated   success (root within success_radius of the target) or collision (the body
 //              disc of body_radius around the root overlaps an obstacle), both tested on
 //              every played frame after the obstacles and the root have moved one frame;
-//              the first event ends the step; collision wins a tie.
+//              the first event ends the step (no later frame is played: last_step_frames
+//              is that frame's index + 1); collision wins a tie.
 // truncated    max_steps steps (the paper has no step limit; this cap only stops runaway
 //              episodes: 1500 steps = 300 s, far longer than any reasonable path).
 // Obstacles move every played frame (1 / fps s). The sensor square sits 1.5 m ahead by
@@ -45,10 +47,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "mmrl/controller.hpp"
 #include "mmrl/grid.hpp"
-#include "mmrl/rng.hpp"
-#include "mmrl/threadpool.hpp"
+#include "mmrl/vecenv.hpp"
 
 namespace mmrl {
 
@@ -82,14 +82,7 @@ struct ObstacleTaskConfig {
   float grid_cell_size = 1.5f;         // broadphase cell side (meters)
 };
 
-struct ObstacleEnvState {
-  RootState root;
-  int64_t frame = 0;
-  float target_x = 0, target_z = 0;
-  int steps = 0;
-  double episode_return = 0;
-  int64_t last_match = -1;
-  bool last_transition = false;
+struct ObstacleEnvState : TargetEnvState {
   // The stage this episode runs with.
   float max_speed = 0, target_half_extent = 0;
   // The last step's hits: the three tested trajectory positions in world (x, z) (the action's,
@@ -100,10 +93,9 @@ struct ObstacleEnvState {
   bool collided = false;
   int grid_age = 0;  // RL steps since env's grid was rebuilt
   int map_head = 0;  // ring slot of the current sensor map (the previous one is the next slot)
-  Rng rng;
 };
 
-class ObstacleVecEnv {
+class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState> {
  public:
   static constexpr int kMapOffset = 0;
   static constexpr int kPrevMapOffset = kMapCells;
@@ -113,13 +105,9 @@ class ObstacleVecEnv {
   static constexpr int kActionDim = kTrajectoryDim;
 
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
+  // Throws std::invalid_argument on a bad config.
   ObstacleVecEnv(const Database& db, const Matcher& matcher, int num_envs, const ObstacleTaskConfig& config,
                  int num_threads = 0);
-
-  int num_envs() const { return static_cast<int>(envs_.size()); }
-  const ObstacleTaskConfig& config() const { return config_; }
-  const float* action_low() const { return low_; }
-  const float* action_high() const { return high_; }
 
   // The stage for every environment's next reset. 0 <= max_speed <= speed_cap,
   // target_half_extent > min_target_distance.
@@ -127,19 +115,24 @@ class ObstacleVecEnv {
   float stage_max_speed() const { return stage_max_speed_; }
   float stage_target_half_extent() const { return stage_half_extent_; }
 
-  void reset(uint64_t seed, float* obs);
-  void reset_env(int i, float* obs_row);
   // actions: N x 12 (finite; checked by the caller). final_obs, episode_return and
   // episode_length rows are written only where an episode ended.
   void step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
             uint8_t* success, uint8_t* collision, int32_t* hits, float* final_obs, float* episode_return,
             int32_t* episode_length);
 
-  const ObstacleEnvState& state(int i) const { return envs_[i]; }
+  void observe(int i, float* obs_row) const;
   const ObstacleField& field() const { return field_; }
   const uint8_t* sensor_map(int i) const { return map_slot(i, envs_[i].map_head); }
   const uint8_t* previous_sensor_map(int i) const { return map_slot(i, (envs_[i].map_head + 1) % map_slots_); }
-  void observe(int i, float* obs_row) const;
+  // Env i's map now with every sensor tested against every obstacle (the tests' reference),
+  // kMapCells bytes [row][col].
+  void sensor_map_bruteforce(int i, uint8_t* map) const;
+  // World (x, z) of env i's sensors now, kMapSide x kMapSide x 2 floats [row][col].
+  void sensor_positions(int i, float* out) const;
+  // Whether env i's body disc (body_radius) at world (x, z) overlaps one of its obstacles.
+  bool collides(int i, float x, float z) const;
+
   // Counts hits of an action (12 normalized floats, clipped like a step's) for env i's
   // current state; writes the three world points and inside flags if given.
   int action_hits(int i, const float* action, float* points = nullptr, uint8_t* inside = nullptr) const;
@@ -147,16 +140,31 @@ class ObstacleVecEnv {
   // character frame), as action_hits does after denormalizing.
   int trajectory_hits(int i, const float* raw, float* points = nullptr, uint8_t* inside = nullptr) const;
 
-  // Scene editing (tests, evaluation, rendering). Each refreshes the grid and the current
-  // sensor map (the previous map is kept).
-  void set_target(int i, float x, float z);
+  // Env i's obstacles now (world meters, radians, m/s; see grid.hpp): centres and velocities
+  // (n x 2, (x, z)), half sizes (n x 2, along the obstacle's own X / Z), angles (n). n is
+  // obstacle_count(i); any output may be null.
+  int obstacle_count(int i) const { return field_.count(i); }
+  void obstacles(int i, float* centres, float* half_sizes, float* angles, float* velocities) const;
+  // Env i's obstacle centres and velocities (n x 2 each) after `frames` more played frames
+  // (frames >= 0) of the env's own motion (grid.hpp: constant velocity, bounce at the
+  // square's border), as a step would move them: called at a step's start, frames =
+  // last_step_frames gives the positions at the step's end. Sizes and angles do not change.
+  void obstacles_after(int i, int frames, float* centres, float* velocities) const;
+
+  // Scene editing (tests, evaluation, rendering). set_root and set_obstacles rebuild the
+  // grid and recompute the sensor map; both maps become the new one, as at a reset.
+  // set_target (TargetVecEnv) changes no map. Bad values throw std::invalid_argument
+  // naming the argument.
   void set_root(int i, float x, float z, float yaw);
+  // centres, half_sizes, velocities: n x 2; angles: n; 0 <= n <= num_obstacles; all finite,
+  // half sizes in [0, obstacle_max_side / 2], centres in the obstacle square, speeds <= speed_cap.
   void set_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
                      const float* velocities);
 
  private:
-  bool advance(int i, const float* action, float* reward, bool* terminated, bool* truncated, bool* collided,
-               int* hits);
+  friend class TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState>;
+  void begin_episode(int i);
+  TaskStep advance(int i, const float* action);
   // Steps between grid rebuilds for env i, and the margin that keeps the grid exact over them.
   int rebuild_interval(int i) const;
   float margin(int i) const;
@@ -164,10 +172,6 @@ class ObstacleVecEnv {
   // old current map becomes the previous one; else both are the new map).
   void refresh(int i, bool keep_previous, bool force_rebuild);
 
-  const Database& db_;
-  const Matcher& matcher_;
-  ObstacleTaskConfig config_;
-  std::vector<ObstacleEnvState> envs_;
   ObstacleField field_;
   const uint8_t* map_slot(int i, int k) const {
     return &maps_[(static_cast<size_t>(i) * map_slots_ + k) * kMapCells];
@@ -175,11 +179,8 @@ class ObstacleVecEnv {
   uint8_t* map_slot(int i, int k) { return &maps_[(static_cast<size_t>(i) * map_slots_ + k) * kMapCells]; }
   int map_slots_;              // previous_map_lag + 1
   std::vector<uint8_t> maps_;  // per env: a ring of map_slots_ maps, the newest at the env's map_head
-  std::vector<int64_t> valid_frames_;
-  float low_[kTrajectoryDim], high_[kTrajectoryDim];
   float stage_max_speed_, stage_half_extent_;
   float frame_dt_;
-  ThreadPool pool_;
 };
 
 }  // namespace mmrl

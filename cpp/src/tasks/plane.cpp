@@ -1,0 +1,59 @@
+#include "mmrl/tasks/plane.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace mmrl {
+
+namespace {
+
+const TargetTaskConfig& checked(const TargetTaskConfig& config) {
+  if (!(config.target_half_extent > 0) || !(config.success_radius > 0) || config.max_steps < 1 ||
+      !(config.action_limit_std > 0))
+    throw std::invalid_argument("target_half_extent, success_radius, max_steps and action_limit_std must be positive");
+  if (config.min_target_distance >= config.target_half_extent)
+    throw std::invalid_argument("min_target_distance must be smaller than target_half_extent");
+  return config;
+}
+
+}  // namespace
+
+PlaneVecEnv::PlaneVecEnv(const Database& db, const Matcher& matcher, int num_envs, const TargetTaskConfig& config,
+                         int num_threads)
+    : TargetVecEnv(db, matcher, num_envs, checked(config), num_threads) {}
+
+void PlaneVecEnv::observe(int i, float* obs) const {
+  const TargetEnvState& s = envs_[i];
+  observe_pose(s, obs);
+  observe_goal(s, obs + kPoseDim);
+}
+
+void PlaneVecEnv::begin_episode(int i) { draw_start(i, config_.target_half_extent); }
+
+TaskStep PlaneVecEnv::advance(int i, const float* action) {
+  TargetEnvState& s = envs_[i];
+  const int64_t j = decide(i, action);
+  const float r2 = config_.success_radius * config_.success_radius;
+  TaskStep out;
+  out.frames_played = config_.frames_per_step;
+  for (int k = 0; k < config_.frames_per_step; ++k) {
+    root_advance(s.root, &db_.root_deltas[static_cast<size_t>(j + k) * 3]);
+    const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
+    if (dx * dx + dz * dz <= r2 && !out.success) {  // tested on every played frame
+      out.success = true;
+      out.frames_played = k + 1;
+    }
+  }
+  s.frame = j + config_.frames_per_step;
+  out.reward = std::exp(-target_distance(s)) + (out.success ? config_.success_bonus : 0.0f);
+  out.terminated = out.success;
+  return out;
+}
+
+void PlaneVecEnv::step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
+                       uint8_t* success, float* final_obs, float* episode_return, int32_t* episode_length) {
+  const TargetStepBuffers out{obs, rewards, terminated, truncated, success, final_obs, episode_return, episode_length};
+  step_envs(actions, out, 4, [](int) {});
+}
+
+}  // namespace mmrl
