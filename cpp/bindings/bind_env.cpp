@@ -120,6 +120,14 @@ void bind_env(py::module_& m) {
           "Writes into out (int32, N) how many frames of the last step each environment played before its episode "
           "ended: the index of the first frame within success_radius + 1, else frames_per_step (0 after reset).")
       .def(
+          "set_state",
+          [](PyPlaneVecEnv& s, int i, int64_t frame, float x, float z, float yaw) {
+            if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
+            s.env.set_state(i, frame, x, z, yaw);
+          },
+          py::arg("index"), py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"),
+          "Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.")
+      .def(
           "set_target",
           [](PyPlaneVecEnv& s, int i, float x, float z) {
             if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");

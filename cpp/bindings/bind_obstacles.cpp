@@ -276,6 +276,13 @@ void bind_obstacles(py::module_& m) {
           },
           py::arg("index"), py::arg("x"), py::arg("z"), py::arg("yaw"))
       .def(
+          "set_state",
+          [](PyObstacleVecEnv& s, int i, int64_t frame, float x, float z, float yaw) {
+            s.env.set_state(checked_index(s, i), frame, x, z, yaw);
+          },
+          py::arg("index"), py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"),
+          "Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.")
+      .def(
           "current_frames",
           [](const PyObstacleVecEnv& s, const py::handle& out) {
             s.env.current_frames(writable_buffer<int64_t>(out, "out", {s.env.num_envs()}));

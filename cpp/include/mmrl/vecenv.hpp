@@ -132,6 +132,22 @@ class TargetVecEnv {
     envs_[i].target_z = z;
   }
 
+  // Puts env i's character on database frame `frame` at world (x, z) facing yaw (radians),
+  // keeping its target, step count, return and RNG: e.g. to go on from where a full-path
+  // character stands. The task refreshes what depends on the root (on_state_set). Throws
+  // std::invalid_argument for a frame outside the database or a non-finite root.
+  void set_state(int i, int64_t frame, float x, float z, float yaw) {
+    if (frame < 0 || frame >= db_.num_frames) throw std::invalid_argument("frame is outside the database");
+    if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw))
+      throw std::invalid_argument("root must be finite");
+    State& s = envs_[i];
+    s.frame = frame;
+    s.root.x = x;
+    s.root.z = z;
+    s.root.yaw = wrap_angle(yaw);
+    task().on_state_set(i);
+  }
+
   // Each environment's current database frame (N).
   void current_frames(int64_t* out) const {
     for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].frame;
@@ -201,6 +217,9 @@ class TargetVecEnv {
     s.last_match = j;
     return j;
   }
+
+  // Hook of set_state for tasks whose state depends on the root (a task hides it).
+  void on_state_set(int) {}
 
   // Distance (meters) from env i's root to its target.
   float target_distance(const State& s) const { return std::hypot(s.target_x - s.root.x, s.target_z - s.root.z); }

@@ -163,6 +163,8 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
 
  private:
   friend class TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState>;
+  // After set_state: rebuild the grid and both sensor maps around the new root.
+  void on_state_set(int i) { refresh(i, false, true); }
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   // Steps between grid rebuilds for env i, and the margin that keeps the grid exact over them.
