@@ -1,37 +1,97 @@
-"""Atomic file writes: a temp file in the same directory, fsync, rename (placeholder, replaced on merge)."""
+"""Atomic file writes, the one helper for the whole package.
+
+A reader (another process, or the next run after a crash or Ctrl-C) sees either the old
+file or the complete new one, never a torn mix: the data goes to a temp file in the same
+directory (so the rename stays on one file system), is flushed and fsync'ed, then renamed
+over the target with ``os.replace`` (atomic on POSIX and Windows), and the directory is
+fsync'ed so the rename itself survives a power loss. On any error, including
+KeyboardInterrupt, the temp file is removed and the old file is left untouched.
+
+The new file gets the permissions a plain ``open(path, "w")`` would give (0666 minus the
+umask), not the 0600 of ``tempfile.mkstemp``.
+"""
 from __future__ import annotations
 
+import contextlib
 import os
 import tempfile
 from pathlib import Path
+from typing import IO, Any, Iterator, Optional, Union
+
+__all__ = ["atomic_open", "atomic_write_bytes", "atomic_write_text"]
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+# Read once at import (os.umask can only be read by setting it).
+_UMASK = os.umask(0)
+os.umask(_UMASK)
 
 
-def atomic_write_bytes(path, data: bytes) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+def _fsync_dir(directory: Path) -> None:
     try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
+        fd = os.open(directory, os.O_RDONLY)
+    except OSError:
+        return  # not supported (e.g. Windows); the rename is still atomic
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass  # some file systems refuse fsync on directories; the rename is still atomic
+    finally:
+        os.close(fd)
+
+
+@contextlib.contextmanager
+def atomic_open(path: PathLike, mode: str = "w", *, encoding: Optional[str] = None,
+                newline: Optional[str] = None) -> Iterator[IO[Any]]:
+    """Open a temp file beside ``path`` for writing; on a clean exit it replaces ``path``.
+
+    ``mode`` is "w"/"wt" (text, ``encoding`` defaults to UTF-8) or "wb" (binary). The
+    directory must exist. Example::
+
+        with atomic_open(run_dir / "config.json") as file:
+            json.dump(config, file)
+    """
+    if mode not in ("w", "wt", "wb"):
+        raise ValueError(f"atomic_open: mode must be 'w', 'wt' or 'wb', got {mode!r}")
+    path = Path(path)
+    binary = "b" in mode
+    if binary and (encoding is not None or newline is not None):
+        raise ValueError("atomic_open: encoding and newline apply to text mode only")
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    text_args = {} if binary else {"encoding": encoding or "utf-8", "newline": newline}
+    try:
+        with os.fdopen(fd, mode, **text_args) as file:
+            if hasattr(os, "fchmod"):
+                os.fchmod(file.fileno(), 0o666 & ~_UMASK)
+            yield file
+            file.flush()
+            os.fsync(file.fileno())
+        os.replace(tmp_name, path)
     except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp_name)
         raise
-    return path
+    _fsync_dir(path.parent)
 
 
-def atomic_write_text(path, text: str) -> Path:
-    return atomic_write_bytes(path, text.encode())
+def atomic_write_bytes(path: PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (see the module docstring); returns the path."""
+    with atomic_open(path, "wb") as file:
+        file.write(data)
+    return Path(path)
 
 
-def atomic_write_npz(path, **arrays) -> Path:
-    import io as _io
+def atomic_write_text(path: PathLike, text: str, encoding: str = "utf-8") -> Path:
+    """Write ``text`` to ``path`` atomically (see the module docstring); returns the path."""
+    with atomic_open(path, "w", encoding=encoding) as file:
+        file.write(text)
+    return Path(path)
 
+
+def atomic_write_npz(path: "str | os.PathLike[str]", **arrays) -> Path:
+    """``numpy.savez`` of ``arrays`` to ``path``, atomically (nothing partial is ever visible)."""
     import numpy as np
 
-    buf = _io.BytesIO()
-    np.savez(buf, **arrays)
-    return atomic_write_bytes(path, buf.getvalue())
+    with atomic_open(path, "wb") as f:
+        np.savez(f, **arrays)
+    return Path(path)

@@ -13,17 +13,85 @@ Every actor-critic here has the interface ``mmrl.ppo`` relies on:
 - ``init_kwargs``: the constructor arguments, saved in checkpoints so
   ``mmrl.ppo.load_policy`` can rebuild the network without the env.
 
+Loading a checkpoint never imports code: a checkpoint names its network, and only classes
+in this module's registry can be built. The paper's networks are registered here; register
+your own with ``register_network(MyActorCritic)`` (usable as a class decorator) before
+loading a checkpoint that uses it.
+
 Policy and value networks never share weights, as in the paper.
 Observations arrive already normalized by PPO (see ``PPOConfig.obs_norm``).
 """
 from __future__ import annotations
 
 import math
+from typing import Optional, TypeVar
 
 import torch
 from torch import nn
 
-__all__ = ["PlaneActorCritic", "ObstacleActorCritic", "OBSTACLE_DEFAULT_LAYOUT"]
+__all__ = ["PlaneActorCritic", "ObstacleActorCritic", "OBSTACLE_DEFAULT_LAYOUT", "register_network",
+           "registered_networks", "network_class", "network_name"]
+
+# ----------------------------------------------------------------------------- registry
+
+_NETWORKS: dict[str, type] = {}
+NetworkClass = TypeVar("NetworkClass", bound=type)
+
+
+def _class_path(cls: type) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def register_network(cls: NetworkClass, name: Optional[str] = None) -> NetworkClass:
+    """Let checkpoints that name ``cls`` be loaded; returns ``cls`` (so it works as a decorator).
+
+    ``name`` (default: the class's qualified name) is what new checkpoints store. Registering
+    the same name again for the same class (e.g. after a module reload) is allowed; for a
+    different class it is an error.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, nn.Module)):
+        raise TypeError(f"register_network: expected a torch.nn.Module subclass, got {cls!r}")
+    missing = [method for method in ("actor_mean", "value") if not callable(getattr(cls, method, None))]
+    if missing:
+        raise TypeError(f"register_network: {cls.__qualname__} lacks {', '.join(missing)} (see mmrl.networks)")
+    name = cls.__qualname__ if name is None else str(name)
+    if not name or ":" in name:
+        raise ValueError(f"register_network: invalid name {name!r} (non-empty, no ':')")
+    previous = _NETWORKS.get(name)
+    if previous is not None and _class_path(previous) != _class_path(cls):
+        raise ValueError(f"register_network: {name!r} is already registered for {_class_path(previous)}")
+    _NETWORKS[name] = cls
+    return cls
+
+
+def registered_networks() -> list[str]:
+    """The names of all registered network classes, sorted."""
+    return sorted(_NETWORKS)
+
+
+def network_class(stored_name: str) -> type:
+    """The registered class a checkpoint's ``model_class`` names: a registered name, or the
+    "module:qualname" form older checkpoints store (e.g. "mmrl.networks:PlaneActorCritic"),
+    matched against the registered classes. Never imports anything; raises ``KeyError``
+    for any other name."""
+    if stored_name in _NETWORKS:
+        return _NETWORKS[stored_name]
+    for cls in _NETWORKS.values():
+        if _class_path(cls) == stored_name:
+            return cls
+    raise KeyError(stored_name)
+
+
+def network_name(model: nn.Module) -> str:
+    """What a checkpoint stores for ``model``: its registered name, else "module:qualname"
+    (which loads once that class is registered)."""
+    for name, cls in _NETWORKS.items():
+        if type(model) is cls:
+            return name
+    return _class_path(type(model))
+
+
+# ----------------------------------------------------------------------------- building blocks
 
 
 def _linear(in_features: int, out_features: int, gain: float = math.sqrt(2)) -> nn.Linear:
@@ -45,6 +113,7 @@ def _mlp(in_features: int, hidden: tuple[int, ...], out_features: int, out_gain:
     return nn.Sequential(*layers)
 
 
+@register_network
 class PlaneActorCritic(nn.Module):
     """Plane task: policy MLP 32 x 32 tanh -> action mean; value MLP 32 x 32 tanh -> 1.
 
@@ -108,6 +177,7 @@ class _ObstacleTower(nn.Module):
         return self.head(torch.cat([features, vector], dim=-1))
 
 
+@register_network
 class ObstacleActorCritic(nn.Module):
     """Moving-obstacles task: separate CNN towers for policy and value.
 

@@ -1,8 +1,11 @@
-"""Proximal Policy Optimization for gymnasium 1.x vector envs, in one file.
+"""Proximal Policy Optimization for gymnasium 1.x vector envs.
 
-Reads top to bottom: the config, small helpers (running statistics, GAE,
-checkpoints), the policy loader used by ``mmrl eval``/``render``, then
-``train`` with one flat loop: collect a rollout, compute advantages, update.
+Reads top to bottom like cleanrl's single file: the config, GAE, rollout collection, the
+update, and ``train``'s short loop (collect a rollout, compute advantages, update, log,
+checkpoint). The rest lives in modules of its own and is re-exported here: checkpoint files
+and RNG capture in ``mmrl.checkpoints``, the metrics log and progress bar in
+``mmrl.logger``, the observation normalizer and the policy loader used by ``mmrl
+eval``/``render`` in ``mmrl.trained_policy``, the networks in ``mmrl.networks``.
 
 The env contract (what the mmrl envs provide, and ``tests/_toyenv.py``):
 
@@ -27,34 +30,44 @@ Design choices, and why:
   ``torch.Generator``, so CPU and CUDA runs sample the same noise. On CUDA, a
   few kernels (atomics in backward of some ops) may still make runs differ in
   the last bits; on CPU the same seed gives bit-identical metrics.
+- Ctrl-C keeps the progress of every completed iteration: the learner's state
+  (weights, optimizer, normalizers, step count, iteration, wall time, RNG) only
+  changes between rollouts, Ctrl-C during that short stretch is held until the
+  iteration is done, and the checkpoint written on Ctrl-C is the state as of the
+  last completed iteration, the steps of an unfinished rollout discarded.
 """
 from __future__ import annotations
 
-import csv
-import dataclasses
-import importlib
+import contextlib
 import math
 import os
 import random
-import tempfile
+import signal
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Literal, Optional, Sequence
+from typing import Any, Callable, Iterator, Literal, Optional, Sequence
 
 import gymnasium as gym
 import numpy as np
 import torch
 from torch import nn
 
+from .checkpoints import (CheckpointError, TrainingState, capture_rng_state, load_checkpoint, save_checkpoint,
+                          save_due_checkpoints)
+from .logger import MetricsLogger, ProgressBar
+from .trained_policy import NonFiniteError, ObsNormalizer, Policy, RunningMeanStd, load_policy, resolve_device
+
 __all__ = [
     "PPOConfig", "TrainResult", "train", "load_policy", "Policy", "compute_gae", "successor_values",
     "CheckpointError", "NonFiniteError", "save_checkpoint", "load_checkpoint",
 ]
 
-CHECKPOINT_FORMAT = "mmrl-ppo-checkpoint"
-CHECKPOINT_VERSION = 1
+LOG_2PI = math.log(2 * math.pi)
 
+# This module is over the 500-line guideline on purpose: PPOConfig documents each of its
+# ~30 fields (~150 lines), and stays here beside the algorithm it tunes, as in cleanrl.
 
 # ----------------------------------------------------------------------------- config
 
@@ -219,84 +232,6 @@ class TrainResult:
     metrics_csv: Path
 
 
-class CheckpointError(RuntimeError):
-    """A checkpoint file is missing, corrupt, or not an mmrl PPO checkpoint."""
-
-
-class NonFiniteError(RuntimeError):
-    """NaN or inf in observations, actions, rewards or the loss."""
-
-
-# ----------------------------------------------------------------------------- running statistics
-
-class RunningMeanStd:
-    """Mean and variance of a stream of batches (parallel Welford), in float64."""
-
-    def __init__(self, shape: tuple[int, ...] = ()):
-        self.mean = np.zeros(shape, np.float64)
-        self.var = np.ones(shape, np.float64)
-        self.count = 1e-4
-
-    def update(self, batch: np.ndarray) -> None:
-        batch = np.asarray(batch, np.float64).reshape(-1, *self.mean.shape)
-        batch_mean, batch_var, batch_count = batch.mean(0), batch.var(0), batch.shape[0]
-        delta = batch_mean - self.mean
-        total = self.count + batch_count
-        self.mean = self.mean + delta * batch_count / total
-        m2 = self.var * self.count + batch_var * batch_count + delta**2 * self.count * batch_count / total
-        self.var = m2 / total
-        self.count = total
-
-    def state_dict(self) -> dict:
-        return {"mean": torch.from_numpy(np.array(self.mean, np.float64)),
-                "var": torch.from_numpy(np.array(self.var, np.float64)),
-                "count": float(self.count)}
-
-    def load_state_dict(self, state: dict) -> None:
-        self.mean = state["mean"].numpy().astype(np.float64)
-        self.var = state["var"].numpy().astype(np.float64)
-        self.count = float(state["count"])
-
-
-class ObsNormalizer:
-    """Running observation statistics plus the frozen torch affine map used to act:
-    normalized = clamp(obs * scale + shift, -clip, clip)."""
-
-    def __init__(self, obs_dim: int, enabled: bool, exclude: Optional[tuple[int, int]], clip: float,
-                 device: torch.device):
-        self.rms = RunningMeanStd((obs_dim,))
-        self.enabled, self.exclude, self.clip = enabled, exclude, clip
-        self.scale = torch.ones(obs_dim, device=device)
-        self.shift = torch.zeros(obs_dim, device=device)
-
-    def refresh(self) -> None:
-        """Copy the running statistics into the frozen affine map."""
-        if not self.enabled:
-            return
-        scale = 1.0 / np.sqrt(self.rms.var + 1e-8)
-        shift = -self.rms.mean * scale
-        if self.exclude is not None:
-            scale[self.exclude[0]:self.exclude[1]] = 1.0
-            shift[self.exclude[0]:self.exclude[1]] = 0.0
-        self.scale.copy_(torch.from_numpy(scale.astype(np.float32)))
-        self.shift.copy_(torch.from_numpy(shift.astype(np.float32)))
-
-    def __call__(self, obs: torch.Tensor) -> torch.Tensor:
-        if not self.enabled:
-            return obs
-        return torch.addcmul(self.shift, obs, self.scale).clamp_(-self.clip, self.clip)
-
-    def state_dict(self) -> dict:
-        return {"rms": self.rms.state_dict(), "enabled": self.enabled, "exclude": self.exclude,
-                "clip": self.clip}
-
-    def load_state_dict(self, state: dict) -> None:
-        self.rms.load_state_dict(state["rms"])
-        self.enabled, self.clip = bool(state["enabled"]), float(state["clip"])
-        self.exclude = tuple(state["exclude"]) if state["exclude"] is not None else None
-        self.refresh()
-
-
 # ----------------------------------------------------------------------------- advantages
 
 def successor_values(values: np.ndarray, terminated: np.ndarray, truncations: Sequence[tuple[int, np.ndarray]],
@@ -359,157 +294,7 @@ def scale_rewards(rewards: np.ndarray, episode_ends: np.ndarray, running_return:
     return scaled
 
 
-# ----------------------------------------------------------------------------- checkpoints
-
-def _fsync_dir(directory: Path) -> None:
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return  # not supported (e.g. Windows); the rename is still atomic
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def save_checkpoint(state: dict, path: str | os.PathLike) -> Path:
-    """Write ``state`` atomically: a temp file in the same directory, fsync, rename.
-
-    If anything fails, the file already at ``path`` is untouched.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    payload = {"format": CHECKPOINT_FORMAT, "version": CHECKPOINT_VERSION, **state}
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as file:
-            torch.save(payload, file)
-            file.flush()
-            os.fsync(file.fileno())
-        os.replace(tmp_name, path)
-    except BaseException:
-        if os.path.exists(tmp_name):
-            os.unlink(tmp_name)
-        raise
-    _fsync_dir(path.parent)
-    return path
-
-
-def load_checkpoint(path: str | os.PathLike, map_location: Any = "cpu") -> dict:
-    """Load and validate a checkpoint; raise ``CheckpointError`` naming the file otherwise."""
-    path = Path(path)
-    if not path.is_file():
-        raise CheckpointError(f"{path}: no such checkpoint file")
-    try:
-        state = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as error:  # torch raises several types for truncated or foreign files
-        raise CheckpointError(f"{path}: not a readable checkpoint (corrupt or truncated?): {error}") from error
-    if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointError(f"{path}: not an mmrl PPO checkpoint")
-    if state.get("version") != CHECKPOINT_VERSION:
-        raise CheckpointError(f"{path}: checkpoint version {state.get('version')} is not supported "
-                              f"(expected {CHECKPOINT_VERSION})")
-    return state
-
-
-def _class_path(obj: object) -> str:
-    return f"{type(obj).__module__}:{type(obj).__qualname__}"
-
-
-def _build_model(class_path: str, kwargs: dict) -> nn.Module:
-    module_name, _, qualname = class_path.partition(":")
-    target: Any = importlib.import_module(module_name)
-    for part in qualname.split("."):
-        target = getattr(target, part)
-    return target(**kwargs)
-
-
-def _rng_state() -> dict:
-    np_state = np.random.get_state()
-    return {
-        "python": random.getstate(),
-        "numpy": {"keys": torch.from_numpy(np_state[1].astype(np.int64)), "pos": int(np_state[2]),
-                  "has_gauss": int(np_state[3]), "cached_gaussian": float(np_state[4])},
-        "torch": torch.get_rng_state(),
-        "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else [],
-    }
-
-
-def _set_rng_state(state: dict) -> None:
-    random.setstate(_as_tuple(state["python"]))
-    np_state = state["numpy"]
-    np.random.set_state(("MT19937", np_state["keys"].numpy().astype(np.uint32), np_state["pos"],
-                         np_state["has_gauss"], np_state["cached_gaussian"]))
-    torch.set_rng_state(state["torch"])
-    if state["cuda"] and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["cuda"])
-
-
-def _as_tuple(value: Any) -> Any:
-    return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
-
-
-# ----------------------------------------------------------------------------- acting with a saved policy
-
-class Policy:
-    """A trained policy for evaluation and rendering: applies the saved
-    observation normalization, then the Gaussian mean (deterministic) or a sample."""
-
-    def __init__(self, model: nn.Module, obs_normalizer: ObsNormalizer, device: torch.device,
-                 action_center: Optional[np.ndarray] = None, action_half: Optional[np.ndarray] = None):
-        self.model = model.eval()
-        self.obs_normalizer = obs_normalizer
-        self.device = device
-        self.action_center = action_center
-        self.action_half = action_half
-
-    @torch.inference_mode()
-    def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """obs (obs_dim,) or (B, obs_dim) -> actions (act_dim,) or (B, act_dim), float32."""
-        obs = np.asarray(obs, np.float32)
-        single = obs.ndim == 1
-        obs_t = torch.as_tensor(obs.reshape(1, -1) if single else obs, device=self.device)
-        if not torch.isfinite(obs_t).all():
-            raise NonFiniteError("Policy.act: observation contains NaN or inf")
-        mean = self.model.actor_mean(self.obs_normalizer(obs_t))
-        if not deterministic:
-            mean = mean + self.model.log_std.exp() * torch.randn_like(mean)
-        actions = mean.float().cpu().numpy()
-        if self.action_center is not None:
-            actions = (self.action_center + self.action_half * actions).astype(np.float32)
-        return actions[0] if single else actions
-
-
-def load_policy(path: str | os.PathLike, device: str = "cpu") -> Policy:
-    """Rebuild the policy saved in a checkpoint written by ``train``."""
-    device_t = _resolve_device(device)
-    state = load_checkpoint(path)
-    try:
-        model = _build_model(state["model_class"], state["model_kwargs"]).to(device_t)
-        model.load_state_dict(state["model"])
-    except Exception as error:
-        raise CheckpointError(f"{path}: cannot rebuild the network: {error}") from error
-    obs_dim = state["obs_normalizer"]["rms"]["mean"].shape[0]
-    normalizer = ObsNormalizer(obs_dim, True, None, 10.0, device_t)
-    normalizer.load_state_dict(state["obs_normalizer"])
-    center, half = state.get("action_center"), state.get("action_half")
-    return Policy(model, normalizer, device_t,
-                  None if center is None else np.asarray(center, np.float32),
-                  None if half is None else np.asarray(half, np.float32))
-
-
-# ----------------------------------------------------------------------------- training
-
-def _resolve_device(device: str) -> torch.device:
-    if device == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    return torch.device(device)
-
-
-def _default_policy_factory(obs_dim: int, act_dim: int, init_log_std: float = 0.0) -> nn.Module:
-    from .networks import PlaneActorCritic
-    return PlaneActorCritic(obs_dim, act_dim, init_log_std=init_log_std)
-
+# ----------------------------------------------------------------------------- setup
 
 def _check_env(envs: gym.vector.VectorEnv) -> tuple[int, int]:
     mode = envs.metadata.get("autoreset_mode")
@@ -523,102 +308,16 @@ def _check_env(envs: gym.vector.VectorEnv) -> tuple[int, int]:
     return obs_space.shape[0], act_space.shape[0]
 
 
-def _final_obs_rows(infos: dict, envs_idx: np.ndarray) -> np.ndarray:
-    if "final_obs" not in infos:
-        raise ValueError("train: an episode was truncated but infos has no 'final_obs' (SAME_STEP contract)")
-    final_obs = infos["final_obs"]
-    if final_obs.dtype == object:  # gymnasium's SyncVectorEnv stores one array per env
-        return np.stack([np.asarray(final_obs[i], np.float32) for i in envs_idx])
-    return np.asarray(final_obs[envs_idx], np.float32)
-
-
-class _MetricsLog:
-    """metrics.csv (appended on resume) plus an optional TensorBoard writer."""
-
-    BASE_COLUMNS = ("step", "wall_s", "iteration", "episode_return", "episode_length", "success_rate",
-                    "episodes", "sps", "learning_rate", "policy_loss", "value_loss", "entropy", "approx_kl",
-                    "clipfrac", "explained_variance", "env_us", "act_us", "update_us")
-
-    def __init__(self, out_dir: Path, resume_step: Optional[int], tensorboard: bool):
-        self.path = out_dir / "metrics.csv"
-        self.columns: Optional[list[str]] = None
-        if resume_step is not None and self.path.exists():
-            # Drop rows logged after the checkpoint we resume from.
-            with open(self.path, newline="") as file:
-                rows = list(csv.reader(file))
-            if rows:
-                self.columns = rows[0]
-                kept = [rows[0]] + [r for r in rows[1:] if r and int(float(r[0])) <= resume_step]
-                if len(kept) != len(rows):
-                    tmp = self.path.with_suffix(".csv.tmp")
-                    with open(tmp, "w", newline="") as file:
-                        csv.writer(file).writerows(kept)
-                    os.replace(tmp, self.path)
-        self.file = open(self.path, "a", newline="")
-        self.writer: Optional[csv.DictWriter] = None
-        if self.columns is not None:
-            self.writer = csv.DictWriter(self.file, self.columns, extrasaction="ignore")
-        self.tb = None
-        if tensorboard:
-            from torch.utils.tensorboard import SummaryWriter
-            self.tb = SummaryWriter(str(out_dir))
-
-    def write(self, row: dict) -> None:
-        if self.writer is None:
-            extra = [k for k in row if k not in self.BASE_COLUMNS]
-            self.columns = list(self.BASE_COLUMNS) + extra
-            self.writer = csv.DictWriter(self.file, self.columns, extrasaction="ignore")
-            self.writer.writeheader()
-        self.writer.writerow({k: row.get(k, "") for k in self.columns})
-        self.file.flush()
-        if self.tb is not None:
-            step = int(row["step"])
-            for key, value in row.items():
-                if key in ("step", "iteration") or not np.isfinite(value):
-                    continue
-                group = "time" if key.endswith("_us") else "losses" if key in ("policy_loss", "value_loss", "entropy", "approx_kl", "clipfrac",
-                                            "explained_variance") else "charts"
-                name = {"sps": "SPS"}.get(key, key)
-                self.tb.add_scalar(f"{group}/{name}", value, step)
-
-    def close(self) -> None:
-        self.file.close()
-        if self.tb is not None:
-            self.tb.close()
-
-
-def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike, *,
-          policy_factory: Optional[Callable[[int, int], nn.Module]] = None, resume: bool = False,
-          callbacks: Sequence[Any] | None = None) -> TrainResult:
-    """Train a Gaussian policy with PPO on ``envs``; write metrics and checkpoints to ``out_dir``.
-
-    ``policy_factory(obs_dim, act_dim)`` builds the actor-critic (default: the
-    paper's ``PlaneActorCritic``); see ``mmrl.networks`` for the interface.
-    ``resume=True`` continues from ``out_dir/latest.pt``: model, optimizer,
-    normalizers, step, wall time, RNG and callback state. The envs are reset
-    (their state is not checkpointed) with seed ``cfg.seed + global_step``.
-    ``callbacks``: objects with any of ``on_iteration(stats) -> dict | None``
-    (extra scalar columns for CSV/TensorBoard), ``state_dict()`` and
-    ``load_state_dict(state)`` (stored in checkpoints under their index).
-    ``stats`` holds the iteration's scalars plus ``stats["episodes"]``, a dict
-    of arrays "return", "length", "success" for the episodes that ended.
-    """
-    callbacks = list(callbacks or [])
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    latest_path = out_dir / "latest.pt"
-    if not resume and latest_path.exists():
-        raise FileExistsError(f"{out_dir} already holds a run ({latest_path}); pass resume=True or use a new directory")
+def _make_learner(envs: gym.vector.VectorEnv, cfg: PPOConfig, policy_factory: Optional[Callable[[int, int], nn.Module]],
+                  callbacks: list) -> TrainingState:
+    """Seed everything, then build the network, optimizer and normalizers for ``envs``."""
     obs_dim, act_dim = _check_env(envs)
     action_center = action_half = None
     space = envs.single_action_space
     if cfg.rescale_actions and np.all(np.isfinite(space.low)) and np.all(np.isfinite(space.high)):
         action_center = ((space.high + space.low) / 2).astype(np.float32)
         action_half = ((space.high - space.low) / 2).astype(np.float32)
-    num_envs, T = envs.num_envs, cfg.num_steps
-    batch_size = T * num_envs
-    minibatch_size = max(1, batch_size // cfg.num_minibatches)
-    device = _resolve_device(cfg.device)
+    device = resolve_device(cfg.device)
     if cfg.torch_threads > 0:
         torch.set_num_threads(cfg.torch_threads)
 
@@ -629,7 +328,8 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
     generator = torch.Generator().manual_seed(cfg.seed)
 
     if policy_factory is None:
-        model = _default_policy_factory(obs_dim, act_dim, cfg.init_log_std).to(device)
+        from .networks import PlaneActorCritic
+        model = PlaneActorCritic(obs_dim, act_dim, init_log_std=cfg.init_log_std).to(device)
     else:
         model = policy_factory(obs_dim, act_dim).to(device)
     # The fused Adam kernel (CPU and CUDA, torch >= 2.4) is ~7x cheaper per step
@@ -638,286 +338,399 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
         optimizer = torch.optim.Adam(model.parameters(), lr=cfg.learning_rate, eps=1e-5, fused=True)
     except (RuntimeError, TypeError):
         optimizer = torch.optim.Adam(model.parameters(), lr=cfg.learning_rate, eps=1e-5)
-    obs_normalizer = ObsNormalizer(obs_dim, cfg.obs_norm, cfg.obs_norm_exclude, cfg.obs_clip, device)
-    return_rms = RunningMeanStd()  # discounted returns ("scale") or value targets ("value")
-    running_return = np.zeros(num_envs, np.float64)
-    global_step, wall_offset, iteration = 0, 0.0, 0
-    saved_snapshots: set[int] = set()
+    return TrainingState(cfg=cfg, model=model, optimizer=optimizer,
+                         obs_normalizer=ObsNormalizer(obs_dim, cfg.obs_norm, cfg.obs_norm_exclude, cfg.obs_clip, device),
+                         return_rms=RunningMeanStd(), running_return=np.zeros(envs.num_envs, np.float64),
+                         generator=generator, device=device, action_center=action_center, action_half=action_half,
+                         callbacks=callbacks)
 
-    if resume:
-        state = load_checkpoint(latest_path)  # on the CPU: RNG states must stay there
-        try:
-            model.load_state_dict(state["model"])
-            optimizer.load_state_dict(state["optimizer"])
-        except Exception as error:
-            raise CheckpointError(f"{latest_path}: does not fit this network/config: {error}") from error
-        obs_normalizer.load_state_dict(state["obs_normalizer"])
-        return_rms.load_state_dict(state["return_rms"])
-        global_step, wall_offset, iteration = state["global_step"], state["wall_s"], state["iteration"]
-        saved_snapshots = set(state["snapshots"])
-        _set_rng_state(state["rng"])
-        generator.set_state(state["rng"]["ppo_generator"])
-        for i, callback in enumerate(callbacks):
-            if hasattr(callback, "load_state_dict") and i in state["callbacks"]:
-                callback.load_state_dict(state["callbacks"][i])
 
-    def checkpoint_state(wall_s: float) -> dict:
-        rng = _rng_state()
-        rng["ppo_generator"] = generator.get_state()
-        return {
-            "model": model.state_dict(), "model_class": _class_path(model),
-            "model_kwargs": getattr(model, "init_kwargs", {}),
-            "optimizer": optimizer.state_dict(), "obs_normalizer": obs_normalizer.state_dict(),
-            "return_rms": return_rms.state_dict(), "global_step": global_step, "wall_s": wall_s,
-            "iteration": iteration, "snapshots": sorted(saved_snapshots), "rng": rng,
-            "config": dataclasses.asdict(cfg),
-            "action_center": None if action_center is None else action_center.tolist(),
-            "action_half": None if action_half is None else action_half.tolist(),
-            "callbacks": {i: cb.state_dict() for i, cb in enumerate(callbacks) if hasattr(cb, "state_dict")},
-        }
+# ----------------------------------------------------------------------------- rollout collection
 
-    # Rollout storage lives on the CPU with numpy views, so env results are
-    # written with one numpy copy; the batch moves to the device once per update.
-    obs_buf = torch.zeros(T + 1, num_envs, obs_dim)
-    obs_np = obs_buf.numpy()
-    actions_buf = torch.zeros(T, num_envs, act_dim)
-    rewards_np = np.zeros((T, num_envs), np.float64)
-    terminated_np = np.zeros((T, num_envs), bool)
-    truncated_np = np.zeros((T, num_envs), bool)
-    episode_return = np.zeros(num_envs, np.float64)
-    episode_length = np.zeros(num_envs, np.int64)
+class RolloutStorage:
+    """The CPU buffers of one rollout of T steps of N envs. Env results are written
+    through numpy views, one copy each; the batch moves to the device once per update.
+    ``obs[t]`` is the obs acted on at step t; ``obs[T]`` the one after the last step,
+    where the next rollout starts."""
 
-    obs, _ = envs.reset(seed=cfg.seed + global_step)
-    obs_np[0] = obs
-    log = _MetricsLog(out_dir, global_step if resume else None, cfg.tensorboard)
-    last_checkpoint_step = global_step
-    progress = None
-    if cfg.progress:
-        from tqdm.auto import tqdm
-        progress = tqdm(total=cfg.total_steps, initial=min(global_step, cfg.total_steps), unit="step",
-                        dynamic_ncols=True)
-    log_2pi = math.log(2 * math.pi)
-    last_row: dict = {}
-    stopped_by = "steps"
-    start_time = time.perf_counter()
-    wall_s = previous_wall_s = wall_offset
-    try:
-        while global_step < cfg.total_steps:
-            if cfg.max_seconds is not None and wall_s >= cfg.max_seconds:
-                stopped_by = "seconds"
-                break
-            iteration += 1
-            lr = cfg.learning_rate * (1.0 - global_step / cfg.total_steps if cfg.anneal_lr else 1.0)
-            for group in optimizer.param_groups:
-                group["lr"] = lr
+    def __init__(self, num_steps: int, num_envs: int, obs_dim: int, act_dim: int):
+        self.obs = torch.zeros(num_steps + 1, num_envs, obs_dim)
+        self.obs_np = self.obs.numpy()
+        self.actions = torch.zeros(num_steps, num_envs, act_dim)  # in the policy's units (before rescaling)
+        self.rewards = np.zeros((num_steps, num_envs), np.float64)
+        self.terminated = np.zeros((num_steps, num_envs), bool)
+        self.truncated = np.zeros((num_steps, num_envs), bool)
+        # Per env, the episode so far; carried across rollouts.
+        self.episode_return = np.zeros(num_envs, np.float64)
+        self.episode_length = np.zeros(num_envs, np.int64)
 
-            # ---------------------------------------------------------------- rollout
-            rollout_start = time.perf_counter()
-            env_seconds = 0.0
-            noise = torch.randn(T, num_envs, act_dim, generator=generator)
-            final_obs: list[tuple[int, np.ndarray, np.ndarray]] = []  # (t, env indices, obs) at truncations
-            ended_returns, ended_lengths, ended_success = [], [], []
-            with torch.inference_mode():
-                std = model.log_std.exp().to(device)
-                noise_dev = noise.to(device)
-                for t in range(T):
-                    mean = model.actor_mean(obs_normalizer(obs_buf[t].to(device, non_blocking=True)))
-                    action = torch.addcmul(mean, std, noise_dev[t])
-                    action_np = action.numpy() if device.type == "cpu" else action.cpu().numpy()
-                    actions_buf[t] = torch.from_numpy(action_np) if device.type != "cpu" else action
-                    if not np.isfinite(action_np).all():
-                        raise NonFiniteError(f"train: the policy produced NaN/inf actions at step {global_step}")
-                    env_start = time.perf_counter()
-                    if action_center is not None:
-                        action_np = action_center + action_half * action_np
-                    obs, reward, terminated, truncated, infos = envs.step(action_np)
-                    env_seconds += time.perf_counter() - env_start
-                    if not np.isfinite(obs).all() or not np.isfinite(reward).all():
-                        raise NonFiniteError(f"train: the env returned NaN/inf observations or rewards "
-                                             f"at step {global_step}")
-                    obs_np[t + 1] = obs
-                    rewards_np[t] = reward
-                    terminated_np[t] = terminated
-                    truncated_np[t] = truncated
-                    episode_return += reward
-                    episode_length += 1
-                    global_step += num_envs
-                    done = terminated | truncated
-                    if done.any():
-                        ended = np.flatnonzero(done)
-                        ended_returns.append(episode_return[ended].copy())
-                        ended_lengths.append(episode_length[ended].copy())
-                        if "success" in infos:
-                            mask = infos.get("_success", np.ones(num_envs, bool))[ended]
-                            ended_success.append(np.where(mask, infos["success"][ended].astype(np.float64), np.nan))
-                        else:
-                            ended_success.append(np.full(len(ended), np.nan))
-                        episode_return[ended] = 0.0
-                        episode_length[ended] = 0
-                        cut = np.flatnonzero(truncated & ~terminated)
-                        if len(cut):
-                            final_obs.append((t, cut, _final_obs_rows(infos, cut)))
 
-                # ------------------------------------------------------------ advantages
-                all_obs = obs_normalizer(obs_buf.to(device).reshape(-1, obs_dim))
-                values = model.value(all_obs).reshape(T + 1, num_envs).double().cpu().numpy()
-                if final_obs:
-                    stacked = torch.from_numpy(np.concatenate([rows for _, _, rows in final_obs])).to(device)
-                    final_values = model.value(obs_normalizer(stacked)).double().cpu().numpy()
-                if cfg.reward_norm == "value":  # the net predicts standardized returns
-                    values = values * math.sqrt(float(return_rms.var) + 1e-8) + float(return_rms.mean)
-                    if final_obs:
-                        final_values = final_values * math.sqrt(float(return_rms.var) + 1e-8) + float(return_rms.mean)
-                next_values = successor_values(values, terminated_np, [(t, cut) for t, cut, _ in final_obs],
-                                               final_values if final_obs else np.zeros(0))
-                episode_ends = terminated_np | truncated_np
-                rewards = rewards_np
-                if cfg.reward_norm == "scale":
-                    rewards = scale_rewards(rewards_np, episode_ends, running_return, return_rms, cfg.gamma,
-                                            cfg.reward_clip)
-                advantages, returns = compute_gae(rewards, values[:-1], next_values, episode_ends, cfg.gamma,
-                                                  cfg.gae_lambda)
-                if cfg.reward_norm == "value":
-                    return_rms.update(returns.reshape(-1))
-                    value_scale = math.sqrt(float(return_rms.var) + 1e-8)
-                    returns = (returns - float(return_rms.mean)) / value_scale
-                    old_values = (values[:-1] - float(return_rms.mean)) / value_scale
-                else:
-                    old_values = values[:-1]
+@dataclass
+class Rollout:
+    """What a rollout produced besides the storage."""
 
-                b_obs = all_obs[:batch_size]  # rows of steps 0..T-1, normalized as when acting
-                b_actions = actions_buf.reshape(batch_size, act_dim).to(device)
-                b_noise = noise_dev.reshape(batch_size, act_dim)
-                b_logprob = (-0.5 * b_noise.pow(2).sum(1) - model.log_std.sum() - 0.5 * act_dim * log_2pi)
-                b_advantages = torch.from_numpy(advantages.reshape(-1).astype(np.float32)).to(device)
-                b_returns = torch.from_numpy(returns.reshape(-1).astype(np.float32)).to(device)
-                b_values = torch.from_numpy(old_values.reshape(-1).astype(np.float32)).to(device)
+    noise: torch.Tensor
+    """(T, N, act_dim) standard normal draws on the device: action = mean + std * noise."""
+    final_obs: list
+    """(t, env indices, their final obs) for each step where episodes were truncated."""
+    ended_returns: np.ndarray
+    ended_lengths: np.ndarray
+    ended_success: np.ndarray
+    """Of the episodes that ended, in order; success is NaN where the env gave no flag."""
+    env_seconds: float
+    """Wall time spent in ``envs.step``."""
 
-            # Update the observation statistics from this rollout, for the next one.
-            if cfg.obs_norm:
-                obs_normalizer.rms.update(obs_np[1:].reshape(-1, obs_dim))
-                obs_normalizer.refresh()
 
-            # ---------------------------------------------------------------- update
-            update_start = time.perf_counter()
-            # Clone out of inference mode so autograd may use them.
-            b_obs, b_actions, b_logprob = b_obs.clone(), b_actions.clone(), b_logprob.clone()
-            b_advantages, b_returns, b_values = b_advantages.clone(), b_returns.clone(), b_values.clone()
-            sum_pg = sum_v = sum_kl = sum_clip = torch.zeros((), device=device)
-            num_updates = 0
-            for epoch in range(cfg.update_epochs):
-                permutation = torch.randperm(batch_size, generator=generator).to(device)
-                epoch_kl = torch.zeros((), device=device)
-                for start in range(0, batch_size, minibatch_size):
-                    idx = permutation[start:start + minibatch_size]
-                    mb_obs, mb_actions = b_obs[idx], b_actions[idx]
-                    log_std = model.log_std
-                    mean = model.actor_mean(mb_obs)
-                    z = (mb_actions - mean) * torch.exp(-log_std)
-                    new_logprob = -0.5 * z.pow(2).sum(1) - log_std.sum() - 0.5 * act_dim * log_2pi
-                    log_ratio = new_logprob - b_logprob[idx]
-                    ratio = log_ratio.exp()
-                    mb_adv = b_advantages[idx]
-                    if cfg.norm_adv:
-                        mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
-                    pg_loss = torch.max(-mb_adv * ratio,
-                                        -mb_adv * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)).mean()
-                    new_value = model.value(mb_obs)
-                    if cfg.clip_vloss:
-                        clipped = b_values[idx] + (new_value - b_values[idx]).clamp(-cfg.clip_coef, cfg.clip_coef)
-                        v_loss = 0.5 * torch.max((new_value - b_returns[idx]).pow(2),
-                                                 (clipped - b_returns[idx]).pow(2)).mean()
-                    else:
-                        v_loss = 0.5 * (new_value - b_returns[idx]).pow(2).mean()
-                    # State-independent Gaussian: entropy = sum(log_std) + const.
-                    entropy = log_std.sum() + 0.5 * act_dim * (1.0 + log_2pi)
-                    loss = pg_loss - cfg.ent_coef * entropy + cfg.vf_coef * v_loss
-                    if not torch.isfinite(loss):
-                        raise NonFiniteError(f"train: the PPO loss became NaN/inf at step {global_step} "
-                                             f"(policy {pg_loss.item()}, value {v_loss.item()})")
-                    optimizer.zero_grad(set_to_none=True)
-                    loss.backward()
-                    if cfg.max_grad_norm is not None:
-                        nn.utils.clip_grad_norm_(model.parameters(), cfg.max_grad_norm, foreach=True)
-                    optimizer.step()
-                    with torch.no_grad():
-                        approx_kl = ((ratio - 1) - log_ratio).mean()
-                        epoch_kl = approx_kl
-                        sum_pg = sum_pg + pg_loss.detach()
-                        sum_v = sum_v + v_loss.detach()
-                        sum_kl = sum_kl + approx_kl
-                        sum_clip = sum_clip + ((ratio - 1).abs() > cfg.clip_coef).float().mean()
-                    num_updates += 1
-                if cfg.target_kl is not None and epoch_kl.item() > cfg.target_kl:
-                    break
+def _final_obs_rows(infos: dict, envs_idx: np.ndarray) -> np.ndarray:
+    if "final_obs" not in infos:
+        raise ValueError("train: an episode was truncated but infos has no 'final_obs' (SAME_STEP contract)")
+    final_obs = infos["final_obs"]
+    if final_obs.dtype == object:  # gymnasium's SyncVectorEnv stores one array per env
+        return np.stack([np.asarray(final_obs[i], np.float32) for i in envs_idx])
+    return np.asarray(final_obs[envs_idx], np.float32)
 
-            obs_np[0] = obs_np[T]  # the next rollout starts where this one ended
-            update_end = time.perf_counter()
-            wall_s = wall_offset + (update_end - start_time)
 
-            # ---------------------------------------------------------------- logging
-            ended_r = np.concatenate(ended_returns) if ended_returns else np.zeros(0)
-            ended_l = np.concatenate(ended_lengths) if ended_lengths else np.zeros(0, np.int64)
-            ended_s = np.concatenate(ended_success) if ended_success else np.zeros(0)
+def _end_episodes(storage: RolloutStorage, t: int, terminated: np.ndarray, truncated: np.ndarray, infos: dict,
+                  ended: tuple[list, list, list], final_obs: list) -> None:
+    """Record the episodes that ended at step t and restart their accumulators."""
+    ended_idx = np.flatnonzero(terminated | truncated)
+    returns, lengths, success = ended
+    returns.append(storage.episode_return[ended_idx].copy())
+    lengths.append(storage.episode_length[ended_idx].copy())
+    if "success" in infos:
+        mask = infos.get("_success", np.ones(len(terminated), bool))[ended_idx]
+        success.append(np.where(mask, infos["success"][ended_idx].astype(np.float64), np.nan))
+    else:
+        success.append(np.full(len(ended_idx), np.nan))
+    storage.episode_return[ended_idx] = 0.0
+    storage.episode_length[ended_idx] = 0
+    cut = np.flatnonzero(truncated & ~terminated)
+    if len(cut):
+        final_obs.append((t, cut, _final_obs_rows(infos, cut)))
+
+
+def collect_rollout(envs: gym.vector.VectorEnv, learner: TrainingState, storage: RolloutStorage,
+                    noise: torch.Tensor) -> Rollout:
+    """Act ``len(noise)`` steps in ``envs`` from ``storage.obs[0]`` with the frozen normalizer,
+    filling ``storage``. Changes nothing in ``learner``."""
+    model, normalizer, device = learner.model, learner.obs_normalizer, learner.device
+    step = learner.global_step  # for error messages
+    final_obs: list = []
+    ended: tuple[list, list, list] = ([], [], [])
+    env_seconds = 0.0
+    with torch.inference_mode():
+        std = model.log_std.exp().to(device)
+        noise_dev = noise.to(device)
+        for t in range(noise.shape[0]):
+            mean = model.actor_mean(normalizer(storage.obs[t].to(device, non_blocking=True)))
+            action = torch.addcmul(mean, std, noise_dev[t])
+            action_np = action.numpy() if device.type == "cpu" else action.cpu().numpy()
+            storage.actions[t] = torch.from_numpy(action_np) if device.type != "cpu" else action
+            if not np.isfinite(action_np).all():
+                raise NonFiniteError(f"train: the policy produced NaN/inf actions at step {step}")
+            env_start = time.perf_counter()
+            if learner.action_center is not None:
+                action_np = learner.action_center + learner.action_half * action_np
+            obs, reward, terminated, truncated, infos = envs.step(action_np)
+            env_seconds += time.perf_counter() - env_start
+            if not np.isfinite(obs).all() or not np.isfinite(reward).all():
+                raise NonFiniteError(f"train: the env returned NaN/inf observations or rewards at step {step}")
+            storage.obs_np[t + 1] = obs
+            storage.rewards[t] = reward
+            storage.terminated[t] = terminated
+            storage.truncated[t] = truncated
+            storage.episode_return += reward
+            storage.episode_length += 1
+            step += envs.num_envs
+            if (terminated | truncated).any():
+                _end_episodes(storage, t, terminated, truncated, infos, ended, final_obs)
+    returns, lengths, success = ended
+    return Rollout(noise=noise_dev, final_obs=final_obs,
+                   ended_returns=np.concatenate(returns) if returns else np.zeros(0),
+                   ended_lengths=np.concatenate(lengths) if lengths else np.zeros(0, np.int64),
+                   ended_success=np.concatenate(success) if success else np.zeros(0),
+                   env_seconds=env_seconds)
+
+
+# ----------------------------------------------------------------------------- advantages
+
+@dataclass
+class Batch:
+    """A rollout flattened to T * N rows for the update, on the device."""
+
+    obs: torch.Tensor  # normalized as when acting
+    actions: torch.Tensor
+    logprob: torch.Tensor  # of the actions under the acting policy
+    advantages: torch.Tensor
+    returns: torch.Tensor  # value targets, in the value net's units
+    values: torch.Tensor  # the value net's predictions when acting, same units
+
+
+def compute_batch(learner: TrainingState, storage: RolloutStorage, rollout: Rollout) -> Batch:
+    """Values of all observations in one batched call, successor values, reward
+    normalization and GAE; updates the return statistics of ``cfg.reward_norm``."""
+    cfg, model, normalizer, device = learner.cfg, learner.model, learner.obs_normalizer, learner.device
+    T, num_envs, act_dim = storage.actions.shape
+    batch_size = T * num_envs
+    with torch.inference_mode():
+        all_obs = normalizer(storage.obs.to(device).reshape(batch_size + num_envs, -1))
+        values = model.value(all_obs).reshape(T + 1, num_envs).double().cpu().numpy()
+        final_values = np.zeros(0)
+        if rollout.final_obs:
+            stacked = torch.from_numpy(np.concatenate([rows for _, _, rows in rollout.final_obs])).to(device)
+            final_values = model.value(normalizer(stacked)).double().cpu().numpy()
+        rms = learner.return_rms
+        if cfg.reward_norm == "value":  # the net predicts standardized returns
+            values = values * math.sqrt(float(rms.var) + 1e-8) + float(rms.mean)
+            final_values = final_values * math.sqrt(float(rms.var) + 1e-8) + float(rms.mean)
+        next_values = successor_values(values, storage.terminated, [(t, cut) for t, cut, _ in rollout.final_obs],
+                                       final_values)
+        episode_ends = storage.terminated | storage.truncated
+        rewards = storage.rewards
+        if cfg.reward_norm == "scale":
+            rewards = scale_rewards(storage.rewards, episode_ends, learner.running_return, rms, cfg.gamma,
+                                    cfg.reward_clip)
+        advantages, returns = compute_gae(rewards, values[:-1], next_values, episode_ends, cfg.gamma,
+                                          cfg.gae_lambda)
+        old_values = values[:-1]
+        if cfg.reward_norm == "value":
+            rms.update(returns.reshape(-1))
+            value_scale = math.sqrt(float(rms.var) + 1e-8)
+            returns = (returns - float(rms.mean)) / value_scale
+            old_values = (values[:-1] - float(rms.mean)) / value_scale
+
+        noise = rollout.noise.reshape(batch_size, act_dim)
+        logprob = -0.5 * noise.pow(2).sum(1) - model.log_std.sum() - 0.5 * act_dim * LOG_2PI
+        tensors = (all_obs[:batch_size], storage.actions.reshape(batch_size, act_dim).to(device), logprob,
+                   *(torch.from_numpy(a.reshape(-1).astype(np.float32)).to(device)
+                     for a in (advantages, returns, old_values)))
+    # Clone out of inference mode so autograd may use them.
+    return Batch(*(tensor.clone() for tensor in tensors))
+
+
+# ----------------------------------------------------------------------------- update
+
+def _minibatch_loss(cfg: PPOConfig, model: nn.Module, batch: Batch, idx: torch.Tensor) -> tuple:
+    """The clipped PPO loss of one minibatch; returns (loss, pg_loss, v_loss, ratio, log_ratio)."""
+    act_dim = batch.actions.shape[1]
+    log_std = model.log_std
+    mb_obs = batch.obs[idx]
+    mean = model.actor_mean(mb_obs)
+    z = (batch.actions[idx] - mean) * torch.exp(-log_std)
+    new_logprob = -0.5 * z.pow(2).sum(1) - log_std.sum() - 0.5 * act_dim * LOG_2PI
+    log_ratio = new_logprob - batch.logprob[idx]
+    ratio = log_ratio.exp()
+    mb_adv = batch.advantages[idx]
+    if cfg.norm_adv:
+        mb_adv = (mb_adv - mb_adv.mean()) / (mb_adv.std() + 1e-8)
+    pg_loss = torch.max(-mb_adv * ratio, -mb_adv * ratio.clamp(1 - cfg.clip_coef, 1 + cfg.clip_coef)).mean()
+    new_value = model.value(mb_obs)
+    if cfg.clip_vloss:
+        clipped = batch.values[idx] + (new_value - batch.values[idx]).clamp(-cfg.clip_coef, cfg.clip_coef)
+        v_loss = 0.5 * torch.max((new_value - batch.returns[idx]).pow(2),
+                                 (clipped - batch.returns[idx]).pow(2)).mean()
+    else:
+        v_loss = 0.5 * (new_value - batch.returns[idx]).pow(2).mean()
+    # State-independent Gaussian: entropy = sum(log_std) + const.
+    entropy = log_std.sum() + 0.5 * act_dim * (1.0 + LOG_2PI)
+    loss = pg_loss - cfg.ent_coef * entropy + cfg.vf_coef * v_loss
+    return loss, pg_loss, v_loss, ratio, log_ratio
+
+
+def ppo_update(learner: TrainingState, batch: Batch) -> dict:
+    """``cfg.update_epochs`` passes of minibatch Adam steps over ``batch`` (stopping early
+    past ``cfg.target_kl``); returns the mean losses, KL and clip fraction over the steps."""
+    cfg, model, optimizer, device = learner.cfg, learner.model, learner.optimizer, learner.device
+    batch_size = batch.obs.shape[0]
+    minibatch_size = max(1, batch_size // cfg.num_minibatches)
+    sum_pg = sum_v = sum_kl = sum_clip = torch.zeros((), device=device)
+    num_updates = 0
+    for epoch in range(cfg.update_epochs):
+        permutation = torch.randperm(batch_size, generator=learner.generator).to(device)
+        epoch_kl = torch.zeros((), device=device)
+        for start in range(0, batch_size, minibatch_size):
+            idx = permutation[start:start + minibatch_size]
+            loss, pg_loss, v_loss, ratio, log_ratio = _minibatch_loss(cfg, model, batch, idx)
+            if not torch.isfinite(loss):
+                raise NonFiniteError(f"train: the PPO loss became NaN/inf at step {learner.global_step + batch_size} "
+                                     f"(policy {pg_loss.item()}, value {v_loss.item()})")
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            if cfg.max_grad_norm is not None:
+                nn.utils.clip_grad_norm_(model.parameters(), cfg.max_grad_norm, foreach=True)
+            optimizer.step()
             with torch.no_grad():
-                var_returns = b_returns.var()
-                explained = 1.0 - (b_returns - b_values).var() / var_returns if var_returns > 0 else torch.tensor(float("nan"))
-            row = {
-                "step": global_step,
-                "wall_s": round(wall_s, 4),
-                "iteration": iteration,
-                "episode_return": float(ended_r.mean()) if len(ended_r) else float("nan"),
-                "episode_length": float(ended_l.mean()) if len(ended_l) else float("nan"),
-                "success_rate": float(np.nanmean(ended_s)) if np.isfinite(ended_s).any() else float("nan"),
-                "episodes": int(len(ended_r)),
-                "sps": round(batch_size / max(wall_s - previous_wall_s, 1e-9), 1),
-                "learning_rate": lr,
-                "policy_loss": float(sum_pg / num_updates),
-                "value_loss": float(sum_v / num_updates),
-                "entropy": float(model.log_std.detach().sum() + 0.5 * act_dim * (1.0 + log_2pi)),
-                "approx_kl": float(sum_kl / num_updates),
-                "clipfrac": float(sum_clip / num_updates),
-                "explained_variance": float(explained),
-                # Cost per env step (summed over envs), microseconds: the env,
-                # PPO's acting and advantage work, and the update.
-                "env_us": 1e6 * env_seconds / batch_size,
-                "act_us": 1e6 * (update_start - rollout_start - env_seconds) / batch_size,
-                "update_us": 1e6 * (update_end - update_start) / batch_size,
-            }
-            stats = dict(row, episode_data={"return": ended_r, "length": ended_l, "success": ended_s})
-            for callback in callbacks:
-                if hasattr(callback, "on_iteration"):
-                    extra = callback.on_iteration(stats)
-                    if extra:
-                        row.update(extra)
-            if iteration % cfg.log_interval == 0:
-                log.write(row)
-            last_row = row
-            previous_wall_s = wall_s
-            if progress is not None:
-                progress.update(min(global_step, cfg.total_steps) - progress.n)
-                progress.set_postfix(sps=f"{row['sps']:.0f}", ret=f"{row['episode_return']:.1f}",
-                                     success=f"{row['success_rate']:.2f}", refresh=False)
+                approx_kl = ((ratio - 1) - log_ratio).mean()
+                epoch_kl = approx_kl
+                sum_pg = sum_pg + pg_loss.detach()
+                sum_v = sum_v + v_loss.detach()
+                sum_kl = sum_kl + approx_kl
+                sum_clip = sum_clip + ((ratio - 1).abs() > cfg.clip_coef).float().mean()
+            num_updates += 1
+        if cfg.target_kl is not None and epoch_kl.item() > cfg.target_kl:
+            break
+    return {"policy_loss": float(sum_pg / num_updates), "value_loss": float(sum_v / num_updates),
+            "approx_kl": float(sum_kl / num_updates), "clipfrac": float(sum_clip / num_updates)}
 
-            # ---------------------------------------------------------------- checkpoints
-            due_snapshots = [s for s in cfg.snapshot_steps if s <= global_step and s not in saved_snapshots]
-            if due_snapshots or global_step - last_checkpoint_step >= cfg.checkpoint_interval_steps:
-                saved_snapshots.update(due_snapshots)
-                state = checkpoint_state(wall_s)
-                save_checkpoint(state, latest_path)
-                for s in due_snapshots:
-                    save_checkpoint(state, out_dir / f"snapshot_{s}.pt")
-                last_checkpoint_step = global_step
-        save_checkpoint(checkpoint_state(wall_s), latest_path)
+
+# ----------------------------------------------------------------------------- training loop
+
+def _metrics_row(learner: TrainingState, rollout: Rollout, batch: Batch, losses: dict, lr: float,
+                 previous_wall_s: float, times: tuple[float, float, float]) -> dict:
+    """The iteration's CSV/TensorBoard row (``MetricsLogger.BASE_COLUMNS``)."""
+    rollout_start, update_start, update_end = times
+    batch_size, act_dim = batch.actions.shape
+    ended_r, ended_l, ended_s = rollout.ended_returns, rollout.ended_lengths, rollout.ended_success
+    with torch.no_grad():
+        var_returns = batch.returns.var()
+        explained = 1.0 - (batch.returns - batch.values).var() / var_returns if var_returns > 0 else torch.tensor(float("nan"))
+    return {
+        "step": learner.global_step,
+        "wall_s": round(learner.wall_s, 4),
+        "iteration": learner.iteration,
+        "episode_return": float(ended_r.mean()) if len(ended_r) else float("nan"),
+        "episode_length": float(ended_l.mean()) if len(ended_l) else float("nan"),
+        "success_rate": float(np.nanmean(ended_s)) if np.isfinite(ended_s).any() else float("nan"),
+        "episodes": int(len(ended_r)),
+        "sps": round(batch_size / max(learner.wall_s - previous_wall_s, 1e-9), 1),
+        "learning_rate": lr,
+        "policy_loss": losses["policy_loss"],
+        "value_loss": losses["value_loss"],
+        "entropy": float(learner.model.log_std.detach().sum() + 0.5 * act_dim * (1.0 + LOG_2PI)),
+        "approx_kl": losses["approx_kl"],
+        "clipfrac": losses["clipfrac"],
+        "explained_variance": float(explained),
+        # Cost per env step (summed over envs), microseconds: the env,
+        # PPO's acting and advantage work, and the update.
+        "env_us": 1e6 * rollout.env_seconds / batch_size,
+        "act_us": 1e6 * (update_start - rollout_start - rollout.env_seconds) / batch_size,
+        "update_us": 1e6 * (update_end - update_start) / batch_size,
+    }
+
+
+def _run_callbacks(callbacks: list, row: dict, rollout: Rollout) -> None:
+    """Call each ``on_iteration(stats)``; the scalars they return become extra columns of ``row``."""
+    stats = dict(row, episode_data={"return": rollout.ended_returns, "length": rollout.ended_lengths,
+                                    "success": rollout.ended_success})
+    for callback in callbacks:
+        if hasattr(callback, "on_iteration"):
+            extra = callback.on_iteration(stats)
+            if extra:
+                row.update(extra)
+
+
+@contextlib.contextmanager
+def _ctrl_c_held() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) until the block ends, then raise KeyboardInterrupt, so an update
+    and its bookkeeping are never left half done. A second Ctrl-C interrupts at once. Only
+    with Python's default handler in the main thread; otherwise the block runs unguarded."""
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield
+        return
+    received = []
+
+    def hold(signum: int, frame: Any) -> None:
+        received.append(signum)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    signal.signal(signal.SIGINT, hold)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if received:
+        raise KeyboardInterrupt
+
+
+def _learn(learner: TrainingState, storage: RolloutStorage, rollout: Rollout, lr: float, rollout_start: float,
+           wall_clock: Callable[[], float]) -> dict:
+    """Everything after a rollout that changes the learner: advantages, observation
+    statistics, the update, the counters and the callbacks. Returns the metrics row."""
+    cfg = learner.cfg
+    batch = compute_batch(learner, storage, rollout)
+    if cfg.obs_norm:  # update the observation statistics from this rollout, for the next one
+        learner.obs_normalizer.rms.update(storage.obs_np[1:].reshape(batch.obs.shape[0], -1))
+        learner.obs_normalizer.refresh()
+    update_start = time.perf_counter()
+    losses = ppo_update(learner, batch)
+    storage.obs_np[0] = storage.obs_np[-1]  # the next rollout starts where this one ended
+    update_end = time.perf_counter()
+    previous_wall_s = learner.wall_s
+    learner.global_step += batch.obs.shape[0]
+    learner.iteration += 1
+    learner.wall_s = wall_clock()
+    row = _metrics_row(learner, rollout, batch, losses, lr, previous_wall_s, (rollout_start, update_start, update_end))
+    _run_callbacks(learner.callbacks, row, rollout)
+    return row
+
+
+def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike, *,
+          policy_factory: Optional[Callable[[int, int], nn.Module]] = None, resume: bool = False,
+          callbacks: Sequence[Any] | None = None) -> TrainResult:
+    """Train a Gaussian policy with PPO on ``envs``; write metrics and checkpoints to ``out_dir``.
+
+    ``policy_factory(obs_dim, act_dim)`` builds the actor-critic (default: the
+    paper's ``PlaneActorCritic``); see ``mmrl.networks`` for the interface, and register
+    the class there (``register_network``) so ``load_policy`` can rebuild it.
+    ``resume=True`` continues from ``out_dir/latest.pt``: model, optimizer,
+    normalizers, step, wall time, RNG and callback state. The envs are reset
+    (their state is not checkpointed) with seed ``cfg.seed + global_step``.
+    ``callbacks``: objects with any of ``on_iteration(stats) -> dict | None``
+    (extra scalar columns for CSV/TensorBoard), ``state_dict()`` and
+    ``load_state_dict(state)`` (stored in checkpoints under their index).
+    ``stats`` holds the iteration's scalars plus ``stats["episode_data"]``, a dict
+    of arrays "return", "length", "success" for the episodes that ended.
+    On Ctrl-C, latest.pt holds the state as of the last completed iteration.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    latest_path = out_dir / "latest.pt"
+    if not resume and latest_path.exists():
+        raise FileExistsError(f"{out_dir} already holds a run ({latest_path}); pass resume=True or use a new directory")
+    learner = _make_learner(envs, cfg, policy_factory, list(callbacks or []))
+    if resume:
+        learner.load(latest_path)
+    storage = RolloutStorage(cfg.num_steps, envs.num_envs, *_check_env(envs))
+    storage.obs_np[0], _ = envs.reset(seed=cfg.seed + learner.global_step)
+    log = MetricsLogger(out_dir, learner.global_step if resume else None, cfg.tensorboard)
+    progress = ProgressBar(cfg.total_steps, cfg.max_seconds, learner.global_step, learner.wall_s) if cfg.progress else None
+    last_row: dict = {}
+    last_saved_step = learner.global_step
+    start_time, wall_offset = time.perf_counter(), learner.wall_s
+    rng: Optional[dict] = capture_rng_state(learner.generator)  # as of the last completed iteration
+    try:
+        while learner.global_step < cfg.total_steps:
+            if cfg.max_seconds is not None and learner.wall_s >= cfg.max_seconds:
+                break
+            lr = cfg.learning_rate * (1.0 - learner.global_step / cfg.total_steps if cfg.anneal_lr else 1.0)
+            for group in learner.optimizer.param_groups:
+                group["lr"] = lr
+            rollout_start = time.perf_counter()
+            noise = torch.randn(*storage.actions.shape, generator=learner.generator)
+            rollout = collect_rollout(envs, learner, storage, noise)  # changes nothing in the learner
+            with _ctrl_c_held():
+                rng = None  # the learner is changing: a (second) Ctrl-C now saves nothing
+                last_row = _learn(learner, storage, rollout, lr, rollout_start,
+                                  lambda: wall_offset + (time.perf_counter() - start_time))
+                if learner.iteration % cfg.log_interval == 0:
+                    log.write(last_row)
+                if progress is not None:
+                    progress.update(learner.global_step, learner.wall_s, last_row)
+                rng = capture_rng_state(learner.generator)
+                last_saved_step = save_due_checkpoints(learner, rng, out_dir, last_saved_step)
+        save_checkpoint(learner.checkpoint(rng), latest_path)
     except KeyboardInterrupt:
-        # Keep the progress made so far; --resume continues from here.
-        save_checkpoint(checkpoint_state(wall_s), latest_path)
+        # Keep the progress of every completed iteration; --resume continues from there.
+        if rng is not None:
+            save_checkpoint(learner.checkpoint(rng), latest_path)
         raise
     finally:
         if progress is not None:
             progress.close()
         log.close()
-    if cfg.max_seconds is not None and wall_s >= cfg.max_seconds and global_step < cfg.total_steps:
+    stopped_by = "steps"
+    if cfg.max_seconds is not None and learner.wall_s >= cfg.max_seconds and learner.global_step < cfg.total_steps:
         stopped_by = "seconds"
-    return TrainResult(global_step=global_step, wall_s=wall_s, iterations=iteration, stopped_by=stopped_by,
-                       last_stats=last_row, checkpoint=latest_path, metrics_csv=log.path)
+    return TrainResult(global_step=learner.global_step, wall_s=learner.wall_s, iterations=learner.iteration,
+                       stopped_by=stopped_by, last_stats=last_row, checkpoint=latest_path, metrics_csv=log.path)
