@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mmrl import _core
-from mmrl.envs import default_database
+from mmrl import default_database
 
 
 def core_env(cls, config, n, seed):

@@ -180,6 +180,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise InputError(f"{out}: the output must end in .bvh")
     s, rec = _follow(args)
     db = s.db
+    out.parent.mkdir(parents=True, exist_ok=True)
     motion = _core.motion_from_pose(db._db, np.ascontiguousarray(rec["local_translations"], np.float32),
                                     np.ascontiguousarray(rec["local_rotations"], np.float32), out.name)
     atomic_write_bytes(out, motion.to_bvh().encode())

@@ -115,8 +115,10 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
     sets = list(args.set)
     if args.preset is not None:
         if args.preset not in task.presets:
-            raise InputError(f"--preset {args.preset}: the {task.name} task has presets "
-                             f"{', '.join(task.presets) or 'none'}")
+            owners = [n for n in task_names() if args.preset in get_task(n).presets]
+            has = f"presets {', '.join(task.presets)}" if task.presets else "no presets"
+            raise InputError(f"--preset {args.preset}: the {task.name} task has {has} "
+                             f"({args.preset} is a preset of the {' and '.join(owners)} task)")
         if saved:
             raise InputError("--preset: a resumed run keeps its configuration (change options with --set)")
         sets = [f"{k}={v}" for k, v in task.presets[args.preset].items()] + sets
