@@ -80,14 +80,14 @@ def test_normalization_blocks(clip_text):
     for name, cols, weight in FEATURE_BLOCKS:
         scale = f[:, cols].std(0).mean() / weight
         np.testing.assert_allclose(norm[:, cols], (f[:, cols] - mean[cols]) / scale, atol=2e-4)
-    db.set_weights({"trajectory_direction": 3.0})
+    db = db.with_weights({"trajectory_direction": 3.0})
     cols = FEATURE_BLOCKS[BLOCK_NAMES.index("trajectory_direction")][1]
     np.testing.assert_allclose(db.normalized_features[:, cols], 2 * norm[:, cols], rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(db.normalize(db.features), db.normalized_features, atol=1e-5)
     with pytest.raises(ValueError, match="unknown feature blocks"):
-        db.set_weights({"nope": 1.0})
+        db.with_weights({"nope": 1.0})
     with pytest.raises(ValueError, match="positive"):
-        db.set_weights({"foot_position": -1.0})
+        db.with_weights({"foot_position": -1.0})
 
 
 def mirror_features(f):
