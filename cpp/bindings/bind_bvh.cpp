@@ -31,6 +31,17 @@ UpAxis up_axis_from(const std::string& up) {
   throw py::value_error("up: expected 'y', 'z' or 'auto', got '" + up + "'");
 }
 
+py::dict plausibility_to_dict(const MotionPlausibility& p) {
+  py::dict d;
+  d["seconds"] = p.seconds;
+  d["height"] = p.height;
+  d["horizontal_extent"] = p.horizontal_extent;
+  d["vertical_travel"] = p.vertical_travel;
+  d["horizontal_path"] = p.horizontal_path;
+  d["median_horizontal_speed"] = p.median_horizontal_speed;
+  return d;
+}
+
 BVHImportOptions import_options(float scale, const std::string& up, float fps) {
   BVHImportOptions opt;
   opt.scale = scale;
@@ -65,28 +76,8 @@ py::dict roles_to_dict(const Skeleton& sk, const JointRoles& roles) {
   return d;
 }
 
-void bind_bvh(py::module_& m) {
-  g_bvh_error = PyErr_NewExceptionWithDoc(
-      "mmrl._core.BVHError", "A malformed BVH file; the message names the file and the line. Attributes: file, line.",
-      PyExc_ValueError, nullptr);
-  m.add_object("BVHError", py::handle(g_bvh_error));
-  g_role_error = PyErr_NewExceptionWithDoc("mmrl._core.JointRoleError",
-                                           "Joint roles could not be found; the message lists the skeleton's joints.",
-                                           PyExc_ValueError, nullptr);
-  m.add_object("JointRoleError", py::handle(g_role_error));
-  py::register_exception_translator([](std::exception_ptr p) {
-    try {
-      if (p) std::rethrow_exception(p);
-    } catch (const BVHError& e) {
-      py::object exc = py::reinterpret_borrow<py::object>(g_bvh_error)(e.what());
-      exc.attr("file") = e.file();
-      exc.attr("line") = e.line();
-      PyErr_SetObject(g_bvh_error, exc.ptr());
-    } catch (const RoleError& e) {
-      PyErr_SetString(g_role_error, e.what());
-    }
-  });
-
+// Motion: read-only views of the parsed clip, FK, roles, mirroring, resampling, export.
+static void bind_motion(py::module_& m) {
   py::class_<Motion>(m, "Motion", "A parsed BVH clip: skeleton and per-frame local transforms (meters).")
       .def_property_readonly("joint_names", [](const Motion& mo) { return mo.skeleton.names; })
       .def_property_readonly("parents", [](const Motion& mo) { return mo.skeleton.parents; })
@@ -158,14 +149,7 @@ void bind_bvh(py::module_& m) {
               py::gil_scoped_release release;
               p = motion_plausibility(mo);
             }
-            py::dict d;
-            d["seconds"] = p.seconds;
-            d["height"] = p.height;
-            d["horizontal_extent"] = p.horizontal_extent;
-            d["vertical_travel"] = p.vertical_travel;
-            d["horizontal_path"] = p.horizontal_path;
-            d["median_horizontal_speed"] = p.median_horizontal_speed;
-            return d;
+            return plausibility_to_dict(p);
           },
           "Measures of a person moving over a floor (meters, seconds, m/s); see motion_import.hpp.")
       .def("to_bvh", &bvh_write, "BVH text of this motion on its own skeleton, in the file's units.")
@@ -174,6 +158,31 @@ void bind_bvh(py::module_& m) {
                std::to_string(mo.skeleton.num_joints()) + " joints, " + std::to_string(mo.fps()) + " fps>";
       });
 
+}
+
+void bind_bvh(py::module_& m) {
+  g_bvh_error = PyErr_NewExceptionWithDoc(
+      "mmrl._core.BVHError", "A malformed BVH file; the message names the file and the line. Attributes: file, line.",
+      PyExc_ValueError, nullptr);
+  m.add_object("BVHError", py::handle(g_bvh_error));
+  g_role_error = PyErr_NewExceptionWithDoc("mmrl._core.JointRoleError",
+                                           "Joint roles could not be found; the message lists the skeleton's joints.",
+                                           PyExc_ValueError, nullptr);
+  m.add_object("JointRoleError", py::handle(g_role_error));
+  py::register_exception_translator([](std::exception_ptr p) {
+    try {
+      if (p) std::rethrow_exception(p);
+    } catch (const BVHError& e) {
+      py::object exc = py::reinterpret_borrow<py::object>(g_bvh_error)(e.what());
+      exc.attr("file") = e.file();
+      exc.attr("line") = e.line();
+      PyErr_SetObject(g_bvh_error, exc.ptr());
+    } catch (const RoleError& e) {
+      PyErr_SetString(g_role_error, e.what());
+    }
+  });
+
+  bind_motion(m);
   m.def(
       "bvh_load",
       [](const std::string& path, float scale, const std::string& up, float fps) {

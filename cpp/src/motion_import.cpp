@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <stdexcept>
 
 #include "mmrl/skeleton.hpp"
@@ -35,6 +37,17 @@ float median(std::vector<float> v) {
   if (v.size() % 2) return v[h];
   const float hi = v[h];
   return 0.5f * (hi + *std::max_element(v.begin(), v.begin() + h));
+}
+
+// 1 / fps rounded to 7 significant digits, as bvh_write (and most exporters) store Frame
+// Time: a resampled clip then has the rate it would have if written at that rate and read
+// back. It matters because features depend on the rate's last digits: the heading
+// smoothing radius ceil(3 * 0.3 s * fps) is 27 frames at 29.9999998 fps (float 1/30) but 28
+// at 30.0000019 fps (0.03333333 s), which moves features by up to 2e-3.
+float written_frame_time(float fps) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.7g", 1.0 / static_cast<double>(fps));
+  return std::strtof(text, nullptr);
 }
 
 }  // namespace
@@ -100,7 +113,7 @@ Motion motion_resample(const Motion& m, float fps) {
   Motion out;
   out.skeleton = m.skeleton;
   out.source = m.source;
-  out.frame_time = 1.0f / fps;
+  out.frame_time = written_frame_time(fps);
   out.scale = m.scale;
   out.source_fps = m.source_fps;
   out.source_up = m.source_up;

@@ -34,8 +34,9 @@ bool motion_needs_resample(const Motion& motion, float fps);
 // The motion at `fps` frames per second over the same time span: output frame k sits at
 // t = k / fps seconds; frames past the last input frame's time are dropped. Local
 // translations are interpolated linearly and local rotations by slerp (shortest arc);
-// an output time on an input frame copies that frame exactly. Throws
-// std::invalid_argument for fps <= 0 or not finite.
+// an output time on an input frame copies that frame exactly. The new Frame Time is 1 / fps
+// to 7 significant digits, as BVH files store it. Throws std::invalid_argument for fps <= 0
+// or not finite.
 Motion motion_resample(const Motion& motion, float fps);
 
 // What a person moving over a floor looks like, measured on an imported (meters, Y up)
