@@ -80,14 +80,14 @@ def test_normalization_blocks(clip_text):
     for name, cols, weight in FEATURE_BLOCKS:
         scale = f[:, cols].std(0).mean() / weight
         np.testing.assert_allclose(norm[:, cols], (f[:, cols] - mean[cols]) / scale, atol=2e-4)
-    db.set_weights({"trajectory_direction": 3.0})
+    db = db.with_weights({"trajectory_direction": 3.0})
     cols = FEATURE_BLOCKS[BLOCK_NAMES.index("trajectory_direction")][1]
     np.testing.assert_allclose(db.normalized_features[:, cols], 2 * norm[:, cols], rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(db.normalize(db.features), db.normalized_features, atol=1e-5)
     with pytest.raises(ValueError, match="unknown feature blocks"):
-        db.set_weights({"nope": 1.0})
+        db.with_weights({"nope": 1.0})
     with pytest.raises(ValueError, match="positive"):
-        db.set_weights({"foot_position": -1.0})
+        db.with_weights({"foot_position": -1.0})
 
 
 def mirror_features(f):
@@ -215,3 +215,60 @@ def test_whole_shared_dataset(shared_data, shared_db):
     # Turn clips turn about 90 degrees in total, left positive.
     assert 60 < np.median(turns["walk-turn-left"]) < 120
     assert -120 < np.median(turns["walk-turn-right"]) < -60
+
+
+@pytest.fixture(scope="module")
+def synth_db(tmp_path_factory):
+    from mmrl import synth
+
+    out = tmp_path_factory.mktemp("synth_weights")
+    for i, (speed, turn) in enumerate([(1.2, 0.0), (3.5, 0.0), (1.5, 0.6), (0.0, 0.0), (2.5, -0.5)]):
+        synth.write_clip(out / f"clip{i}.bvh", speed=speed, turn_rate=turn, seconds=6.0, seed=i)
+    return mmrl.Database.from_bvh(out)
+
+
+def test_with_weights_leaves_existing_matchers_exact(synth_db):
+    """Weights are fixed at build. A matcher (and an env holding it) built before a weight
+    change keeps answering exactly like brute force over its own database's rows; the new
+    Database's matcher answers like brute force over the new rows. (The old mutating
+    set_weights rewrote the rows under a tree built from the old ones: tree and brute force
+    then disagreed, silently.)"""
+    from mmrl import _core
+    from mmrl.envs import PlaneVectorEnv
+
+    db = synth_db
+    env = PlaneVectorEnv(4, db=db)
+    matcher = db.matcher
+    rows = db.normalized_features.copy()
+    rng = np.random.default_rng(0)
+    queries = (rows[rng.integers(0, db.num_frames, 400)] + rng.normal(0, 0.7, (400, 27))).astype(np.float32)
+
+    new = db.with_weights({"trajectory_direction": 4.0, "foot_position": 0.2, "hips_velocity": 2.5})
+    assert isinstance(new, mmrl.Database) and new is not db
+    assert not hasattr(db, "set_weights")
+    np.testing.assert_array_equal(db.normalized_features, rows)  # the old database is untouched
+    assert db.weights == mmrl.database.DEFAULT_WEIGHTS and new.weights["trajectory_direction"] == 4.0
+    assert env.db is db and db.matcher is matcher
+    np.testing.assert_array_equal(new.features, db.features)
+    assert np.abs(new.normalized_features - rows).max() > 0.5
+
+    for database, m in ((db, matcher), (new, new.matcher)):
+        # Reference: an independent brute-force scan over a copy of the database's current rows.
+        reference = _core.Matcher(np.array(database.normalized_features), database.valid_mask.copy())
+        want_i, want_c = reference.brute_force(queries)
+        got_i, got_c = m.match(queries)
+        np.testing.assert_array_equal(got_i, want_i)
+        np.testing.assert_array_equal(got_c, want_c)
+        np.testing.assert_array_equal(database.match(queries, normalized=True)[0], want_i)
+    # The weights matter: the two databases answer differently for many queries.
+    assert (matcher.match(queries)[0] != new.matcher.match(queries)[0]).mean() > 0.1
+
+
+def test_with_weights_keeps_import_metadata_and_saves(tmp_path, synth_db):
+    new = synth_db.with_weights([1, 1, 1, 1, 1])
+    np.testing.assert_array_equal(new.clip_source_fps, synth_db.clip_source_fps)
+    np.testing.assert_array_equal(new.clip_source_up, synth_db.clip_source_up)
+    new.save(tmp_path / "w.npz")
+    back = mmrl.Database.load(tmp_path / "w.npz")
+    assert back.weights == {n: 1.0 for n in BLOCK_NAMES}
+    np.testing.assert_array_equal(back.normalized_features, new.normalized_features)

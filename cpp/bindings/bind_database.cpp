@@ -150,8 +150,14 @@ void bind_database(py::module_& m) {
                                const auto s = db.normalization.column_scale();
                                return py::array_t<float>(kFeatureDim, s.data());
                              })
-      .def("set_weights", [](Database& db, const std::vector<float>& w) { db.set_weights(weights_from(w)); },
-           py::arg("weights"));
+      .def(
+          "with_weights",
+          [](const Database& db, const std::vector<float>& w) {
+            Database out = db;  // a copy: matchers of `db` keep borrowing its rows unchanged
+            out.set_weights(weights_from(w));
+            return out;
+          },
+          py::arg("weights"), "A new Database with other block weights (same mean and block scales).");
   m.attr("FEATURE_DIM") = kFeatureDim;
   m.attr("POSE_DIM") = kPoseDim;
   m.attr("TRAJECTORY_DIM") = kTrajectoryDim;

@@ -1,5 +1,7 @@
 #include "mmrl/bvh.hpp"
 
+#include "mmrl/motion_import.hpp"
+
 #include <algorithm>
 #include <cctype>
 #include <charconv>
@@ -270,14 +272,13 @@ float bvh_infer_scale(const Motion& m) {
   return best;
 }
 
-Motion bvh_parse(const std::string& text, const std::string& source, float scale) {
-  check_text(text, source);
-  Lexer lx(text, source);
-  Motion m;
-  m.source = source;
+namespace {
+
+// HIERARCHY and the MOTION header (Frames, Frame Time); leaves the lexer at the end of the
+// Frame Time line's number. Returns the line of 'Frames:' (for messages).
+int parse_header(Lexer& lx, Motion& m) {
   Skeleton& sk = m.skeleton;
   std::unordered_set<std::string> seen;
-
   {
     const std::string t = lx.next();
     if (t != "HIERARCHY") lx.fail("expected 'HIERARCHY' at the start of the file, found '" + t.substr(0, 40) + "'", lx.token_line());
@@ -315,14 +316,40 @@ Motion bvh_parse(const std::string& text, const std::string& source, float scale
   if (!(frame_time > 0)) lx.fail("Frame Time must be positive", ft_line);
   m.frame_time = frame_time;
   m.num_frames = frames;
+  return frames_line;
+}
 
+// Local transform of joint j from its channel values (file units, degrees).
+void apply_channels(const Skeleton& sk, int j, const float* values, float* tr, float* rot) {
+  tr[0] = sk.offsets[j].x();
+  tr[1] = sk.offsets[j].y();
+  tr[2] = sk.offsets[j].z();
+  Eigen::Quaterniond r = Eigen::Quaterniond::Identity();
+  for (Channel ch : sk.channels[j]) {
+    const float v = *values++;
+    switch (ch) {
+      case Channel::Xposition: tr[0] = v; break;
+      case Channel::Yposition: tr[1] = v; break;
+      case Channel::Zposition: tr[2] = v; break;
+      case Channel::Xrotation: r = r * Eigen::AngleAxisd(v * M_PI / 180.0, Eigen::Vector3d::UnitX()); break;
+      case Channel::Yrotation: r = r * Eigen::AngleAxisd(v * M_PI / 180.0, Eigen::Vector3d::UnitY()); break;
+      case Channel::Zrotation: r = r * Eigen::AngleAxisd(v * M_PI / 180.0, Eigen::Vector3d::UnitZ()); break;
+    }
+  }
+  r.normalize();
+  quat_store(r.cast<float>(), rot);
+}
+
+// Frame data after the header: one frame per non-blank line, exactly C values each.
+void parse_frames(Lexer& lx, const std::string& source, int frames_line, Motion& m) {
+  const Skeleton& sk = m.skeleton;
+  const int frames = m.num_frames;
   const int J = sk.num_joints();
   const int C = sk.num_channels();
   m.translations.resize(static_cast<size_t>(frames) * J * 3);
   m.rotations.resize(static_cast<size_t>(frames) * J * 4);
   std::vector<float> values(static_cast<size_t>(C));
 
-  // Frame data: one frame per non-blank line, exactly C values each.
   const std::string& s = lx.text();
   size_t p = lx.pos();
   int line = lx.line();
@@ -358,26 +385,11 @@ Motion bvh_parse(const std::string& text, const std::string& source, float scale
       if (count != C)
         throw BVHError(source, line, "frame line has " + std::to_string(count) + " values, expected " + std::to_string(C));
       // Apply the channels to joint transforms (file units, scaled later).
-      int c = 0;
+      const float* v = values.data();
       for (int j = 0; j < J; ++j) {
-        float* tr = &m.translations[(static_cast<size_t>(f) * J + j) * 3];
-        tr[0] = sk.offsets[j].x();
-        tr[1] = sk.offsets[j].y();
-        tr[2] = sk.offsets[j].z();
-        Eigen::Quaterniond r = Eigen::Quaterniond::Identity();
-        for (Channel ch : sk.channels[j]) {
-          const float v = values[c++];
-          switch (ch) {
-            case Channel::Xposition: tr[0] = v; break;
-            case Channel::Yposition: tr[1] = v; break;
-            case Channel::Zposition: tr[2] = v; break;
-            case Channel::Xrotation: r = r * Eigen::AngleAxisd(v * M_PI / 180.0, Eigen::Vector3d::UnitX()); break;
-            case Channel::Yrotation: r = r * Eigen::AngleAxisd(v * M_PI / 180.0, Eigen::Vector3d::UnitY()); break;
-            case Channel::Zrotation: r = r * Eigen::AngleAxisd(v * M_PI / 180.0, Eigen::Vector3d::UnitZ()); break;
-          }
-        }
-        r.normalize();
-        quat_store(r.cast<float>(), &m.rotations[(static_cast<size_t>(f) * J + j) * 4]);
+        const size_t o = static_cast<size_t>(f) * J + j;
+        apply_channels(sk, j, v, &m.translations[o * 3], &m.rotations[o * 4]);
+        v += sk.channels[j].size();
       }
       ++f;
     }
@@ -386,22 +398,44 @@ Motion bvh_parse(const std::string& text, const std::string& source, float scale
   if (f < frames)
     throw BVHError(source, line, "truncated MOTION data: 'Frames: " + std::to_string(frames) + "' (line " +
                                      std::to_string(frames_line) + ") but only " + std::to_string(f) + " frame lines");
+}
 
-  m.scale = scale > 0 ? scale : bvh_infer_scale(m);
-  if (m.scale != 1.0f) {
-    for (float& v : m.translations) v *= m.scale;
-    for (auto& o : sk.offsets) o *= m.scale;
-    for (auto& o : sk.end_sites) o *= m.scale;
-  }
+void motion_apply_scale(Motion& m, float scale) {
+  m.scale = scale;
+  if (scale == 1.0f) return;
+  for (float& v : m.translations) v *= scale;
+  for (auto& o : m.skeleton.offsets) o *= scale;
+  for (auto& o : m.skeleton.end_sites) o *= scale;
+}
+
+}  // namespace
+
+Motion bvh_parse(const std::string& text, const std::string& source, const BVHImportOptions& options) {
+  if (!std::isfinite(options.scale) || options.scale < 0)
+    throw std::invalid_argument("scale must be positive (or 0 to infer it), got " + std::to_string(options.scale));
+  if (!std::isfinite(options.fps) || options.fps < 0)
+    throw std::invalid_argument("fps must be positive (or 0 to keep the file's), got " + std::to_string(options.fps));
+  check_text(text, source);
+  Lexer lx(text, source);
+  Motion m;
+  m.source = source;
+  const int frames_line = parse_header(lx, m);
+  parse_frames(lx, source, frames_line, m);
+  m.source_fps = motion_nominal_fps(m);
+  // Up axis before the scale: the unit rule measures the height along Y.
+  m.source_up = options.up == UpAxis::Auto ? motion_detect_up_axis(m) : options.up;
+  if (m.source_up == UpAxis::Z) motion_rotate_z_up_to_y_up(m);
+  motion_apply_scale(m, options.scale > 0 ? options.scale : bvh_infer_scale(m));
+  if (options.fps > 0 && motion_needs_resample(m, options.fps)) m = motion_resample(m, options.fps);
   return m;
 }
 
-Motion bvh_load(const std::string& path, float scale) {
+Motion bvh_load(const std::string& path, const BVHImportOptions& options) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw BVHError(path, 0, "cannot open file");
   std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   if (in.bad()) throw BVHError(path, 0, "read error");
-  return bvh_parse(text, path, scale);
+  return bvh_parse(text, path, options);
 }
 
 void pose_forward_kinematics(const std::vector<int>& parents, const float* lt, const float* lr, float* gp, float* gr) {
@@ -435,78 +469,6 @@ void motion_forward_kinematics(const Motion& m, float* global_positions, float* 
     if (global_positions) std::copy(gp.begin(), gp.end(), global_positions + o * 3);
     if (global_rotations) std::copy(gr.begin(), gr.end(), global_rotations + o * 4);
   }
-}
-
-namespace {
-
-const char* channel_name(Channel c) {
-  static const char* kNames[6] = {"Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation"};
-  return kNames[static_cast<int>(c)];
-}
-
-// Euler angles (degrees) for R = R_a0 * R_a1 * R_a2 with axes given in order.
-Eigen::Vector3d euler_from_quat(const Eigen::Quaterniond& q, const int axes[3]) {
-  // Eigen's eulerAngles(a0, a1, a2) returns angles for R = R_a0(x) R_a1(y) R_a2(z).
-  const Eigen::Matrix3d R = q.toRotationMatrix();
-  Eigen::Vector3d e = R.eulerAngles(axes[0], axes[1], axes[2]);
-  // Prefer the solution with the smallest middle-angle magnitude for continuity.
-  return e * (180.0 / M_PI);
-}
-
-void write_joint(std::ostringstream& os, const Skeleton& sk, int j, int depth, float inv_scale) {
-  const std::string ind(static_cast<size_t>(depth), '\t');
-  os << ind << (sk.parents[j] < 0 ? "ROOT " : "JOINT ") << sk.names[j] << "\n" << ind << "{\n";
-  const Vec3 o = sk.offsets[j] * inv_scale;
-  os << ind << "\tOFFSET " << o.x() << " " << o.y() << " " << o.z() << "\n";
-  os << ind << "\tCHANNELS " << sk.channels[j].size();
-  for (Channel c : sk.channels[j]) os << " " << channel_name(c);
-  os << "\n";
-  for (int k = 0; k < sk.num_joints(); ++k)
-    if (sk.parents[k] == j) write_joint(os, sk, k, depth + 1, inv_scale);
-  if (sk.has_end_site[j]) {
-    const Vec3 e = sk.end_sites[j] * inv_scale;
-    os << ind << "\tEnd Site\n" << ind << "\t{\n" << ind << "\t\tOFFSET " << e.x() << " " << e.y() << " " << e.z() << "\n" << ind << "\t}\n";
-  }
-  os << ind << "}\n";
-}
-
-}  // namespace
-
-std::string bvh_write(const Motion& m) {
-  const Skeleton& sk = m.skeleton;
-  const int J = sk.num_joints();
-  const float inv_scale = m.scale > 0 ? 1.0f / m.scale : 1.0f;
-  std::ostringstream os;
-  os << std::setprecision(7);
-  os << "HIERARCHY\n";
-  // Joints are written in depth-first order, which is the order BVH files store them in;
-  // a Motion parsed from BVH already has that order.
-  for (int j = 0; j < J; ++j)
-    if (sk.parents[j] < 0) write_joint(os, sk, j, 0, inv_scale);
-  os << "MOTION\nFrames: " << m.num_frames << "\nFrame Time: " << m.frame_time << "\n";
-  for (int f = 0; f < m.num_frames; ++f) {
-    bool first = true;
-    for (int j = 0; j < J; ++j) {
-      const size_t o = static_cast<size_t>(f) * J + j;
-      const float* t = &m.translations[o * 3];
-      int axes[3];
-      int na = 0;
-      for (Channel c : sk.channels[j])
-        if (c >= Channel::Xrotation) axes[na++] = static_cast<int>(c) - 3;
-      Eigen::Vector3d e = Eigen::Vector3d::Zero();
-      if (na == 3) e = euler_from_quat(quat_load(&m.rotations[o * 4]).cast<double>(), axes);
-      int ri = 0;
-      for (Channel c : sk.channels[j]) {
-        double v;
-        if (c < Channel::Xrotation) v = t[static_cast<int>(c)] * inv_scale;
-        else v = e[ri++];
-        os << (first ? "" : " ") << v;
-        first = false;
-      }
-    }
-    os << "\n";
-  }
-  return os.str();
 }
 
 }  // namespace mmrl

@@ -1,7 +1,9 @@
 """The motion database: clips, 27-d features, root motion, normalisation, save/load.
 
-Offline: :meth:`Database.from_bvh` parses BVH files (in C++, in parallel) and builds the
-features. Runtime: :meth:`Database.match` searches the normalized features.
+Offline: :meth:`Database.from_bvh` parses BVH files (in C++, in parallel: Y up, resampled
+to the database's rate) and builds the features. Runtime: :meth:`Database.match` searches
+the normalized features. A Database never changes after it is built: matchers and envs
+borrow its rows; :meth:`Database.with_weights` returns a new one.
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Uni
 import numpy as np
 
 from . import _core
-from .bvh import load_bvh
+from .bvh import _options as _bvh_options, check_motion, warn_if_implausible
 
 PathLike = Union[str, os.PathLike]
 
@@ -28,7 +30,12 @@ BLOCK_NAMES: List[str] = [b[0] for b in FEATURE_BLOCKS]
 DEFAULT_WEIGHTS: Dict[str, float] = {b[0]: b[2] for b in FEATURE_BLOCKS}
 
 FILE_FORMAT = "mmrl.database"
+# Version 2 files written before import metadata existed lack "clip_source_fps" and
+# "clip_source_up"; they load with the database's rate and Y up.
 FILE_VERSION = 2
+#: The database's frame rate unless told otherwise: the trajectory offsets (+10/+20/+30
+#: frames) and the decision interval (6 frames) mean 1/3, 2/3, 1 s and 0.2 s at this rate.
+DEFAULT_FPS = 30.0
 
 
 class DatabaseFileError(ValueError):
@@ -86,12 +93,26 @@ class Database:
     - ``root_deltas`` (N, 3): (dx, dz, dyaw) from frame i to i+1 in frame i's character frame;
     - ``bone_translations`` (N, J, 3), ``bone_rotations`` (N, J, 4) local pose (w, x, y, z);
     - ``contacts`` (N, 2) bool: left/right foot planted (toe or ankle near the ground and
-      slower than 0.15 m/s horizontally, median-filtered over 5 frames).
+      slower than 0.15 m/s horizontally, median-filtered over 5 frames);
+    - ``clip_source_fps`` (C,) the files' frame rates before resampling to ``fps``;
+      ``clip_source_up`` (C,) their up axes, ``"y"`` or ``"z"`` (rotated to Y up).
+
+    Immutable: every array is read-only, and matchers (``matcher``, envs, controllers)
+    keep borrowing the rows they were built on. :meth:`with_weights` returns a new Database.
     """
 
-    def __init__(self, core: "_core.Database"):
+    def __init__(self, core: "_core.Database", clip_source_fps: Optional[Sequence[float]] = None,
+                 clip_source_up: Optional[Sequence[str]] = None):
         self._db = core
         self._matcher = None
+        c = core.num_clips
+        fps = np.full(c, core.fps, np.float32) if clip_source_fps is None else np.asarray(clip_source_fps, np.float32)
+        up = np.full(c, "y") if clip_source_up is None else np.asarray(clip_source_up, np.str_)
+        if fps.shape != (c,) or up.shape != (c,) or not set(up.tolist()) <= {"y", "z"}:
+            raise ValueError(f"clip_source_fps and clip_source_up: expected {c} entries each ('y' or 'z' for up)")
+        fps.setflags(write=False)
+        up.setflags(write=False)
+        self._clip_source_fps, self._clip_source_up = fps, up
 
     # ----------------------------------------------------------------- building
     @classmethod
@@ -101,6 +122,8 @@ class Database:
         *,
         mirror: bool = False,
         scale: Optional[float] = None,
+        up: Optional[str] = None,
+        fps: Optional[float] = DEFAULT_FPS,
         roles: Optional[Mapping[str, str]] = None,
         weights: Optional[Union[Mapping[str, float], Sequence[float]]] = None,
         progress: bool = False,
@@ -112,37 +135,62 @@ class Database:
             paths: a file, a directory (searched recursively, in sorted order) or a list.
             mirror: add a left/right mirrored copy of every clip.
             scale: file units to meters; ``None`` infers it per file (see :func:`mmrl.load_bvh`).
+            up: the files' up axis, ``"y"`` or ``"z"``; ``None`` detects it per file.
+            fps: the database's frame rate; clips at other rates are resampled on import
+                (translations linear, rotations slerp). ``None`` keeps the files' rate
+                (they must then agree).
             roles: overrides of the joint-role detection, e.g. ``{"left_foot": "LeftAnkle"}``.
             weights: block weights by name (see ``BLOCK_NAMES``) or as a 5-sequence.
             progress: show a progress bar while parsing.
             num_workers: parsing threads (default: all cores).
+
+        Warns:
+            MotionImportWarning: per file whose motion looks implausible after import
+                (lying flat, travelling vertically; see :func:`mmrl.bvh.check_motion`).
         """
         files = find_bvh_files(paths)
+        s, u, f = _bvh_options(scale, up, fps)
         workers = num_workers or os.cpu_count() or 1
         bar = None
         if progress:
             from tqdm import tqdm
 
             bar = tqdm(total=len(files), unit="file", desc="parsing BVH")
+
+        def load(path):  # runs in a worker thread; the C++ releases the GIL
+            motion = _core.bvh_load(os.fspath(path), s, u, f)
+            return motion, check_motion(motion)
+
         motions = []
         try:
             with ThreadPoolExecutor(max_workers=workers) as pool:
-                for m in pool.map(lambda f: load_bvh(f, scale), files):
+                for m, problems in pool.map(load, files):
+                    warn_if_implausible(m, problems, stacklevel=2)  # from this thread, in file order
                     motions.append(m)
                     if bar is not None:
                         bar.update(1)
         finally:
             if bar is not None:
                 bar.close()
-        return cls.from_motions(motions, mirror=mirror, roles=roles, weights=weights)
+        return cls.from_motions(motions, mirror=mirror, roles=roles, weights=weights, fps=fps)
 
     @classmethod
     def from_motions(cls, motions: Sequence["_core.Motion"], *, mirror: bool = False,
                      roles: Optional[Mapping[str, str]] = None,
-                     weights: Optional[Union[Mapping[str, float], Sequence[float]]] = None) -> "Database":
-        """Build a database from parsed motions (see :func:`mmrl.load_bvh`)."""
+                     weights: Optional[Union[Mapping[str, float], Sequence[float]]] = None,
+                     fps: Optional[float] = DEFAULT_FPS) -> "Database":
+        """Build a database from parsed motions (see :func:`mmrl.load_bvh`); motions at
+        another rate than ``fps`` are resampled (``None`` keeps their rate)."""
+        if fps is not None and not (0 < fps < float("inf")):
+            raise ValueError(f"fps must be positive, got {fps!r}")
+        motions = list(motions)
+        if fps is not None:
+            motions = [m.resampled(fps) if abs(m.fps - fps) > 1e-4 * fps else m for m in motions]
         w = _weights_list(weights, [DEFAULT_WEIGHTS[n] for n in BLOCK_NAMES])
-        return cls(_core.Database.build(list(motions), bool(mirror), dict(roles or {}), w))
+        core = _core.Database.build(motions, bool(mirror), dict(roles or {}), w)
+        src_fps = [m.source_fps for m in motions] * (2 if mirror else 1)
+        src_up = [m.up_axis for m in motions] * (2 if mirror else 1)
+        return cls(core, src_fps, src_up)
 
     # ----------------------------------------------------------------- properties
     num_frames = property(lambda self: self._db.num_frames, doc="Number of frames N.")
@@ -198,11 +246,23 @@ class Database:
         w = self._state()["weights"]
         return {n: float(w[i]) for i, n in enumerate(BLOCK_NAMES)}
 
-    def set_weights(self, weights: Union[Mapping[str, float], Sequence[float]]) -> None:
-        """Change block weights (by name or as a 5-sequence); renormalizes the features."""
+    def with_weights(self, weights: Union[Mapping[str, float], Sequence[float]]) -> "Database":
+        """A new Database with other block weights (by name, the others kept, or as a
+        5-sequence): the same features, mean and block scales, renormalized rows. This one,
+        and every matcher or env built on it, stays unchanged."""
         cur = self._state()["weights"].tolist()
-        self._db.set_weights(_weights_list(weights, cur))
-        self._matcher = None
+        return Database(self._db.with_weights(_weights_list(weights, cur)), self._clip_source_fps,
+                        self._clip_source_up)
+
+    @property
+    def clip_source_fps(self) -> np.ndarray:
+        """(C,) float32: each clip's frame rate in its file, before resampling to ``fps``."""
+        return self._clip_source_fps
+
+    @property
+    def clip_source_up(self) -> np.ndarray:
+        """(C,) str: each clip's up axis in its file, ``"y"`` or ``"z"`` (rotated to Y up)."""
+        return self._clip_source_up
 
     def normalize(self, features: np.ndarray) -> np.ndarray:
         """Map raw features (..., 27) into the normalized, weighted search space."""
@@ -232,6 +292,8 @@ class Database:
         arrays["roles"] = np.array(s["roles"], dtype=np.int32)
         arrays["fps"] = np.array(s["fps"], dtype=np.float32)
         arrays["source_scale"] = np.array(s["source_scale"], dtype=np.float32)
+        arrays["clip_source_fps"] = self._clip_source_fps
+        arrays["clip_source_up"] = self._clip_source_up
         arrays["format"] = np.array(FILE_FORMAT)
         arrays["version"] = np.array(FILE_VERSION, dtype=np.int32)
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -268,6 +330,8 @@ class Database:
                 if version != FILE_VERSION:
                     raise DatabaseFileError(f"{path}: database file version {version}, this mmrl reads version {FILE_VERSION}; rebuild it with 'mmrl db build'")
                 state = {k: z[k] for k in z.files if k not in ("format", "version")}
+            source_fps = state.pop("clip_source_fps", None)
+            source_up = state.pop("clip_source_up", None)
         except DatabaseFileError:
             raise
         except (zipfile.BadZipFile, OSError, ValueError, KeyError, EOFError) as e:
@@ -280,7 +344,7 @@ class Database:
             state["fps"] = float(state["fps"])
             state["source_scale"] = float(state["source_scale"])
             state = {k: (np.ascontiguousarray(v) if isinstance(v, np.ndarray) else v) for k, v in state.items()}
-            return cls(_core.Database.from_state(state))
+            return cls(_core.Database.from_state(state), source_fps, source_up)
         except (KeyError, TypeError, ValueError) as e:
             raise DatabaseFileError(f"{path}: corrupt database file ({e})") from e
 

@@ -6,8 +6,10 @@
 // added to it). Rotation channels listed as "Zrotation Xrotation Yrotation" give the local
 // rotation Rz * Rx * Ry (intrinsic, in listed order), in degrees.
 //
-// Units: everything inside a Motion is in meters. The scale from file units to meters is
-// either given (> 0) or inferred (see bvh_infer_scale).
+// Units: everything inside a Motion is in meters, Y up. The scale from file units to meters is
+// either given (> 0) or inferred (see bvh_infer_scale). A file whose world is Z up is rotated
+// to Y up at import (given, or detected from the hips and feet; see motion_import.hpp), and
+// a clip can be resampled to another frame rate at import (positions linear, rotations slerp).
 #pragma once
 
 #include <array>
@@ -35,6 +37,15 @@ class BVHError : public std::runtime_error {
 
 enum class Channel : int8_t { Xposition = 0, Yposition, Zposition, Xrotation, Yrotation, Zrotation };
 
+// The world's up axis in a file. Auto: detect it (motion_detect_up_axis).
+enum class UpAxis : int8_t { Auto = 0, Y, Z };
+
+struct BVHImportOptions {
+  float scale = 0.0f;         // file units -> meters; <= 0 infers it (bvh_infer_scale)
+  UpAxis up = UpAxis::Auto;   // the file's up axis; Z rotates the world to Y up
+  float fps = 0.0f;           // resample to this rate (frames per second); <= 0 keeps the file's
+};
+
 struct Skeleton {
   std::vector<std::string> names;
   std::vector<int> parents;                  // -1 for a root
@@ -54,6 +65,8 @@ struct Motion {
   std::string source;       // file name, for messages
   float frame_time = 0.0f;  // seconds
   float scale = 1.0f;       // file units -> meters, as applied
+  float source_fps = 0.0f;  // the file's frame rate, before any resampling
+  UpAxis source_up = UpAxis::Y;  // the file's up axis (Z: rotated to Y up at import)
   int num_frames = 0;
   // Local transforms, frames x joints, row-major. Translations in meters; rotations as
   // unit quaternions stored (w, x, y, z).
@@ -63,14 +76,28 @@ struct Motion {
   float fps() const { return frame_time > 0 ? 1.0f / frame_time : 0.0f; }
 };
 
-// Parses BVH text. `source` names the file in error messages. scale <= 0 infers it.
-Motion bvh_parse(const std::string& text, const std::string& source, float scale = 0.0f);
+// Parses BVH text. `source` names the file in error messages. Steps after parsing, in order:
+// the up axis (detected or given; Z up is rotated to Y up), the scale (inferred when not
+// given, on the Y-up skeleton), then resampling to options.fps if it differs from the file's
+// rate by more than 1e-4 relative. Throws std::invalid_argument for a negative or non-finite
+// options.fps or scale.
+Motion bvh_parse(const std::string& text, const std::string& source, const BVHImportOptions& options);
+inline Motion bvh_parse(const std::string& text, const std::string& source, float scale = 0.0f) {
+  BVHImportOptions options;
+  options.scale = scale;
+  return bvh_parse(text, source, options);
+}
 
 // Reads and parses a file. Throws BVHError (line 0 when the file cannot be read).
-Motion bvh_load(const std::string& path, float scale = 0.0f);
+Motion bvh_load(const std::string& path, const BVHImportOptions& options);
+inline Motion bvh_load(const std::string& path, float scale = 0.0f) {
+  BVHImportOptions options;
+  options.scale = scale;
+  return bvh_load(path, options);
+}
 
-// The unit rule: the skeleton's height h in file units is the highest joint or End Site in
-// the first frame, measured from the floor y = 0 (or from the lowest point if that is below
+// The unit rule (on a Y-up motion): the skeleton's height h in file units is the highest joint
+// or End Site in the first frame, measured from the floor y = 0 (or from the lowest point if that is below
 // the floor). The scale is the one of {1 (m), 0.01 (cm),
 // 0.0254 (inch), 0.001 (mm)} that brings h closest to 1.5 m on a log scale.
 float bvh_infer_scale(const Motion& motion_in_file_units);

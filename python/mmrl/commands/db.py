@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..database import DEFAULT_FPS
+
 
 def parse_roles(items):
     roles = {}
@@ -30,11 +32,27 @@ def register_cli(sub) -> None:
     b.add_argument("--scale", type=float, default=None, help="file units to meters (default: inferred)")
     b.add_argument("--role", action="append", metavar="ROLE=JOINT",
                    help="override a joint role, e.g. --role left_foot=LeftAnkle (repeatable)")
+    add_import_arguments(b)
     b.set_defaults(func=cmd_build)
 
     i = dsub.add_parser("info", help="print clips, frames, skeleton roles and feature statistics")
     i.add_argument("database", help="a .npz database, a BVH file or a directory")
+    add_import_arguments(i, " (when given BVH files)")
     i.set_defaults(func=cmd_info)
+
+
+def add_import_arguments(parser, when: str = "") -> None:
+    parser.add_argument("--up", choices=("auto", "y", "z"), default="auto",
+                        help="the files' up axis; auto detects it per file from the hips and feet" + when)
+    parser.add_argument("--fps", type=float, default=DEFAULT_FPS,
+                        help=f"the database's frame rate; other rates are resampled (default {DEFAULT_FPS:g}; "
+                             "0 keeps the files' rate)" + when)
+
+
+def import_options(args: argparse.Namespace) -> dict:
+    if not args.fps >= 0:
+        raise ValueError(f"--fps must be positive (or 0 to keep the files' rate), got {args.fps}")
+    return {"up": None if args.up == "auto" else args.up, "fps": args.fps or None}
 
 
 def cmd_build(args: argparse.Namespace) -> int:
@@ -42,33 +60,50 @@ def cmd_build(args: argparse.Namespace) -> int:
 
     t0 = time.perf_counter()
     db = Database.from_bvh(args.data, mirror=args.mirror, scale=args.scale, roles=parse_roles(args.role),
-                           progress=True)
+                           progress=True, **import_options(args))
     t1 = time.perf_counter()
     db.save(args.output)
     print(f"{db!r}\nbuilt in {t1 - t0:.2f} s, saved to {args.output} in {time.perf_counter() - t1:.2f} s")
     return 0
 
 
-def load_any(path: str):
-    """A database from a .npz file, or built from BVH files/directories."""
+def load_any(path: str, **import_options):
+    """A database from a .npz file, or built from BVH files/directories (``up``, ``fps``)."""
     from ..database import Database
 
     p = Path(path)
     if p.is_file() and p.suffix == ".npz":
         return Database.load(p)
-    return Database.from_bvh(p)
+    return Database.from_bvh(p, **import_options)
+
+
+def source_lines(db) -> list:
+    """How the clips were imported, when it was not as-is: resampled rates, rotated up axes."""
+    lines = []
+    src = db.clip_source_fps
+    other = np.abs(src - db.fps) > 1e-4 * db.fps
+    if other.any():
+        rates = ", ".join(f"{r:g}" for r in np.unique(np.round(src[other], 3)))
+        lines.append(f"source fps   {int(other.sum())} of {db.num_clips} clips resampled from {rates} fps "
+                     f"to {db.fps:g} fps")
+    z_up = db.clip_source_up == "z"
+    if z_up.any():
+        lines.append(f"up axis      {int(z_up.sum())} of {db.num_clips} clips were Z up, rotated to Y up")
+    return lines
 
 
 def cmd_info(args: argparse.Namespace) -> int:
     from ..database import FEATURE_BLOCKS
 
-    db = load_any(args.database)
+    db = load_any(args.database, **import_options(args))
     lengths = np.diff(db.clip_ranges, axis=1)[:, 0] / db.fps
     print(f"database     {args.database}")
     print(f"clips        {db.num_clips} ({int(db.clip_mirrored.sum())} mirrored), "
           f"length {lengths.min():.1f}-{lengths.max():.1f} s (median {np.median(lengths):.1f} s)")
     print(f"frames       {db.num_frames} at {db.fps:g} fps = {db.minutes:.1f} min; "
           f"{int(db.valid_mask.sum())} valid matches")
+    for line in source_lines(db):
+        print(line)
     print(f"skeleton     {db.num_joints} joints")
     for role, joint in db.roles.items():
         print(f"  {role:<16} {joint}")
