@@ -77,6 +77,7 @@ py::dict roles_to_dict(const Skeleton& sk, const JointRoles& roles) {
 }
 
 // Motion: read-only views of the parsed clip, FK, roles, mirroring, resampling, export.
+// long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 static void bind_motion(py::module_& m) {
   py::class_<Motion>(m, "Motion", "A parsed BVH clip: skeleton and per-frame local transforms (meters).")
       .def_property_readonly("joint_names", [](const Motion& mo) { return mo.skeleton.names; })

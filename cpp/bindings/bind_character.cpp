@@ -26,6 +26,7 @@ py::array vec_array(const Vec3& v) {
 
 }  // namespace
 
+// long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 void bind_character(py::module_& m) {
   py::class_<CharacterOptions>(m, "CharacterOptions", "Options of a Character (see character.hpp).")
       .def(py::init<>())

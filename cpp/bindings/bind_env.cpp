@@ -15,6 +15,7 @@ struct PyPlaneVecEnv {
 
 }  // namespace
 
+// long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 void bind_env(py::module_& m) {
   py::class_<TargetTaskConfig>(m, "TargetTaskConfig", "Numbers of the plane task (see tasks/plane.hpp).")
       .def(py::init<>())

@@ -44,6 +44,7 @@ py::dict obstacle_dict(const ObstacleVecEnv& env, int i, int frames_after) {
 
 }  // namespace
 
+// long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 void bind_obstacles(py::module_& m) {
   m.attr("OBSTACLE_MAP_SIDE") = kMapSide;
   py::class_<ObstacleTaskConfig>(m, "ObstacleTaskConfig", "Numbers of the moving-obstacles task (tasks/obstacles.hpp).")

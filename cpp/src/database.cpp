@@ -161,12 +161,15 @@ Database database_build(const std::vector<Motion>& clips, const DatabaseOptions&
   return database_build(ptrs, opt);
 }
 
-Database database_build(const std::vector<const Motion*>& clips_in, const DatabaseOptions& opt) {
-  if (clips_in.empty()) throw std::invalid_argument("no clips to build a database from");
-  for (const Motion* m : clips_in)
+namespace {
+
+// Every clip must exist and share the first one's skeleton and frame rate.
+void check_clips(const std::vector<const Motion*>& clips) {
+  if (clips.empty()) throw std::invalid_argument("no clips to build a database from");
+  for (const Motion* m : clips)
     if (!m) throw std::invalid_argument("database_build: null clip");
-  const Motion& first = *clips_in.front();
-  for (const Motion* mp : clips_in) {
+  const Motion& first = *clips.front();
+  for (const Motion* mp : clips) {
     const Motion& m = *mp;
     if (!m.skeleton.same_hierarchy(first.skeleton))
       throw std::invalid_argument("'" + m.source + "' has a different skeleton (joint names or hierarchy) than '" +
@@ -176,6 +179,25 @@ Database database_build(const std::vector<const Motion*>& clips_in, const Databa
                                   first.source + "' has " + std::to_string(first.frame_time) +
                                   "; resample the clips to one frame rate");
   }
+}
+
+// Root deltas of one clip (F frames): (dx, dz) of frame i -> i + 1 in frame i's character
+// frame (meters) and the yaw change (radians); the last frame repeats its predecessor's.
+void clip_root_deltas(int F, const float* rp, const float* ry, float* rd) {
+  for (int i = 0; i + 1 < F; ++i) {
+    const Vec2 d = world_to_local_xz(rp[(i + 1) * 3] - rp[i * 3], rp[(i + 1) * 3 + 2] - rp[i * 3 + 2], ry[i]);
+    rd[i * 3] = d.x();
+    rd[i * 3 + 1] = d.y();
+    rd[i * 3 + 2] = wrap_angle(ry[i + 1] - ry[i]);
+  }
+  for (int k = 0; k < 3; ++k) rd[(F - 1) * 3 + k] = F > 1 ? rd[(F - 2) * 3 + k] : 0.0f;
+}
+
+}  // namespace
+
+Database database_build(const std::vector<const Motion*>& clips_in, const DatabaseOptions& opt) {
+  check_clips(clips_in);
+  const Motion& first = *clips_in.front();
   Database db;
   db.skeleton = first.skeleton;
   db.roles = skeleton_find_roles(db.skeleton, opt.roles);
@@ -231,14 +253,7 @@ Database database_build(const std::vector<const Motion*>& clips_in, const Databa
     float* ry = &db.root_yaws[start];
     clip_character_frames(F, db.fps, hips.data(), lul.data(), rul.data(), rp, ry);
     clip_features(F, db.fps, lf.data(), rf.data(), hips.data(), rp, ry, &db.features[start * kFeatureDim]);
-    float* rd = &db.root_deltas[start * 3];
-    for (int i = 0; i + 1 < F; ++i) {
-      const Vec2 d = world_to_local_xz(rp[(i + 1) * 3] - rp[i * 3], rp[(i + 1) * 3 + 2] - rp[i * 3 + 2], ry[i]);
-      rd[i * 3] = d.x();
-      rd[i * 3 + 1] = d.y();
-      rd[i * 3 + 2] = wrap_angle(ry[i + 1] - ry[i]);
-    }
-    for (int k = 0; k < 3; ++k) rd[(F - 1) * 3 + k] = F > 1 ? rd[(F - 2) * 3 + k] : 0.0f;
+    clip_root_deltas(F, rp, ry, &db.root_deltas[start * 3]);
     db.clip_ranges.push_back(static_cast<int32_t>(start));
     db.clip_ranges.push_back(static_cast<int32_t>(start + F));
     db.clip_names.push_back(m.source);

@@ -70,6 +70,20 @@ std::vector<int> joint_roles_as_list(const JointRoles& r) {
           r.upper_leg[1], r.lower_leg[1], r.foot[1],      r.toe[1]};
 }
 
+namespace {
+
+// The hips: the nearest common ancestor of the two upper legs (-1 if none), or its parent when
+// that ancestor is itself a side joint (prefer the hips/pelvis on that path).
+int find_hips(const Skeleton& sk, const std::vector<int>& side, int left_upper_leg, int right_upper_leg) {
+  int hips = -1;
+  for (int a = sk.parents[left_upper_leg]; a >= 0 && hips < 0; a = sk.parents[a])
+    if (descends_from(sk, right_upper_leg, a)) hips = a;
+  if (hips >= 0 && side[hips] >= 0) hips = sk.parents[hips];
+  return hips;
+}
+
+}  // namespace
+
 JointRoles skeleton_find_roles(const Skeleton& sk, const std::map<std::string, std::string>& overrides) {
   const int J = sk.num_joints();
   std::vector<int> side(J);
@@ -140,15 +154,7 @@ JointRoles skeleton_find_roles(const Skeleton& sk, const std::map<std::string, s
   }
 
   auto it = overrides.find("hips");
-  if (it != overrides.end()) {
-    r.hips = sk.find(it->second);
-  } else {
-    // Nearest common ancestor of the two upper legs.
-    for (int a = sk.parents[r.upper_leg[0]]; a >= 0 && r.hips < 0; a = sk.parents[a])
-      if (descends_from(sk, r.upper_leg[1], a)) r.hips = a;
-    // Prefer a joint named hips/pelvis on that path if the ancestor is a side joint.
-    if (r.hips >= 0 && side[r.hips] >= 0) r.hips = sk.parents[r.hips];
-  }
+  r.hips = it != overrides.end() ? sk.find(it->second) : find_hips(sk, side, r.upper_leg[0], r.upper_leg[1]);
   if (r.hips < 0) throw RoleError("could not find the hips (no common ancestor of the upper legs); joints found: " + joint_list());
   return r;
 }

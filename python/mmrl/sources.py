@@ -63,9 +63,10 @@ def database_from_spec(spec: Any) -> Database:
     return resolve_database()
 
 
-def load_any(path: PathLike) -> Database:
-    """A database from a ``.npz`` file, or built from a BVH file or directory."""
+def load_any(path: PathLike, **import_options) -> Database:
+    """A database from a ``.npz`` file, or built from a BVH file or directory (``import_options``:
+    ``Database.from_bvh``'s, e.g. ``up`` and ``fps``)."""
     p = Path(path)
     if p.is_file() and p.suffix == ".npz":
         return Database.load(p)
-    return Database.from_bvh(p)
+    return Database.from_bvh(p, **import_options)

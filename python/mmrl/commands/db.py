@@ -3,18 +3,19 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 
 import numpy as np
 
 from ..database import DEFAULT_FPS
+from ..errors import InputError
+from ..sources import load_any
 
 
 def parse_roles(items):
     roles = {}
     for item in items or []:
         if "=" not in item:
-            raise ValueError(f"--role expects ROLE=JOINT, got {item!r}")
+            raise InputError(f"--role expects ROLE=JOINT, got {item!r}")
         k, v = item.split("=", 1)
         roles[k.strip()] = v.strip()
     return roles
@@ -51,7 +52,7 @@ def add_import_arguments(parser, when: str = "") -> None:
 
 def import_options(args: argparse.Namespace) -> dict:
     if not args.fps >= 0:
-        raise ValueError(f"--fps must be positive (or 0 to keep the files' rate), got {args.fps}")
+        raise InputError(f"--fps must be positive (or 0 to keep the files' rate), got {args.fps}")
     return {"up": None if args.up == "auto" else args.up, "fps": args.fps or None}
 
 
@@ -65,16 +66,6 @@ def cmd_build(args: argparse.Namespace) -> int:
     db.save(args.output)
     print(f"{db!r}\nbuilt in {t1 - t0:.2f} s, saved to {args.output} in {time.perf_counter() - t1:.2f} s")
     return 0
-
-
-def load_any(path: str, **import_options):
-    """A database from a .npz file, or built from BVH files/directories (``up``, ``fps``)."""
-    from ..database import Database
-
-    p = Path(path)
-    if p.is_file() and p.suffix == ".npz":
-        return Database.load(p)
-    return Database.from_bvh(p, **import_options)
 
 
 def source_lines(db) -> list:
