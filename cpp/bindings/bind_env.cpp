@@ -15,6 +15,8 @@ struct PyPlaneVecEnv {
 
 }  // namespace
 
+// One pybind11 definition chain per class, over 80 lines by nature: each method is a short
+// lambda that checks its arguments and forwards (see bindings.hpp).
 void bind_env(py::module_& m) {
   py::class_<TargetTaskConfig>(m, "TargetTaskConfig", "Numbers of the plane task (see tasks/plane.hpp).")
       .def(py::init<>())

@@ -44,6 +44,8 @@ py::dict obstacle_dict(const ObstacleVecEnv& env, int i, int frames_after) {
 
 }  // namespace
 
+// One pybind11 definition chain per class, over 80 lines by nature: each method is a short
+// lambda that checks its arguments and forwards (see bindings.hpp).
 void bind_obstacles(py::module_& m) {
   m.attr("OBSTACLE_MAP_SIDE") = kMapSide;
   py::class_<ObstacleTaskConfig>(m, "ObstacleTaskConfig", "Numbers of the moving-obstacles task (tasks/obstacles.hpp).")
