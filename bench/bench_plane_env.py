@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import mmrl
-from mmrl.tasks.plane import PlaneVectorEnv
+from mmrl.tasks.plane import PlaneEnv, PlaneVectorEnv
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai-namco-2"
 
@@ -84,7 +84,7 @@ def main():
     import gymnasium as gym
 
     n = 64
-    sync = gym.vector.SyncVectorEnv([lambda: mmrl.envs.PlaneEnv(db=db) for _ in range(n)])
+    sync = gym.vector.SyncVectorEnv([lambda: PlaneEnv(db=db) for _ in range(n)])
     sync.reset(seed=0)
     ours = PlaneVectorEnv(n, db=db, num_threads=args.threads)
     ours.reset(seed=0)

@@ -234,7 +234,7 @@ def test_with_weights_leaves_existing_matchers_exact(synth_db):
     set_weights rewrote the rows under a tree built from the old ones: tree and brute force
     then disagreed, silently.)"""
     from mmrl import _core
-    from mmrl.envs import PlaneVectorEnv
+    from mmrl.tasks.plane import PlaneVectorEnv
 
     db = synth_db
     env = PlaneVectorEnv(4, db=db)

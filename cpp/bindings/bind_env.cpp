@@ -28,7 +28,7 @@ void bind_env(py::module_& m) {
       .def_readwrite("action_limit_std", &TargetTaskConfig::action_limit_std)
       .def_readwrite("random_heading", &TargetTaskConfig::random_heading);
 
-  py::class_<PyPlaneVecEnv>(m, "PlaneVecEnv", "Batched plane-task environments (C++ core of mmrl.envs).")
+  py::class_<PyPlaneVecEnv>(m, "PlaneVecEnv", "Batched plane-task environments (C++ core of mmrl.tasks.plane).")
       .def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const TargetTaskConfig& config,
                        int num_threads) {
              if (num_threads < 0) throw py::value_error("num_threads: must be >= 0 (0 = all cores)");

@@ -78,7 +78,7 @@ void bind_obstacles(py::module_& m) {
       .def_readwrite("grid_cell_size", &ObstacleTaskConfig::grid_cell_size);
 
   using E = ObstacleVecEnv;
-  py::class_<PyObstacleVecEnv>(m, "ObstacleVecEnv", "Batched moving-obstacles environments (C++ core of mmrl.obstacles).")
+  py::class_<PyObstacleVecEnv>(m, "ObstacleVecEnv", "Batched moving-obstacles environments (C++ core of mmrl.tasks.obstacles).")
       .def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const ObstacleTaskConfig& config,
                        int num_threads) {
              if (num_threads < 0) throw py::value_error("num_threads: must be >= 0 (0 = all cores)");

@@ -22,7 +22,7 @@ bool is_allowed(int64_t i, const SearchFilter& f) {
 
 }  // namespace
 
-int brute_force_knn(const float* points, int64_t num_points, int dim, const float* query, int k,
+MMRL_MULTIVERSION int brute_force_knn(const float* points, int64_t num_points, int dim, const float* query, int k,
                     int64_t* out_indices, float* out_sqdist, const SearchFilter& filter) {
   check_points(points, num_points, dim, "brute_force_knn");
   if (query == nullptr || out_indices == nullptr || out_sqdist == nullptr)
@@ -56,7 +56,7 @@ int brute_force_knn(const float* points, int64_t num_points, int dim, const floa
   return found;
 }
 
-int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
+MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                           const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
                           float* out_cost) {
   check_points(points, num_points, dim, "brute_force_match");
@@ -98,7 +98,7 @@ Matcher::Matcher(const float* rows, int64_t num_rows, int dim, const uint8_t* va
         return KDTree(rows, num_rows, dim, leaf, valid);
       }()) {}
 
-int64_t Matcher::match(const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
+MMRL_MULTIVERSION int64_t Matcher::match(const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
                        float* out_cost) const {
   SearchFilter filter;
   filter.exclude_lo = exclude_lo;

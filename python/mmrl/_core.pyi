@@ -256,7 +256,7 @@ class TargetTaskConfig:
         ...
 class PlaneVecEnv:
     """
-    Batched plane-task environments (C++ core of mmrl.envs).
+    Batched plane-task environments (C++ core of mmrl.tasks.plane).
     """
     action_dim: typing.ClassVar[int] = 12
     obs_dim: typing.ClassVar[int] = 17
@@ -540,7 +540,7 @@ class ObstacleTaskConfig:
         ...
 class ObstacleVecEnv:
     """
-    Batched moving-obstacles environments (C++ core of mmrl.obstacles).
+    Batched moving-obstacles environments (C++ core of mmrl.tasks.obstacles).
     """
     action_dim: typing.ClassVar[int] = 12
     layout: typing.ClassVar[tuple] = (('maps', 512), ('pose', 15), ('goal', 2))

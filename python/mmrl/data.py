@@ -34,7 +34,6 @@ import hashlib
 import json
 import os
 import sys
-import tempfile
 import urllib.error
 import urllib.request
 from importlib import resources
@@ -42,6 +41,7 @@ from pathlib import Path
 from typing import Iterable, List, Optional, Sequence
 
 from .errors import InputError
+from .io import atomic_open
 
 __all__ = [
     "DATASETS",
@@ -124,13 +124,13 @@ def _is_valid(path: Path, entry: dict) -> bool:
 def _download(url: str, dest: Path, entry: dict, timeout: float, progress) -> None:
     """Stream `url` into a temporary file next to `dest`, verify size and hash, rename into place."""
     dest.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{dest.name}.", suffix=".part", dir=dest.parent)
-    tmp = Path(tmp_name)
-    try:
+    # atomic_open keeps nothing when the block raises: a failed or mismatched download never
+    # replaces (or creates) dest.
+    with atomic_open(dest, "wb") as out:
         h = hashlib.sha256()
         size = 0
         try:
-            with os.fdopen(fd, "wb") as out, urllib.request.urlopen(url, timeout=timeout) as response:
+            with urllib.request.urlopen(url, timeout=timeout) as response:
                 while True:
                     block = response.read(_CHUNK)
                     if not block:
@@ -149,10 +149,6 @@ def _download(url: str, dest: Path, entry: dict, timeout: float, progress) -> No
                 f"checksum mismatch for {entry['name']} from {url}: expected {entry['size']} bytes, "
                 f"sha256 {entry['sha256']}; got {got}. The file was not kept; check the URL "
                 f"(--base-url / --url-template) or retry.")
-        os.replace(tmp, dest)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
 
 
 def fetch(name: str = "bandai-namco-2", *, styles: Optional[Sequence[str]] = None,

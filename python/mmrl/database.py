@@ -8,7 +8,6 @@ borrow its rows; :meth:`Database.with_weights` returns a new one.
 from __future__ import annotations
 
 import os
-import tempfile
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -18,6 +17,7 @@ import numpy as np
 
 from . import _core
 from .bvh import _options as _bvh_options, check_motion, warn_if_implausible
+from .io import atomic_write_npz
 
 PathLike = Union[str, os.PathLike]
 
@@ -297,20 +297,7 @@ class Database:
         arrays["format"] = np.array(FILE_FORMAT)
         arrays["version"] = np.array(FILE_VERSION, dtype=np.int32)
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as f:
-                np.savez(f, **arrays)
-                f.flush()
-                os.fsync(f.fileno())
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(tmp, 0o666 & ~umask)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
+        atomic_write_npz(path, **arrays)
 
     @classmethod
     def load(cls, path: PathLike) -> "Database":

@@ -18,7 +18,7 @@ import tempfile
 from pathlib import Path
 from typing import IO, Any, Iterator, Optional, Union
 
-__all__ = ["atomic_open", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["atomic_open", "atomic_path", "atomic_write_bytes", "atomic_write_text", "atomic_write_npz"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -95,3 +95,21 @@ def atomic_write_npz(path: "str | os.PathLike[str]", **arrays) -> Path:
     with atomic_open(path, "wb") as f:
         np.savez(f, **arrays)
     return Path(path)
+
+
+@contextlib.contextmanager
+def atomic_path(path: PathLike) -> Iterator[Path]:
+    """A temp path beside ``path`` with the same suffix, for writers that need a file name
+    (video encoders, matplotlib); on a clean exit it replaces ``path``, on an error it is removed."""
+    path = Path(path)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    os.close(fd)
+    try:
+        yield Path(tmp_name)
+        os.chmod(tmp_name, 0o666 & ~_UMASK)
+        os.replace(tmp_name, path)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp_name)
+        raise
+    _fsync_dir(path.parent)

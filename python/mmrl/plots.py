@@ -95,7 +95,7 @@ def plot_run(run: Path, out_dir: Optional[Path] = None, num_targets: int = 4, se
                 ax.axvline(x, ls="--", lw=0.8, color=f"C{k + 1}")
     fig.suptitle(f"{run.name}: learning curves")
     path = out_dir / "learning.png"
-    fig.savefig(path, dpi=110)
+    _save(fig, path)
     plt.close(fig)
     written.append(path)
 
@@ -126,7 +126,15 @@ def plot_run(run: Path, out_dir: Optional[Path] = None, num_targets: int = 4, se
             ax.legend(loc="upper right", fontsize=8)
             ax.set_title("top-down paths of checkpoints toward the same targets")
             path = out_dir / "trajectories.png"
-            fig.savefig(path, dpi=110)
+            _save(fig, path)
             plt.close(fig)
             written.append(path)
     return written
+
+
+def _save(fig, path: Path) -> None:
+    """Save a figure atomically (a PNG is complete or absent)."""
+    from .io import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")

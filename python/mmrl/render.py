@@ -22,6 +22,8 @@ from typing import Dict, Optional, Sequence
 import numpy as np
 
 from .errors import require_extra
+from .camera import Camera
+from .io import atomic_path
 
 SKY = (0.86, 0.90, 0.95)
 GROUND = (0.80, 0.80, 0.77)
@@ -51,68 +53,6 @@ def _as_verts(polys: list):
     if polys and all(len(p) == len(polys[0]) for p in polys):
         return np.asarray(polys)
     return polys
-
-
-class Camera:
-    """A pinhole camera looking at ``focus`` from ``distance`` meters away at a fixed azimuth."""
-
-    def __init__(self, width: int = 640, height: int = 360, fov_deg: float = 45.0, distance: float = 5.5,
-                 elevation_deg: float = 22.0, azimuth_deg: float = 35.0):
-        self.width, self.height = int(width), int(height)
-        self.focal = 0.5 * self.height / np.tan(np.radians(fov_deg) / 2)
-        el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
-        self.offset = distance * np.array([np.cos(el) * np.sin(az), np.sin(el), -np.cos(el) * np.cos(az)])
-        self.near = 0.1
-        self.look_at(np.zeros(3))
-
-    def look_at(self, focus) -> None:
-        self.focus = np.asarray(focus, np.float64)
-        self.eye = self.focus + self.offset
-        f = self.focus - self.eye
-        f /= np.linalg.norm(f)
-        r = np.cross(f, [0.0, 1.0, 0.0])
-        r /= np.linalg.norm(r)
-        u = np.cross(r, f)
-        self.rotation = np.stack([r, u, f])  # rows: camera x (right), y (up), z (forward)
-
-    def to_camera(self, p: np.ndarray) -> np.ndarray:
-        return (np.asarray(p, np.float64) - self.eye) @ self.rotation.T
-
-    def project(self, pc: np.ndarray) -> np.ndarray:
-        """Camera-space points (..., 3) with z > 0 -> pixels (..., 2), origin bottom-left."""
-        z = np.maximum(pc[..., 2], 1e-6)
-        return np.stack([0.5 * self.width + self.focal * pc[..., 0] / z,
-                         0.5 * self.height + self.focal * pc[..., 1] / z], axis=-1)
-
-    def segments(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """World segments (n, 3) -> pixel segments (m, 2, 2), clipped at the near plane."""
-        ca, cb = self.to_camera(a), self.to_camera(b)
-        za, zb = ca[:, 2], cb[:, 2]
-        keep = (za > self.near) | (zb > self.near)
-        ca, cb, za, zb = ca[keep], cb[keep], za[keep], zb[keep]
-        # Where z = near along a -> b; at most one end is behind the plane.
-        t = ((self.near - za) / np.where(np.abs(zb - za) > 1e-9, zb - za, 1e-9))[:, None]
-        cut = ca + (cb - ca) * t
-        ca = np.where((za < self.near)[:, None], cut, ca)
-        cb = np.where((zb < self.near)[:, None], cut, cb)
-        return np.stack([self.project(ca), self.project(cb)], axis=1)
-
-    def polygon(self, pts: np.ndarray) -> Optional[np.ndarray]:
-        """A world polygon (n, 3) -> pixel polygon clipped at the near plane (None if hidden)."""
-        c = self.to_camera(pts)
-        out = []
-        n = len(c)
-        for i in range(n):
-            p, q = c[i], c[(i + 1) % n]
-            pin, qin = p[2] > self.near, q[2] > self.near
-            if pin:
-                out.append(p)
-            if pin != qin:
-                t = (self.near - p[2]) / (q[2] - p[2])
-                out.append(p + (q - p) * t)
-        if len(out) < 3:
-            return None
-        return self.project(np.array(out))
 
 
 class Renderer:
@@ -437,47 +377,59 @@ def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray
     fps = float(fps or recording.get("fps", db.fps))
     if suffix == ".mp4":  # H.264 with 4:2:0 chroma needs even sizes
         width, height = width - width % 2, height - height % 2
-    targets = recording.get("targets")
     qframes = recording.get("query_frames")
     frame_obstacles = recording.get("obstacles")
-    episode = recording.get("episode")
     # Obstacle scenes: a higher, farther camera shows the layout around the character.
     view = dict(camera_distance=8.0, camera_elevation_deg=40.0) if frame_obstacles is not None else {}
     renderer = Renderer(db.parents, body_joints=body_joints(db), joint_names=db.joint_names, width=width,
                         height=height, success_radius=success_radius, **view)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if suffix == ".mp4":
-        writer = iio.get_writer(str(path), fps=fps, codec="libx264", quality=7, macro_block_size=2,
-                                ffmpeg_log_level="error", pixelformat="yuv420p")
-    else:
-        writer = iio.get_writer(str(path), mode="I", duration=1000.0 / fps, loop=0)
-    q = -1
-    try:
-        for t in range(pos.shape[0]):
-            if qframes is not None:
-                while q + 1 < len(qframes) and qframes[q + 1] <= t:
-                    q += 1
-            new_episode = t == 0 or (episode is not None and episode[t] != episode[t - 1])
-            # A decision is shown only within its own episode.
-            has_q = q >= 0 and (episode is None or episode[qframes[q]] == episode[t])
-            sensors = None
-            if has_q and "sensor_maps" in recording:
-                sensors = {"positions": recording["sensor_positions"][q], "map": recording["sensor_maps"][q]}
-            text = f"{t / fps:5.2f} s"
-            if episode is not None:
-                text += f"   episode {int(episode[t]) + 1}"
-            img = renderer.draw(pos[t], targets=None if targets is None else targets[t],
-                                query_points=recording["query_points"][q] if has_q else None,
-                                query_directions=recording["query_directions"][q] if has_q else None,
-                                obstacles=frame_obstacles[t] if frame_obstacles is not None else obstacles,
-                                sensors=sensors, hit_inside=recording["hit_inside"][q] if has_q and
-                                "hit_inside" in recording else None, text=text, snap_camera=new_episode)
-            writer.append_data(img)
-            if still is not None and t == (pos.shape[0] // 2 if still_frame is None else still_frame):
-                iio.imwrite(str(still), img)
-    finally:
-        writer.close()
+    still_image = None
+    with atomic_path(path) as tmp:  # a video is complete or absent, never half written
+        if suffix == ".mp4":
+            writer = iio.get_writer(str(tmp), fps=fps, codec="libx264", quality=7, macro_block_size=2,
+                                    ffmpeg_log_level="error", pixelformat="yuv420p")
+        else:
+            writer = iio.get_writer(str(tmp), mode="I", duration=1000.0 / fps, loop=0)
+        q = -1
+        try:
+            for t in range(pos.shape[0]):
+                if qframes is not None:
+                    while q + 1 < len(qframes) and qframes[q + 1] <= t:
+                        q += 1
+                img = _draw_recording_frame(renderer, recording, t, q, fps, obstacles)
+                writer.append_data(img)
+                if still is not None and t == (pos.shape[0] // 2 if still_frame is None else still_frame):
+                    still_image = img
+        finally:
+            writer.close()
+    if still_image is not None:
+        with atomic_path(still) as tmp:
+            iio.imwrite(str(tmp), still_image)
     return pos.shape[0]
+
+
+def _draw_recording_frame(renderer: "Renderer", recording: Dict[str, np.ndarray], t: int, q: int, fps: float,
+                          obstacles) -> np.ndarray:
+    """Frame t of a recording, with decision q's query (shown only within its own episode)."""
+    episode = recording.get("episode")
+    qframes = recording.get("query_frames")
+    frame_obstacles = recording.get("obstacles")
+    targets = recording.get("targets")
+    new_episode = t == 0 or (episode is not None and episode[t] != episode[t - 1])
+    has_q = q >= 0 and (episode is None or episode[qframes[q]] == episode[t])
+    sensors = None
+    if has_q and "sensor_maps" in recording:
+        sensors = {"positions": recording["sensor_positions"][q], "map": recording["sensor_maps"][q]}
+    text = f"{t / fps:5.2f} s"
+    if episode is not None:
+        text += f"   episode {int(episode[t]) + 1}"
+    return renderer.draw(recording["positions"][t], targets=None if targets is None else targets[t],
+                         query_points=recording["query_points"][q] if has_q else None,
+                         query_directions=recording["query_directions"][q] if has_q else None,
+                         obstacles=frame_obstacles[t] if frame_obstacles is not None else obstacles,
+                         sensors=sensors, hit_inside=recording["hit_inside"][q] if has_q and
+                         "hit_inside" in recording else None, text=text, snap_camera=new_episode)
 
 
 def render_topdown(states, size: int = 256, extent: float = 8.0) -> np.ndarray:

@@ -45,7 +45,9 @@ constexpr int kMaxDim = 128;  // rows are staged in fixed stack buffers: no heap
 typedef float Lanes __attribute__((vector_size(kLanes * sizeof(float))));
 typedef int32_t LaneMask __attribute__((vector_size(kLanes * sizeof(float))));
 
-inline Lanes load_lanes(const float* p) {
+// Always inlined: a Lanes value never crosses a call, so the AVX2 and baseline clones of the
+// search (search.hpp) never disagree on how it is passed.
+__attribute__((always_inline)) inline Lanes load_lanes(const float* p) {
   Lanes v;
   std::memcpy(&v, p, sizeof(v));
   return v;
@@ -57,7 +59,8 @@ inline Lanes load_lanes(const float* p) {
 // continuation bound all call this, so every distance is computed by the same sequence of
 // operations (whatever the compiler's FMA contraction does, it does it everywhere) and the
 // results compare equal bit for bit.
-inline Lanes lanes_sqdist(const float* q, const float* x, int d_begin, int d_end, Lanes acc) {
+__attribute__((always_inline)) inline Lanes lanes_sqdist(const float* q, const float* x, int d_begin, int d_end,
+                                                      Lanes acc) {
   for (int d = d_begin; d < d_end; ++d) {
     const Lanes diff = q[d] - load_lanes(x + d * kLanes);
     acc += diff * diff;
