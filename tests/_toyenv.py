@@ -118,3 +118,21 @@ class PointMassTargetVecEnv(VectorEnv):
             self._reset_envs(done)
         obs = self._write_obs()
         return obs, rewards.astype(np.float32), terminated, truncated, infos
+
+
+def quiet_config(total_steps: int = 8192, **overrides):
+    """A PPOConfig for tests: no progress bar, no TensorBoard, no periodic checkpoints."""
+    from mmrl.ppo import PPOConfig
+
+    fields = dict(total_steps=total_steps, num_steps=32, progress=False, tensorboard=False,
+                  checkpoint_interval_steps=10**9)
+    fields.update(overrides)
+    return PPOConfig(**fields)
+
+
+def read_rows(path) -> list:
+    """metrics.csv as a list of dicts (strings)."""
+    import csv
+
+    with open(path, newline="") as file:
+        return list(csv.DictReader(file))

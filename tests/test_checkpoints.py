@@ -2,7 +2,6 @@
 users register their own networks, and Ctrl-C saves the state of the last completed iteration."""
 from __future__ import annotations
 
-import csv
 import importlib
 import os
 import signal
@@ -14,7 +13,8 @@ import pytest
 import torch
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _toyenv import PointMassTargetVecEnv  # noqa: E402
+from _toyenv import PointMassTargetVecEnv, read_rows  # noqa: E402
+from _toyenv import quiet_config as _quiet_config  # noqa: E402
 
 from mmrl import networks  # noqa: E402
 from mmrl.checkpoints import CheckpointError, load_checkpoint, save_checkpoint  # noqa: E402
@@ -25,15 +25,7 @@ VARYING = ("wall_s", "sps", "env_us", "act_us", "update_us")  # wall time and sp
 
 
 def quiet_config(**overrides) -> PPOConfig:
-    fields = dict(total_steps=1024, num_steps=32, progress=False, tensorboard=False,
-                  checkpoint_interval_steps=10**9)
-    fields.update(overrides)
-    return PPOConfig(**fields)
-
-
-def read_rows(path: Path) -> list[dict]:
-    with open(path, newline="") as file:
-        return list(csv.DictReader(file))
+    return _quiet_config(**{"total_steps": 1024, **overrides})
 
 
 def deterministic(rows: list[dict]) -> list[dict]:

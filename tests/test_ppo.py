@@ -2,7 +2,6 @@
 callbacks, bad inputs, and learning the toy target task end to end."""
 from __future__ import annotations
 
-import csv
 import math
 import os
 import sys
@@ -14,7 +13,7 @@ import pytest
 import torch
 
 sys.path.insert(0, str(Path(__file__).parent))
-from _toyenv import PointMassTargetVecEnv  # noqa: E402
+from _toyenv import quiet_config, read_rows, PointMassTargetVecEnv  # noqa: E402
 
 from mmrl import ppo  # noqa: E402
 from mmrl.networks import OBSTACLE_DEFAULT_LAYOUT, ObstacleActorCritic, PlaneActorCritic  # noqa: E402
@@ -22,18 +21,6 @@ from mmrl.ppo import (  # noqa: E402
     CheckpointError, NonFiniteError, PPOConfig, compute_gae, load_checkpoint, load_policy,
     save_checkpoint, successor_values, train,
 )
-
-
-def quiet_config(**overrides) -> PPOConfig:
-    fields = dict(total_steps=8192, num_steps=32, progress=False, tensorboard=False,
-                  checkpoint_interval_steps=10**9)
-    fields.update(overrides)
-    return PPOConfig(**fields)
-
-
-def read_rows(path: Path) -> list[dict]:
-    with open(path, newline="") as file:
-        return list(csv.DictReader(file))
 
 
 def deterministic_columns(rows: list[dict]) -> list[dict]:

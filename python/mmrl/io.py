@@ -57,21 +57,11 @@ def atomic_open(path: PathLike, mode: str = "w", *, encoding: Optional[str] = No
     binary = "b" in mode
     if binary and (encoding is not None or newline is not None):
         raise ValueError("atomic_open: encoding and newline apply to text mode only")
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     text_args = {} if binary else {"encoding": encoding or "utf-8", "newline": newline}
-    try:
-        with os.fdopen(fd, mode, **text_args) as file:
-            if hasattr(os, "fchmod"):
-                os.fchmod(file.fileno(), 0o666 & ~_UMASK)
-            yield file
-            file.flush()
-            os.fsync(file.fileno())
-        os.replace(tmp_name, path)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp_name)
-        raise
-    _fsync_dir(path.parent)
+    with atomic_path(path) as tmp, open(tmp, mode, **text_args) as file:
+        yield file
+        file.flush()
+        os.fsync(file.fileno())
 
 
 def atomic_write_bytes(path: PathLike, data: bytes) -> Path:
