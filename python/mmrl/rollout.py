@@ -430,6 +430,7 @@ class _FollowLog:
         rec["episode"] = np.concatenate([np.full(e["frames"].size, i, np.int32) for i, e in enumerate(episodes)])
         for k, v in self.per_frame.items():
             rec[k] = np.concatenate(v)
+        rec["frame_keys"] = tuple(self.per_frame)  # per-frame keys beyond the controller's: targets, the scene's
         for k, v in self.per_step.items():
             rec[k] = np.array(v)
         rec["outcomes"] = np.array(self.outcomes, np.int32)

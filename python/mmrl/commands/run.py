@@ -167,8 +167,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
-#: Per-frame and per-episode recording keys written to the export's .npz besides the pose.
-EXPORT_KEYS = ("roots", "frames", "contacts", "targets", "episode", "outcomes", "obstacles")
+#: Recording keys written to the export's .npz besides the pose (plus the task's per-frame
+#: keys, ``frame_keys``: targets and the scene's, such as obstacle corners).
+EXPORT_KEYS = ("roots", "frames", "contacts", "episode", "outcomes")
 
 
 def cmd_export(args: argparse.Namespace) -> int:
@@ -187,6 +188,6 @@ def cmd_export(args: argparse.Namespace) -> int:
     npz = out.with_suffix(".npz")
     atomic_write_npz(npz, positions=rec["positions"].astype(np.float32),
                      joint_names=np.array(db.joint_names, np.str_), parents=np.array(db.parents, np.int32),
-                     fps=np.float32(db.fps), **{k: rec[k] for k in EXPORT_KEYS if k in rec})
+                     fps=np.float32(db.fps), **{k: rec[k] for k in EXPORT_KEYS + tuple(rec["frame_keys"])})
     print(f"wrote {out} ({motion.num_frames} frames at {db.fps:g} fps) and {npz} (global joint positions, meters)")
     return 0
