@@ -58,15 +58,19 @@ MMRL_MULTIVERSION int brute_force_knn(const float* points, int64_t num_points, i
 
 MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                           const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
-                          float* out_cost) {
+                          float* out_cost, float bound_margin) {
   check_points(points, num_points, dim, "brute_force_match");
   if (query == nullptr) throw std::invalid_argument("brute_force_match: null query");
   if (bound_index >= num_points) throw std::out_of_range("brute_force_match: bound_index out of range");
+  if (!(bound_margin >= 0.0f) || !std::isfinite(bound_margin))
+    throw std::invalid_argument("brute_force_match: bound_margin must be finite and >= 0");
   int64_t best = -1;
   float best_cost = std::numeric_limits<float>::infinity();
+  float bound_cost = best_cost;
   if (bound_index >= 0) {
     best = bound_index;
-    best_cost = sqdist_row(query, points + bound_index * dim, dim);
+    bound_cost = sqdist_row(query, points + bound_index * dim, dim);
+    best_cost = bound_cost - bound_margin;  // another row must beat the bound by the margin
   }
   float dist[kLanes];
   for (int64_t i = 0; i < num_points; ++i) {
@@ -79,6 +83,7 @@ MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_poi
       best = i;
     }
   }
+  if (best == bound_index) best_cost = bound_cost;
   if (out_cost) *out_cost = best_cost;
   return best;
 }
@@ -99,11 +104,11 @@ Matcher::Matcher(const float* rows, int64_t num_rows, int dim, const uint8_t* va
       }()) {}
 
 MMRL_MULTIVERSION int64_t Matcher::match(const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
-                       float* out_cost) const {
+                       float* out_cost, float bound_margin) const {
   SearchFilter filter;
   filter.exclude_lo = exclude_lo;
   filter.exclude_hi = exclude_hi;
-  return tree_.nearest_with_bound(query, bound_index, out_cost, filter);
+  return tree_.nearest_with_bound(query, bound_index, out_cost, filter, bound_margin);
 }
 
 namespace {

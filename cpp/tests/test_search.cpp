@@ -116,6 +116,48 @@ TEST(Matcher, BoundWinsTiesAndNothingValid) {
   EXPECT_EQ(m.match(q, 0, 4, -1, &cost), -1);  // window excludes everything
 }
 
+// The continuation bias: with a margin, another row replaces the bound only when it is closer
+// by more than the margin; the tree answers exactly like a brute-force scan with the same rule.
+TEST(Matcher, BoundMarginEqualsBruteForceAndHandComputedCases) {
+  const int dim = 3;
+  std::vector<float> rows = {0, 0, 0, 1, 1, 1, 1, 1, 1.5f, 2, 2, 2};
+  std::vector<uint8_t> valid = {1, 1, 1, 1};
+  mmrl::Matcher m(rows.data(), 4, dim, valid.data());
+  const float q[3] = {1, 1, 1};
+  float cost = -1;
+  // Bound row 2 costs 0.25; row 1 costs 0: better by 0.25.
+  EXPECT_EQ(m.match(q, 0, 0, 2, &cost, 0.2f), 1);  // 0 < 0.25 - 0.2
+  EXPECT_EQ(cost, 0.0f);
+  EXPECT_EQ(m.match(q, 0, 0, 2, &cost, 0.3f), 2);  // not better by more than 0.3: the bound stays
+  EXPECT_EQ(cost, 0.25f);                          // with its own cost, not cost - margin
+  EXPECT_EQ(m.match(q, 0, 0, 2, &cost, 0.25f), 2);  // a tie with the margin keeps the bound
+  EXPECT_EQ(m.match(q, 0, 0, -1, &cost, 5.0f), 1);  // no bound: the margin does nothing
+  EXPECT_THROW(m.match(q, 0, 0, 2, &cost, -1.0f), std::invalid_argument);
+
+  const int64_t n = 5000;
+  const int d = 27;
+  const auto walk = walk_rows(n, d, 5);
+  std::vector<uint8_t> all(n, 1);
+  mmrl::Matcher tree(walk.data(), n, d, all.data());
+  for (float margin : {0.0f, 0.1f, 1.0f, 10.0f}) {
+    Case c = make_queries(walk, n, d, 300, 0.5f, 23);
+    int transitions = 0;
+    for (int k = 0; k < 300; ++k) {
+      float tc = -1, bc = -2;
+      const float* query = c.queries.data() + k * d;
+      const int64_t ti = tree.match(query, c.lo[k], c.hi[k], c.bound[k], &tc, margin);
+      const int64_t bi = mmrl::brute_force_match(walk.data(), n, d, all.data(), query, c.lo[k], c.hi[k], c.bound[k],
+                                                 &bc, margin);
+      ASSERT_EQ(ti, bi) << "margin " << margin << " query " << k;
+      ASSERT_EQ(tc, bc);
+      transitions += (c.bound[k] >= 0 && ti != c.bound[k]);
+    }
+    if (margin == 10.0f) {
+      EXPECT_LT(transitions, 30);  // a large margin keeps most continuations
+    }
+  }
+}
+
 TEST(Matcher, RefusesBadInput) {
   std::vector<float> rows(30, 0.0f);
   EXPECT_THROW(mmrl::Matcher(nullptr, 10, 3, nullptr), std::invalid_argument);
