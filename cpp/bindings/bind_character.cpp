@@ -107,6 +107,23 @@ void bind_character(py::module_& m) {
           "Views (overwritten by the next step): global positions, global rotations, local translations, "
           "local rotations of the frames played by the last step.")
       .def(
+          "animated_feet",
+          [](py::object self) {
+            const Character& c = self.cast<const Character&>();
+            if (!c.options().poses) throw py::value_error("the fast path (poses off) produces no poses");
+            return make_view(c.animated_feet(), {c.options().frames_per_step, 2, 3}, self);
+          },
+          "View (overwritten by the next step), (F, 2, 3) world meters: the left and right ankles of the frames "
+          "played by the last step before foot locking and IK, i.e. the ankles of the same run with IK off.")
+      .def(
+          "current_animated_feet",
+          [](py::object self) {
+            const Character& c = self.cast<const Character&>();
+            if (!c.options().poses) throw py::value_error("the fast path (poses off) produces no poses");
+            return make_view(c.current_animated_feet(), {2, 3}, self);
+          },
+          "View (2, 3): the ankles of the pose shown now before foot locking and IK.")
+      .def(
           "current_pose",
           [](py::object self) {
             const Character& c = self.cast<const Character&>();

@@ -179,6 +179,7 @@ void bind_obstacles(py::module_& m) {
             d["steps"] = st.steps;
             d["last_match"] = st.last_match;
             d["last_transition"] = st.last_transition;
+            d["last_cost"] = st.last_cost;
             d["max_speed"] = st.max_speed;
             d["target_half_extent"] = st.target_half_extent;
             d["last_hits"] = st.last_hits;
@@ -296,7 +297,19 @@ void bind_obstacles(py::module_& m) {
           },
           py::arg("out"),
           "Writes into out (int32, N) how many frames of the last step each environment played before its episode "
-          "ended: the index of the frame that succeeded or collided + 1, else frames_per_step (0 after reset).");
+          "ended: the index of the frame that succeeded or collided + 1, else frames_per_step (0 after reset).")
+      .def(
+          "last_step_matches",
+          [](const PyObstacleVecEnv& s, const py::handle& transitions, const py::handle& costs) {
+            const py::ssize_t n = s.env.num_envs();
+            uint8_t* t = writable_buffer<uint8_t>(transitions, "transitions", {n});
+            float* c = writable_buffer<float>(costs, "costs", {n});
+            s.env.last_step_matches(t, c);
+          },
+          py::arg("transitions"), py::arg("costs"),
+          "Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the "
+          "current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, "
+          "weighted feature space). Kept through the autoreset; 0 after reset.");
 }
 
 }  // namespace mmrl

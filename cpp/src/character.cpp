@@ -70,6 +70,7 @@ Character::Character(const Database& db, const Matcher& matcher, const Character
     lpos_.assign(F * J_ * 3, 0);
     grot_.assign(F * J_ * 4, 0);
     lrot_.assign(F * J_ * 4, 0);
+    anim_feet_.assign(F * 2 * 3, 0);
   }
   reset(0, RootState{});
 }
@@ -202,6 +203,9 @@ void Character::show_frame(int64_t f, bool decay) {
     forward_kinematics_joint(j);  // the hips' local transform above needs its parent's global
   }
 
+  // The ankles before locking and IK (solve_leg of one side leaves the other ankle alone).
+  for (int side = 0; side < 2; ++side) store3(glob_t_[db_.roles.foot[side]], &cur_anim_feet_[side * 3]);
+
   // Foot locking and IK.
   const bool locking = options_.ik && options_.foot_locking;
   for (int side = 0; side < 2; ++side) {
@@ -265,6 +269,7 @@ void Character::step(const float* trajectory) {
     std::copy(cur_lpos_.begin(), cur_lpos_.end(), lpos_.begin() + k * JJ * 3);
     std::copy(cur_grot_.begin(), cur_grot_.end(), grot_.begin() + k * JJ * 4);
     std::copy(cur_lrot_.begin(), cur_lrot_.end(), lrot_.begin() + k * JJ * 4);
+    std::copy(cur_anim_feet_, cur_anim_feet_ + 6, anim_feet_.begin() + k * 6);
   }
   frame_ = j + F;
 }

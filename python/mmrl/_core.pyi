@@ -270,6 +270,10 @@ class PlaneVecEnv:
         """
         Writes into out (int32, N) how many frames of the last step each environment played before its episode ended: the index of the first frame within success_radius + 1, else frames_per_step (0 after reset).
         """
+    def last_step_matches(self, transitions: typing.Any, costs: typing.Any) -> None:
+        """
+        Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, weighted feature space). Kept through the autoreset; 0 after reset.
+        """
     def observe(self, index: typing.SupportsInt | typing.SupportsIndex, out: typing.Any) -> None:
         """
         Writes environment i's current observation into out (float32, 17).
@@ -350,6 +354,14 @@ class Character:
     """
     def __init__(self, db: Database, matcher: Matcher, options: CharacterOptions) -> None:
         ...
+    def animated_feet(self) -> numpy.ndarray:
+        """
+        View (overwritten by the next step), (F, 2, 3) world meters: the left and right ankles of the frames played by the last step before foot locking and IK, i.e. the ankles of the same run with IK off.
+        """
+    def current_animated_feet(self) -> numpy.ndarray:
+        """
+        View (2, 3): the ankles of the pose shown now before foot locking and IK.
+        """
     def current_pose(self) -> tuple[numpy.ndarray, numpy.ndarray, numpy.ndarray, numpy.ndarray]:
         """
         Views of the pose shown now.
@@ -562,6 +574,10 @@ class ObstacleVecEnv:
     def last_step_frames(self, out: typing.Any) -> None:
         """
         Writes into out (int32, N) how many frames of the last step each environment played before its episode ended: the index of the frame that succeeded or collided + 1, else frames_per_step (0 after reset).
+        """
+    def last_step_matches(self, transitions: typing.Any, costs: typing.Any) -> None:
+        """
+        Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, weighted feature space). Kept through the autoreset; 0 after reset.
         """
     def observe(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
         """

@@ -50,6 +50,9 @@ class StepResult:
     """True when the match was not the current frame's continuation."""
     cost: float
     """Squared distance of the match in the normalized, weighted feature space."""
+    animated_feet: Optional[np.ndarray] = None
+    """(F, 2, 3) world positions of the left/right ankle before foot locking and IK (None on
+    the fast path): the ankles of the same run with IK off, since IK changes nothing later."""
 
 
 class Controller:
@@ -117,7 +120,7 @@ class Controller:
         self.steps = 0
         if self._record:
             self._rec = {k: [] for k in ("frames", "roots", "positions", "rotations", "local_translations",
-                                         "local_rotations", "contacts", "lock_weights")}
+                                         "local_rotations", "contacts", "lock_weights", "animated_feet")}
             self._rec["frames"].append(np.array([self.frame], np.int64))
             self._rec["roots"].append(np.array([self.root], np.float32))
             self._rec["contacts"].append(self.db.contacts[self.frame][None].copy())
@@ -126,8 +129,10 @@ class Controller:
                 for key, arr in zip(("positions", "rotations", "local_translations", "local_rotations"),
                                     self._core.current_pose()):
                     self._rec[key].append(np.array(arr)[None])
+                self._rec["animated_feet"].append(np.array(self._core.current_animated_feet())[None])
             self._rec["transitions"] = []
             self._rec["queries"] = []
+            self._rec["costs"] = []
 
     @property
     def root(self) -> Tuple[float, float, float]:
@@ -176,7 +181,8 @@ class Controller:
         res = StepResult(frames=c.played_frames, roots=np.array(c.roots), positions=poses[0], rotations=poses[1],
                          local_translations=poses[2], local_rotations=poses[3],
                          contacts=np.array(c.contacts).astype(bool), lock_weights=np.array(c.lock_weights),
-                         match=int(c.last_match), transition=bool(c.last_transition), cost=float(c.last_cost))
+                         match=int(c.last_match), transition=bool(c.last_transition), cost=float(c.last_cost),
+                         animated_feet=None if self.fast else np.array(c.animated_feet()))
         if self._record:
             r = self._rec
             r["frames"].append(res.frames)
@@ -185,8 +191,9 @@ class Controller:
             r["lock_weights"].append(res.lock_weights)
             r["transitions"].append(res.transition)
             r["queries"].append(q.copy())
+            r["costs"].append(res.cost)
             if not self.fast:
-                for key in ("positions", "rotations", "local_translations", "local_rotations"):
+                for key in ("positions", "rotations", "local_translations", "local_rotations", "animated_feet"):
                     r[key].append(getattr(res, key))
         return res
 
@@ -194,15 +201,19 @@ class Controller:
         """Everything shown since the last reset (needs ``record=True``).
 
         Keys: ``frames`` (T,), ``roots`` (T, 3), ``contacts`` (T, 2), ``lock_weights`` (T, 2),
-        and on the full path ``positions``/``local_translations`` (T, J, 3) and
-        ``rotations``/``local_rotations`` (T, J, 4), where T = 1 + steps * frames_per_step (the
-        reset pose first); per step: ``transitions`` (S,) bool and ``queries`` (S, 12).
+        and on the full path ``positions``/``local_translations`` (T, J, 3),
+        ``rotations``/``local_rotations`` (T, J, 4) and ``animated_feet`` (T, 2, 3, the ankles
+        before foot locking and IK), where T = 1 + steps * frames_per_step (the reset pose
+        first); per step: ``transitions`` (S,) bool, ``queries`` (S, 12) and ``costs`` (S,)
+        (the matched cost).
         """
         if not self._record:
             raise ValueError("this controller was created with record=False")
-        out = {k: np.concatenate(v) for k, v in self._rec.items() if k not in ("transitions", "queries") and v}
+        per_step = ("transitions", "queries", "costs")
+        out = {k: np.concatenate(v) for k, v in self._rec.items() if k not in per_step and v}
         out["transitions"] = np.array(self._rec["transitions"], bool)
         out["queries"] = np.array(self._rec["queries"], np.float32).reshape(-1, TRAJECTORY_DIM)
+        out["costs"] = np.array(self._rec["costs"], np.float32)
         out["fps"] = np.float32(self.db.fps)
         out["frames_per_step"] = np.int32(self.frames_per_step)
         return out

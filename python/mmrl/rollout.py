@@ -30,7 +30,9 @@ from .tasks import Task
 
 #: Per-shown-frame keys of a controller recording (trimmed together).
 FRAME_KEYS = ("frames", "roots", "positions", "rotations", "local_translations", "local_rotations", "contacts",
-              "lock_weights")
+              "lock_weights", "animated_feet")
+#: Per-step keys of a controller recording.
+STEP_KEYS = ("transitions", "queries", "costs")
 
 
 def policy_actions(policy, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
@@ -241,25 +243,27 @@ class FullPath:
 
 
 class EpisodeSummary:
-    """Collects full-path episodes and their quality metrics into the summary ``mmrl eval`` prints."""
+    """Collects full-path episodes and their quality metrics into the summary ``mmrl eval`` prints.
+
+    The quality keys are :mod:`mmrl.metrics`' (pooled over every episode's frames), plus
+    ``raw_mocap`` (:func:`mmrl.metrics.raw_mocap_floor`) so each number reads against the data's
+    own; with ``fast`` (root motion only) the pose metrics are None.
+    """
 
     def __init__(self, task: Task, db: Database, fast: bool, stage: Optional[int]):
         self.task, self.db, self.fast, self.stage = task, db, fast, stage
         self.results: List[Dict[str, Any]] = []
-        self.sliding_sum = self.sliding_w = self.jump = 0.0
-        self.transitions = self.seconds = 0.0
+        self.quality = metrics.QualityAccumulator()
+        self.transitions = self.frames = 0
+        self.costs: List[np.ndarray] = []
 
-    def add(self, ep: Dict[str, Any], rec: Dict[str, np.ndarray], seconds: float) -> None:
-        """Adds one episode (``ep`` gets its quality metrics unless ``fast``)."""
+    def add(self, ep: Dict[str, Any], rec: Dict[str, np.ndarray], frames: int) -> None:
+        """Adds one episode of ``frames`` shown frames (``ep`` gets its quality metrics unless ``fast``)."""
         if not self.fast:
-            q = metrics.quality(self.db, rec)
-            ep.update(q)
-            n = rec["frames"].size
-            self.sliding_sum += q["foot_sliding_cm_per_s"] * n
-            self.sliding_w += n
-            self.jump = max(self.jump, q["max_pose_jump_cm"])
+            ep.update(self.quality.add(self.db, rec))
         self.transitions += int(rec["transitions"].sum())
-        self.seconds += seconds
+        self.frames += int(frames)
+        self.costs.append(rec["costs"])
         self.results.append(ep)
 
     def summary(self) -> Dict[str, Any]:
@@ -269,13 +273,16 @@ class EpisodeSummary:
         out.update(summarize_outcomes(self.task, np.array([e["success"] for e in results]),
                                       {k: np.array([e.get(k, False) for e in results]) for k in self.task.outcomes}))
         out.pop("success_stderr")
-        out.update({
-            "mean_time_to_target_s": float(np.mean(times)) if times else None,
-            "foot_sliding_cm_per_s": self.sliding_sum / self.sliding_w if self.sliding_w else None,
-            "max_pose_jump_cm": self.jump if not self.fast else None,
-            "transitions_per_s": self.transitions / self.seconds if self.seconds else 0.0,
-            "mean_steps": float(np.mean([e["steps"] for e in results])),
-        })
+        out["mean_time_to_target_s"] = float(np.mean(times)) if times else None
+        out.update(self.quality.result())
+        out["transitions_per_s"] = metrics.rate_per_second(self.transitions, self.frames, self.db.fps)
+        costs = np.concatenate(self.costs) if self.costs else np.zeros(0)
+        out["matched_cost_mean"] = float(costs.mean()) if costs.size else None
+        out["mean_steps"] = float(np.mean([e["steps"] for e in results]))
+        if not self.fast:
+            floor = metrics.raw_mocap_floor(self.db)
+            out["raw_mocap"] = {k: floor[k] for k in ("foot_sliding_cm_per_s", "foot_sliding_p95_cm_per_s",
+                                                      "pose_jump_p99_cm")}
         if self.stage is not None:
             out["stage"] = self.stage
         out["episode_results"] = results
@@ -293,8 +300,9 @@ def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, 
     uniformly random direction instead of the task's own draw.
 
     Returns success_rate, mean_time_to_target_s (successful episodes), the task's outcome
-    rates, the quality metrics over all played frames (foot sliding and transitions
-    weighted by length, the pose jump a maximum), mean_steps and per-episode details.
+    rates, the quality metrics of :mod:`mmrl.metrics` over all shown frames of all episodes
+    (pooled samples), ``raw_mocap`` (the database's clips played straight, the same metrics),
+    mean_steps and per-episode details (each with its own quality metrics).
     """
     episodes = _check_episodes(episodes)
     run = FullPath(task, db, config=config, stage=stage, seed=seed, ik=ik, foot_locking=foot_locking,
@@ -316,7 +324,7 @@ def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, 
               "steps": int(out["episode_length"]), "distance_m": distance, "truncated": out["truncated"]}
         for key in task.outcomes:
             ep.setdefault(key, bool(out.get(key, False)))
-        summary.add(ep, run.last_recording, frames / db.fps)
+        summary.add(ep, run.last_recording, frames)
     return summary.summary()
 
 
@@ -422,7 +430,7 @@ class _FollowLog:
             self.outcomes.append(0)
         episodes = self.episodes
         rec: Dict[str, Any] = {}
-        for k in FRAME_KEYS + ("transitions", "queries"):
+        for k in FRAME_KEYS + STEP_KEYS:
             if k in episodes[0]:
                 rec[k] = np.concatenate([e[k] for e in episodes])
         rec["fps"] = np.float32(run.db.fps)
@@ -438,10 +446,9 @@ class _FollowLog:
         if rec["targets"].shape[0] != rec["frames"].shape[0]:
             raise RuntimeError(f"follow: {rec['targets'].shape[0]} targets for {rec['frames'].shape[0]} frames")
         # Quality within episodes only (a cut between episodes is no pose jump).
-        q = [metrics.quality(run.db, e) for e in episodes]
-        n = np.array([e["frames"].size for e in episodes], np.float64)
-        rec["foot_sliding_cm_per_s"] = np.float32(np.dot([v["foot_sliding_cm_per_s"] for v in q], n) / n.sum())
-        rec["max_pose_jump_cm"] = np.float32(max(v["max_pose_jump_cm"] for v in q))
-        rec["transitions_per_s"] = np.float32(metrics.transitions_per_second(
-            rec["transitions"], int(rec["frames_per_step"]), run.db.fps))
+        acc = metrics.QualityAccumulator()
+        for e in episodes:
+            acc.add(run.db, e)
+        for key, value in acc.result().items():
+            rec[key] = np.float32(np.nan if value is None else value)
         return rec

@@ -83,11 +83,17 @@ class Character {
   const float* local_rotations() const { return lrot_.data(); }          // F x J x 4
   const uint8_t* contacts() const { return contacts_.data(); }           // F x 2, database contacts
   const float* lock_weights() const { return lock_w_out_.data(); }       // F x 2, 0..1
+  // The left and right ankles (roles foot) before foot locking and IK: F x 2 x 3, world meters.
+  // IK changes nothing else and nothing later (decisions, inertialization and the next frames
+  // do not depend on it), so these are exactly the ankles of the same run with IK off: one run
+  // measures foot sliding with IK on and off over the same frames.
+  const float* animated_feet() const { return anim_feet_.data(); }
   // The pose shown now (the last played frame, or the reset frame): J x 3 / J x 4.
   const float* current_global_positions() const { return cur_gpos_.data(); }
   const float* current_global_rotations() const { return cur_grot_.data(); }
   const float* current_local_translations() const { return cur_lpos_.data(); }
   const float* current_local_rotations() const { return cur_lrot_.data(); }
+  const float* current_animated_feet() const { return cur_anim_feet_; }  // 2 x 3, see animated_feet
 
  private:
   void blend_pose_of(int64_t frame, BlendPose& pose) const;
@@ -125,10 +131,11 @@ class Character {
   std::vector<Vec3> loc_t_, glob_t_;
   std::vector<Quat> loc_r_, glob_r_;
   std::vector<float> cur_gpos_, cur_grot_, cur_lpos_, cur_lrot_;
+  float cur_anim_feet_[6] = {0, 0, 0, 0, 0, 0};
 
   // Step outputs.
   std::vector<int64_t> played_;
-  std::vector<float> roots_, gpos_, grot_, lpos_, lrot_, lock_w_out_;
+  std::vector<float> roots_, gpos_, grot_, lpos_, lrot_, lock_w_out_, anim_feet_;
   std::vector<uint8_t> contacts_;
 };
 

@@ -44,11 +44,16 @@ struct TargetEnvState {
   double episode_return = 0;
   int64_t last_match = -1;  // frame chosen by the last match
   bool last_transition = false;
+  float last_cost = 0;  // squared distance of the last match (normalized, weighted feature space)
   // Frames the last step played before its episode ended: the index of the frame of the
   // ending event + 1, or frames_per_step when the step did not end the episode (truncation
   // included). Kept through the autoreset, so it describes the step just returned; 0 after
   // reset(seed).
   int last_step_frames = 0;
+  // The last step's decision (a transition; the matched cost), kept through the autoreset
+  // like last_step_frames (last_transition and last_cost are cleared by it); 0 after reset(seed).
+  bool last_step_transition = false;
+  float last_step_cost = 0;
   Rng rng;
 };
 
@@ -108,6 +113,8 @@ class TargetVecEnv {
     for (int i = 0; i < num_envs(); ++i) {
       envs_[i].rng = Rng(seed, static_cast<uint64_t>(i));
       envs_[i].last_step_frames = 0;
+      envs_[i].last_step_transition = false;
+      envs_[i].last_step_cost = 0;
     }
     pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
       for (int64_t i = b; i < e; ++i) reset_env(static_cast<int>(i), obs ? obs + i * Task::kObsDim : nullptr);
@@ -122,6 +129,7 @@ class TargetVecEnv {
     s.episode_return = 0;
     s.last_match = -1;
     s.last_transition = false;
+    s.last_cost = 0;
     if (obs_row) task().observe(i, obs_row);
   }
 
@@ -156,6 +164,16 @@ class TargetVecEnv {
   void last_step_frames(int32_t* out) const {
     for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].last_step_frames;
   }
+  // Each environment's last step's decision (N each; see TargetEnvState::last_step_transition):
+  // transitions[i] = 1 where the match was not the continuation of the current clip, costs[i]
+  // the match's squared distance to the query (normalized, weighted feature space). Training
+  // reads this after every step for its cheap motion-quality log.
+  void last_step_matches(uint8_t* transitions, float* costs) const {
+    for (int i = 0; i < num_envs(); ++i) {
+      transitions[i] = envs_[i].last_step_transition;
+      costs[i] = envs_[i].last_step_cost;
+    }
+  }
 
  protected:
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
@@ -183,6 +201,8 @@ class TargetVecEnv {
         s.steps += 1;
         s.episode_return += r.reward;
         s.last_step_frames = r.frames_played;
+        s.last_step_transition = s.last_transition;
+        s.last_step_cost = s.last_cost;
         const bool truncated = !r.terminated && s.steps >= config_.max_steps;
         out.rewards[i] = r.reward;
         out.terminated[i] = r.terminated;
@@ -209,10 +229,11 @@ class TargetVecEnv {
                        &s.frame, &s.root, &s.target_x, &s.target_z);
   }
 
-  // The decision of env i's step: the frame to play from; records last_match / last_transition.
+  // The decision of env i's step: the frame to play from; records last_match, last_transition
+  // and last_cost.
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
-    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_);
+    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost);
     s.last_transition = (j != s.frame);
     s.last_match = j;
     return j;

@@ -85,6 +85,7 @@ def source_lines(db) -> list:
 
 def cmd_info(args: argparse.Namespace) -> int:
     from ..database import FEATURE_BLOCKS
+    from ..metrics import raw_mocap_floor
 
     db = load_any(args.database, **import_options(args))
     lengths = np.diff(db.clip_ranges, axis=1)[:, 0] / db.fps
@@ -98,6 +99,10 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"skeleton     {db.num_joints} joints")
     for role, joint in db.roles.items():
         print(f"  {role:<16} {joint}")
+    floor = raw_mocap_floor(db)
+    print(f"raw mocap    clips played straight (no matching, no IK): foot sliding "
+          f"{floor['foot_sliding_cm_per_s']:.2f} cm/s (p95 {floor['foot_sliding_p95_cm_per_s']:.2f}) over contact "
+          f"frames, pose jump p99 {floor['pose_jump_p99_cm']:.2f} cm (mmrl.metrics)")
     f = db.features[db.valid_mask]
     speed = np.hypot(f[:, 23], f[:, 24])
     turn = np.degrees(np.arctan2(f[:, 25], f[:, 26]))

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any, Dict, List
 
 from ..errors import InputError
+from ..quality_log import MatchQualityLog
 from ..tasks import Task, get_task, task_names
 from .common import add_data_options, data_spec_from_args
 
@@ -176,6 +177,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     except (ValueError, TypeError) as e:
         raise InputError(f"{task.name} options: {e}") from e
     callbacks = list(task.callbacks(envs, options)) if task.callbacks else []
+    callbacks.append(MatchQualityLog(envs))  # last: the task's callbacks keep their checkpoint indices
     policy_factory = task.policy_factory(envs) if task.policy_factory else None
     # config.json always holds the options the run trains with now, so eval and render read them.
     RunDir.create(out, task=task, data=data, num_envs=num_envs, task_config=task_cfg, ppo_config=cfg)

@@ -139,6 +139,14 @@ class TargetVectorEnv(VectorEnv):
         self._ep_length = np.zeros(n, np.int32)
         self._step_frames = np.zeros(n, np.int32)
         self._ep_frames = np.zeros(n, np.int64)
+        # The last step's decisions and their running sums since pop_match_stats (training's
+        # cheap quality log): in-place adds only, nothing allocated per step.
+        self._step_transitions = np.zeros(n, np.uint8)
+        self._step_costs = np.zeros(n, np.float32)
+        self._sum_transitions = np.zeros(n, np.int64)
+        self._sum_costs = np.zeros(n, np.float64)
+        self._sum_frames = np.zeros(n, np.int64)
+        self._sum_steps = 0
         self._seeded = False
 
     # -- hooks -------------------------------------------------------------------------------
@@ -178,6 +186,11 @@ class TargetVectorEnv(VectorEnv):
         self._step_core(a)
         self._core.last_step_frames(self._step_frames)
         self._ep_frames += self._step_frames
+        self._core.last_step_matches(self._step_transitions, self._step_costs)
+        self._sum_transitions += self._step_transitions
+        self._sum_costs += self._step_costs
+        self._sum_frames += self._step_frames
+        self._sum_steps += 1
         terminated = self._terminated.astype(bool)
         truncated = self._truncated.astype(bool)
         infos: Dict[str, Any] = {}
@@ -203,6 +216,20 @@ class TargetVectorEnv(VectorEnv):
     def step_frames(self) -> np.ndarray:
         """Frames each env played in the last step (up to the frame that ended an episode)."""
         return self._step_frames.copy()
+
+    def pop_match_stats(self) -> Dict[str, float]:
+        """The decisions of every env since the last call (or since construction), then zeroes
+        the sums: ``decisions`` (env steps), ``transitions`` (decisions whose match was not the
+        current clip's continuation), ``cost_sum`` (their matched costs, normalized weighted
+        feature space, summed) and ``frames`` (frames played, each step up to the frame that
+        ended its episode). :mod:`mmrl.quality_log` turns them into training-log columns."""
+        out = {"decisions": self._sum_steps * self.num_envs, "transitions": int(self._sum_transitions.sum()),
+               "cost_sum": float(self._sum_costs.sum()), "frames": int(self._sum_frames.sum())}
+        self._sum_transitions[:] = 0
+        self._sum_costs[:] = 0.0
+        self._sum_frames[:] = 0
+        self._sum_steps = 0
+        return out
 
     def env_state(self, i: int) -> dict:
         """World-space state of env i: root x, z, yaw, database frame, target (and the task's own)."""
