@@ -38,7 +38,8 @@ void bind_character(py::module_& m) {
       .def_readwrite("ik_margin", &CharacterOptions::ik_margin)
       .def_readwrite("lock_release_distance", &CharacterOptions::lock_release_distance)
       .def_readwrite("lock_blend_time", &CharacterOptions::lock_blend_time)
-      .def_readwrite("action_limit_std", &CharacterOptions::action_limit_std);
+      .def_readwrite("action_limit_std", &CharacterOptions::action_limit_std)
+      .def_readwrite("transition_cost", &CharacterOptions::transition_cost);
 
   py::class_<Character>(m, "Character", "A motion-matching character (C++ core of mmrl.Controller).")
       .def(py::init([](const Database& db, PyMatcher& matcher, const CharacterOptions& options) {

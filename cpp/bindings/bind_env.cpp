@@ -26,7 +26,8 @@ void bind_env(py::module_& m) {
       .def_readwrite("success_bonus", &TargetTaskConfig::success_bonus)
       .def_readwrite("max_steps", &TargetTaskConfig::max_steps)
       .def_readwrite("action_limit_std", &TargetTaskConfig::action_limit_std)
-      .def_readwrite("random_heading", &TargetTaskConfig::random_heading);
+      .def_readwrite("random_heading", &TargetTaskConfig::random_heading)
+      .def_readwrite("transition_cost", &TargetTaskConfig::transition_cost);
 
   py::class_<PyPlaneVecEnv>(m, "PlaneVecEnv", "Batched plane-task environments (C++ core of mmrl.tasks.plane).")
       .def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const TargetTaskConfig& config,

@@ -32,6 +32,8 @@ Character::Character(const Database& db, const Matcher& matcher, const Character
     throw std::invalid_argument("inertialization_halflife must be finite (<= 0 turns it off)");
   if (!(options.ik_margin >= 0) || !(options.lock_release_distance > 0) || !(options.lock_blend_time >= 0))
     throw std::invalid_argument("ik_margin must be >= 0, lock_release_distance > 0 and lock_blend_time >= 0");
+  if (!(options.transition_cost >= 0.0f) || !std::isfinite(options.transition_cost))
+    throw std::invalid_argument("transition_cost must be finite and >= 0");
   if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("matcher was not built over this database");
   if (db.contacts.size() != static_cast<size_t>(db.num_frames) * 2)
     throw std::invalid_argument("database has no foot contacts (rebuild it)");
@@ -240,7 +242,7 @@ void Character::show_frame(int64_t f, bool decay) {
 }
 
 void Character::step(const float* trajectory) {
-  const int64_t j = controller_decide(db_, matcher_, frame_, trajectory, low_, high_, &last_cost_);
+  const int64_t j = controller_decide(db_, matcher_, frame_, trajectory, low_, high_, &last_cost_, options_.transition_cost);
   last_transition_ = (j != frame_);
   last_match_ = j;
   if (options_.poses && last_transition_ && inertializer_.enabled()) {

@@ -68,13 +68,15 @@ class Controller:
         fast: root motion only (no poses), the training path.
         action_limit_std: trajectories are clipped to mean +- this many std per dimension,
             like the env's action box (0 or None: no clipping).
+        transition_cost: continuation bias of the match (squared normalized distance; 0 is
+            the paper's rule), like the task option of the same name.
         record: keep every shown frame for :meth:`recording` (metrics, video, export).
     """
 
     def __init__(self, db: Database, *, frames_per_step: int = 6, inertialization_halflife: Optional[float] = 0.1,
                  ik: bool = True, foot_locking: bool = True, start_frame: Optional[int] = None,
                  position: Sequence[float] = (0.0, 0.0), yaw: float = 0.0, fast: bool = False,
-                 action_limit_std: Optional[float] = 3.0, record: bool = False):
+                 action_limit_std: Optional[float] = 3.0, record: bool = False, transition_cost: float = 0.0):
         if not isinstance(db, Database):
             raise TypeError(f"db: expected an mmrl.Database, got {type(db).__name__}")
         if not isinstance(frames_per_step, (int, np.integer)) or not 1 <= frames_per_step <= 30:
@@ -92,6 +94,9 @@ class Controller:
         opt.ik = bool(ik)
         opt.foot_locking = bool(foot_locking)
         opt.action_limit_std = limit
+        if not np.isfinite(float(transition_cost)) or float(transition_cost) < 0:
+            raise ValueError(f"transition_cost must be finite and >= 0, got {transition_cost!r}")
+        opt.transition_cost = float(transition_cost)
         self.db = db
         self.fast = bool(fast)
         self.frames_per_step = int(frames_per_step)

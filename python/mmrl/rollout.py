@@ -162,7 +162,8 @@ class FullPath:
         self.stage = apply_stage(task, self.env, stage)
         self.ctrl = Controller(db, frames_per_step=self.config.frames_per_step,
                                inertialization_halflife=inertialization_halflife, ik=ik, foot_locking=foot_locking,
-                               fast=fast, action_limit_std=self.config.action_limit_std, record=record)
+                               fast=fast, action_limit_std=self.config.action_limit_std, record=record,
+                               transition_cost=self.config.transition_cost)
         self.scene = task.scene(self.env) if scene and task.scene is not None else None
         obs, _ = self.env.reset(seed=int(seed))
         self.obs = obs[0]

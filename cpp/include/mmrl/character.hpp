@@ -46,6 +46,7 @@ struct CharacterOptions {
   float lock_release_distance = 0.2f;    // meters between locked and animated ankle
   float lock_blend_time = 0.1f;          // seconds to blend a lock in or out
   float action_limit_std = 3.0f;         // trajectory clipped like PlaneVecEnv; <= 0: not clipped
+  float transition_cost = 0.0f;          // continuation bias (controller.hpp); 0: the paper's rule
 };
 
 // Global positions (J x 3, meters) of database frame f in the database's world.

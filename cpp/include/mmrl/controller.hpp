@@ -6,7 +6,9 @@
 //   2. match: the nearest valid frame j outside a window of kMatchExcludeWindow frames on
 //      either side of the current frame (in its clip). The current frame itself is the
 //      starting best when it is a valid match, so playback continues unless another frame
-//      is strictly better (the continuation rule). The window stops the search from
+//      is strictly better (the continuation rule), or with a transition cost m > 0 better by
+//      more than m (squared normalized distance): the continuation bias that keeps a clip
+//      playing unless a jump buys a clearly better match. The window stops the search from
 //      jumping a few frames back or ahead in the same clip, which can trap a character in
 //      a loop of one step's frames;
 //   3. playback: frames j+1 .. j+n are shown; the root advances by the database root
@@ -48,7 +50,7 @@ constexpr int kMatchExcludeWindow = 20;
 
 // The match with the continuation rule (see above). Returns the frame to play from.
 inline int64_t controller_match(const Database& db, const Matcher& matcher, int64_t frame, const float* query,
-                                float* cost = nullptr) {
+                                float* cost = nullptr, float transition_cost = 0.0f) {
   const int64_t bound = (frame >= 0 && db.valid[frame]) ? frame : -1;
   int64_t lo = 0, hi = 0;
   if (frame >= 0) {
@@ -56,18 +58,19 @@ inline int64_t controller_match(const Database& db, const Matcher& matcher, int6
     lo = std::max<int64_t>(db.clip_ranges[c * 2], frame - kMatchExcludeWindow);
     hi = std::min<int64_t>(db.clip_ranges[c * 2 + 1], frame + kMatchExcludeWindow + 1);
   }
-  return matcher.match(query, lo, hi, bound, cost);
+  return matcher.match(query, lo, hi, bound, cost, transition_cost);
 }
 
 // One decision: clips the trajectory action to the box [low, high] (12 each), forms the
 // query for the current frame and matches it. Returns the frame to play from.
 inline int64_t controller_decide(const Database& db, const Matcher& matcher, int64_t frame, const float* action,
-                                 const float* low, const float* high, float* cost = nullptr) {
+                                 const float* low, const float* high, float* cost = nullptr,
+                                 float transition_cost = 0.0f) {
   float query[kFeatureDim];
   float traj[kTrajectoryDim];
   for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high[k], std::max(low[k], action[k]));
   controller_query(db, frame, traj, query);
-  return controller_match(db, matcher, frame, query, cost);
+  return controller_match(db, matcher, frame, query, cost, transition_cost);
 }
 
 // Normalized trajectory features <-> raw (meters, unit directions) in the character frame.

@@ -184,6 +184,8 @@ class TargetVecEnv {
         valid_frames_(target_env_check(db, matcher, num_envs, config.frames_per_step)),
         envs_(static_cast<size_t>(num_envs)),
         pool_(num_threads) {
+    if (!(config.transition_cost >= 0.0f) || !std::isfinite(config.transition_cost))
+      throw std::invalid_argument("transition_cost must be finite and >= 0");
     trajectory_action_box(db, config.action_limit_std, low_, high_);
     for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
   }
@@ -233,7 +235,7 @@ class TargetVecEnv {
   // and last_cost.
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
-    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost);
+    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, config_.transition_cost);
     s.last_transition = (j != s.frame);
     s.last_match = j;
     return j;

@@ -56,6 +56,10 @@ class TaskConfig:
     """Half-width of the action box in standard deviations of each normalized trajectory feature."""
     random_heading: bool = True
     """Start with a uniformly random heading (else facing +Z)."""
+    transition_cost: float = 0.0
+    """Continuation bias of the match, in squared normalized feature distance: another frame
+    replaces the current clip's continuation only when its cost is lower by more than this.
+    0 is the paper's rule (any strictly better frame wins)."""
 
     def replace(self, **overrides) -> "TaskConfig":
         """A copy with ``overrides`` applied; an unknown name raises TypeError listing the options."""

@@ -69,6 +69,7 @@ struct ObstacleTaskConfig {
   int max_steps = 1500;              // safety cap (truncation), 300 s at 6 frames per step
   float action_limit_std = 3.0f;     // action box half-width, in standard deviations
   bool random_heading = true;        // start heading uniform in [-pi, pi)
+  float transition_cost = 0.0f;      // continuation bias of the match (controller.hpp); 0: the paper's rule
   int num_obstacles = 100;
   float obstacle_square_half = 10.0f;  // obstacle centres in a 20 x 20 m square around the start
   float obstacle_min_side = 0.25f;     // rectangle sides uniform in [min, max] meters

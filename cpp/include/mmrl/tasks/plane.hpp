@@ -26,6 +26,7 @@ struct TargetTaskConfig {
   int max_steps = 100;               // truncation (20 s at 6 frames per step, 30 fps)
   float action_limit_std = 3.0f;     // action box half-width, in standard deviations
   bool random_heading = true;        // start heading uniform in [-pi, pi)
+  float transition_cost = 0.0f;      // continuation bias of the match (controller.hpp); 0: the paper's rule
 };
 
 class PlaneVecEnv : public TargetVecEnv<PlaneVecEnv, TargetTaskConfig, TargetEnvState> {
