@@ -98,3 +98,18 @@ def test_bad_transition_cost_is_refused(db):
 
     with pytest.raises(ValueError, match="transition_cost"):
         Controller(db, transition_cost=float("nan"))
+
+
+def test_plane_quality_preset_sets_its_options(tmp_path):
+    import json
+
+    from mmrl.cli import main
+    from mmrl.tasks.plane import PLANE_PRESETS
+
+    run = tmp_path / "q"
+    assert main(["train", "plane", "--steps", "512", "--envs", "8", "--out", str(run), "--no-progress", "--preset",
+                 "quality"]) == 0
+    saved = json.loads((run / "config.json").read_text())
+    for key, value in PLANE_PRESETS["quality"].items():
+        section = "ppo" if key in saved["ppo"] else "task_config"
+        assert saved[section][key] == value, key

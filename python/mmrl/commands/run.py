@@ -136,9 +136,13 @@ def cmd_eval(args: argparse.Namespace) -> int:
     where = f" (stage {res['stage']})" if "stage" in res else ""
     print(f"{s.policy_name} on {s.task.name}{where}: {args.episodes} episodes")
     rates = [k for k in res if k.endswith("_rate") and k != "success_rate"]
-    for k in ["success_rate", *rates, "mean_time_to_target_s", "foot_sliding_cm_per_s", "max_pose_jump_cm",
-              "transitions_per_s"]:
-        print(f"  {k:<24} {fmt(res[k])}")
+    for k in ["success_rate", *rates, "mean_time_to_target_s", "foot_sliding_cm_per_s", "foot_sliding_ik_off_cm_per_s",
+              "transitions_per_s", "pose_jump_p99_cm", "max_pose_jump_cm", "matched_cost_mean"]:
+        if k in res:
+            print(f"  {k:<32} {fmt(res[k])}")
+    floor = res.get("raw_mocap") or {}
+    if floor:
+        print(f"  raw mocap (clips played straight): foot sliding {fmt(floor.get('foot_sliding_cm_per_s'))} cm/s")
     return 0
 
 
