@@ -7,7 +7,6 @@ import textwrap
 
 import pytest
 
-import mmrl
 from mmrl.cli import main
 from mmrl.runs import RunDir
 
@@ -64,7 +63,7 @@ def _run_without_viz(code: str, cwd) -> subprocess.CompletedProcess:
 
 
 def test_core_trains_evaluates_and_exports_without_the_viz_extra(tmp_path):
-    r = _run_without_viz(f'''
+    r = _run_without_viz('''
         import json, sys
         import mmrl
         from mmrl.cli import main

@@ -254,6 +254,12 @@ class TargetTaskConfig:
     @target_half_extent.setter
     def target_half_extent(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
+    @property
+    def transition_cost(self) -> float:
+        ...
+    @transition_cost.setter
+    def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
 class PlaneVecEnv:
     """
     Batched plane-task environments (C++ core of mmrl.tasks.plane).
@@ -347,6 +353,12 @@ class CharacterOptions:
         ...
     @lock_release_distance.setter
     def lock_release_distance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def transition_cost(self) -> float:
+        ...
+    @transition_cost.setter
+    def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
 class Character:
     """
@@ -549,6 +561,12 @@ class ObstacleTaskConfig:
         ...
     @target_half_extent.setter
     def target_half_extent(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def transition_cost(self) -> float:
+        ...
+    @transition_cost.setter
+    def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
 class ObstacleVecEnv:
     """
