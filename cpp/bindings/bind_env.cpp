@@ -1,5 +1,6 @@
 // Bindings of the plane task (tasks/plane.hpp): checks, GIL release, writes into caller-owned
 // numpy buffers. No logic.
+#include "bind_target_env.hpp"
 #include "bindings.hpp"
 #include "mmrl/tasks/plane.hpp"
 #include "py_matcher.hpp"
@@ -29,8 +30,8 @@ void bind_env(py::module_& m) {
       .def_readwrite("random_heading", &TargetTaskConfig::random_heading)
       .def_readwrite("transition_cost", &TargetTaskConfig::transition_cost);
 
-  py::class_<PyPlaneVecEnv>(m, "PlaneVecEnv", "Batched plane-task environments (C++ core of mmrl.tasks.plane).")
-      .def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const TargetTaskConfig& config,
+  py::class_<PyPlaneVecEnv> plane(m, "PlaneVecEnv", "Batched plane-task environments (C++ core of mmrl.tasks.plane).");
+  plane.def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const TargetTaskConfig& config,
                        int num_threads) {
              if (num_threads < 0) throw py::value_error("num_threads: must be >= 0 (0 = all cores)");
              return new PyPlaneVecEnv{PlaneVecEnv(db, matcher.matcher, num_envs, config, num_threads)};
@@ -107,48 +108,11 @@ void bind_env(py::module_& m) {
             float* o = writable_buffer<float>(out, "out", {PlaneVecEnv::kObsDim});
             s.env.observe(i, o);
           },
-          py::arg("index"), py::arg("out"), "Writes environment i's current observation into out (float32, 17).")
-      .def(
-          "current_frames",
-          [](const PyPlaneVecEnv& s, const py::handle& out) {
-            s.env.current_frames(writable_buffer<int64_t>(out, "out", {s.env.num_envs()}));
-          },
-          py::arg("out"), "Writes each environment's current database frame into out (int64, N).")
-      .def(
-          "last_step_frames",
-          [](const PyPlaneVecEnv& s, const py::handle& out) {
-            s.env.last_step_frames(writable_buffer<int32_t>(out, "out", {s.env.num_envs()}));
-          },
-          py::arg("out"),
-          "Writes into out (int32, N) how many frames of the last step each environment played before its episode "
-          "ended: the index of the first frame within success_radius + 1, else frames_per_step (0 after reset).")
-      .def(
-          "last_step_matches",
-          [](const PyPlaneVecEnv& s, const py::handle& transitions, const py::handle& costs) {
-            const py::ssize_t n = s.env.num_envs();
-            uint8_t* t = writable_buffer<uint8_t>(transitions, "transitions", {n});
-            float* c = writable_buffer<float>(costs, "costs", {n});
-            s.env.last_step_matches(t, c);
-          },
-          py::arg("transitions"), py::arg("costs"),
-          "Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the "
-          "current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, "
-          "weighted feature space). Kept through the autoreset; 0 after reset.")
-      .def(
-          "set_state",
-          [](PyPlaneVecEnv& s, int i, int64_t frame, float x, float z, float yaw) {
-            if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
-            s.env.set_state(i, frame, x, z, yaw);
-          },
-          py::arg("index"), py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"),
-          "Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.")
-      .def(
-          "set_target",
-          [](PyPlaneVecEnv& s, int i, float x, float z) {
-            if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
-            s.env.set_target(i, x, z);
-          },
-          py::arg("index"), py::arg("x"), py::arg("z"));
+          py::arg("index"), py::arg("out"), "Writes environment i's current observation into out (float32, 17).");
+  bind_target_env_methods(plane,
+                          "Writes into out (int32, N) how many frames of the last step each environment played "
+                          "before its episode ended: the index of the first frame within success_radius + 1, else "
+                          "frames_per_step (0 after reset).");
 }
 
 }  // namespace mmrl

@@ -1,5 +1,6 @@
 // Bindings of the moving-obstacles task core (tasks/obstacles.hpp, grid.hpp): checks, GIL
 // release, writes into caller-owned numpy buffers. No logic.
+#include "bind_target_env.hpp"
 #include "bindings.hpp"
 #include "mmrl/tasks/obstacles.hpp"
 #include "py_matcher.hpp"
@@ -12,12 +13,7 @@ struct PyObstacleVecEnv {
   ObstacleVecEnv env;
 };
 
-int checked_index(const PyObstacleVecEnv& s, int i) {
-  if (i < 0 || i >= s.env.num_envs())
-    throw py::index_error("env index " + std::to_string(i) + " out of range [0, " + std::to_string(s.env.num_envs()) +
-                          ")");
-  return i;
-}
+int checked_index(const PyObstacleVecEnv& s, int i) { return checked_env_index(s, i); }
 
 constexpr int kNow = -1;  // obstacle_dict: the obstacles as they are
 
@@ -79,8 +75,9 @@ void bind_obstacles(py::module_& m) {
       .def_readwrite("grid_cell_size", &ObstacleTaskConfig::grid_cell_size);
 
   using E = ObstacleVecEnv;
-  py::class_<PyObstacleVecEnv>(m, "ObstacleVecEnv", "Batched moving-obstacles environments (C++ core of mmrl.tasks.obstacles).")
-      .def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const ObstacleTaskConfig& config,
+  py::class_<PyObstacleVecEnv> obstacles(m, "ObstacleVecEnv",
+                                          "Batched moving-obstacles environments (C++ core of mmrl.tasks.obstacles).");
+  obstacles.def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const ObstacleTaskConfig& config,
                        int num_threads) {
              if (num_threads < 0) throw py::value_error("num_threads: must be >= 0 (0 = all cores)");
              if (num_envs < 1) throw py::value_error("num_envs: must be >= 1");
@@ -267,50 +264,15 @@ void bind_obstacles(py::module_& m) {
           },
           py::arg("index"), py::arg("x"), py::arg("z"), "Whether the body disc at world (x, z) overlaps an obstacle.")
       .def(
-          "set_target",
-          [](PyObstacleVecEnv& s, int i, float x, float z) {
-            s.env.set_target(checked_index(s, i), x, z);
-          },
-          py::arg("index"), py::arg("x"), py::arg("z"))
-      .def(
           "set_root",
           [](PyObstacleVecEnv& s, int i, float x, float z, float yaw) {
             s.env.set_root(checked_index(s, i), x, z, yaw);
           },
-          py::arg("index"), py::arg("x"), py::arg("z"), py::arg("yaw"))
-      .def(
-          "set_state",
-          [](PyObstacleVecEnv& s, int i, int64_t frame, float x, float z, float yaw) {
-            s.env.set_state(checked_index(s, i), frame, x, z, yaw);
-          },
-          py::arg("index"), py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"),
-          "Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.")
-      .def(
-          "current_frames",
-          [](const PyObstacleVecEnv& s, const py::handle& out) {
-            s.env.current_frames(writable_buffer<int64_t>(out, "out", {s.env.num_envs()}));
-          },
-          py::arg("out"), "Writes each environment's current database frame into out (int64, N).")
-      .def(
-          "last_step_frames",
-          [](const PyObstacleVecEnv& s, const py::handle& out) {
-            s.env.last_step_frames(writable_buffer<int32_t>(out, "out", {s.env.num_envs()}));
-          },
-          py::arg("out"),
-          "Writes into out (int32, N) how many frames of the last step each environment played before its episode "
-          "ended: the index of the frame that succeeded or collided + 1, else frames_per_step (0 after reset).")
-      .def(
-          "last_step_matches",
-          [](const PyObstacleVecEnv& s, const py::handle& transitions, const py::handle& costs) {
-            const py::ssize_t n = s.env.num_envs();
-            uint8_t* t = writable_buffer<uint8_t>(transitions, "transitions", {n});
-            float* c = writable_buffer<float>(costs, "costs", {n});
-            s.env.last_step_matches(t, c);
-          },
-          py::arg("transitions"), py::arg("costs"),
-          "Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the "
-          "current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, "
-          "weighted feature space). Kept through the autoreset; 0 after reset.");
+          py::arg("index"), py::arg("x"), py::arg("z"), py::arg("yaw"));
+  bind_target_env_methods(obstacles,
+                          "Writes into out (int32, N) how many frames of the last step each environment played "
+                          "before its episode ended: the index of the frame that succeeded or collided + 1, else "
+                          "frames_per_step (0 after reset).");
 }
 
 }  // namespace mmrl

@@ -293,7 +293,9 @@ class PlaneVecEnv:
         Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.
         """
     def set_target(self, index: typing.SupportsInt | typing.SupportsIndex, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
+        """
+        Moves env i's target (world meters).
+        """
     def state(self, index: typing.SupportsInt | typing.SupportsIndex) -> dict:
         """
         The world-space state of environment i (root, frame, target).
@@ -640,7 +642,9 @@ class ObstacleVecEnv:
         Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.
         """
     def set_target(self, index: typing.SupportsInt | typing.SupportsIndex, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
+        """
+        Moves env i's target (world meters).
+        """
     def state(self, index: typing.SupportsInt | typing.SupportsIndex) -> dict:
         """
         World-space state of env i: root, frame, target, stage, last action's hit points.
