@@ -191,3 +191,30 @@ def test_single_env_renders_the_character(synth_db):
     assert a.shape == (360, 640, 3) and a.dtype == np.uint8
     assert np.abs(a.astype(np.int16) - b).mean() > 0.5
     env.close()
+
+
+def test_a_locked_foot_does_not_move(synth_db):
+    """Foot locking (deliverable 3 of issue 14): on consecutive frames where a foot is fully
+    locked, its ankle stays where it was locked (IK reaches it unless the leg is too short:
+    allowed in at most 10% of frames), and locking starts without a jump: the first locked
+    frame moves the ankle no more than the animation moves it."""
+    from mmrl.rollout import FullPath, policy_actions
+
+    run = FullPath(get_task("plane"), synth_db, seed=3)
+    pol = JoystickPolicy.preset(synth_db, "joystick")
+    feet = [synth_db.joint_names.index(synth_db.roles[k]) for k in ("left_foot", "right_foot")]
+    held, starts = [], []
+    for _ in range(20):
+        while not run.step(policy_actions(pol, run.obs[None]).reshape(-1))["done"]:
+            pass
+        rec = run.last_recording
+        p, w, anim = rec["positions"], rec["lock_weights"], rec["animated_feet"]
+        for s, j in enumerate(feet):
+            step = np.linalg.norm(np.diff(p[:, j], axis=0), axis=1)
+            anim_step = np.linalg.norm(np.diff(anim[:, s], axis=0), axis=1)
+            held.extend(step[(w[1:, s] >= 1.0) & (w[:-1, s] >= 1.0)].tolist())
+            start = (w[1:, s] >= 1.0) & (w[:-1, s] == 0.0)
+            starts.extend((step[start] - anim_step[start]).tolist())
+    held = np.array(held)
+    assert held.size > 500 and np.mean(held < 1e-3) >= 0.9, (held.size, np.mean(held < 1e-3))
+    assert len(starts) > 20 and max(starts) < 1e-4

@@ -224,8 +224,14 @@ void Character::show_frame(int64_t f, bool decay) {
       released_in_contact_[side] = contact;
     }
     if (contact && !locked_[side] && !released_in_contact_[side] && decay) {
+      // Lock at once where the foot would be shown now (the animated ankle, or the ankle
+      // still blending out of an earlier lock): no jump, and from this frame on the foot
+      // does not move. Only the release is blended, since that is where the locked and
+      // animated ankles differ.
+      const float w_prev = smoothstep(lock_weight_[side]);
+      lock_position_[side] = animated + w_prev * (lock_position_[side] - animated);
       locked_[side] = true;
-      lock_position_[side] = animated;
+      lock_weight_[side] = 1.0f;
     }
     const float rate = options_.lock_blend_time > 0 ? dt_ / options_.lock_blend_time : 1.0f;
     lock_weight_[side] = std::clamp(lock_weight_[side] + (locked_[side] ? rate : -rate), 0.0f, 1.0f);

@@ -18,11 +18,12 @@
 // and the destination is j (the same instant); the first shown frame is j + 1.
 //
 // Foot locking (world space, per side): when the played frame's database contact starts
-// the ankle is locked where it is; the lock is released when the contact ends or the
-// animated ankle is more than lock_release_distance from it (then it stays free until the
-// next contact). A weight blends the IK target between the animated and the locked ankle
-// over lock_blend_time. The two-bone IK (ik.hpp) moves the ankle to the target and the
-// foot keeps its animated world orientation.
+// the ankle is locked at once where it is shown (so a locked foot does not move, and
+// locking never jumps); the lock is released when the contact ends or the animated ankle is
+// more than lock_release_distance from it (then it stays free until the next contact), and
+// a weight blends the IK target back to the animated ankle over lock_blend_time. The
+// two-bone IK (ik.hpp) moves the ankle to the target and the foot keeps its animated world
+// orientation.
 //
 // The step allocates nothing: every buffer is sized at construction.
 #pragma once
@@ -42,9 +43,9 @@ struct CharacterOptions {
   float inertialization_halflife = 0.1f; // seconds; <= 0: hard switch
   bool ik = true;                        // two-bone leg IK
   bool foot_locking = true;              // lock planted feet (needs ik)
-  float ik_margin = 0.015f;              // meters short of a straight leg
-  float lock_release_distance = 0.2f;    // meters between locked and animated ankle
-  float lock_blend_time = 0.1f;          // seconds to blend a lock in or out
+  float ik_margin = 0.0f;                // meters short of a straight leg
+  float lock_release_distance = 0.5f;    // meters between locked and animated ankle
+  float lock_blend_time = 0.2f;          // seconds to blend a lock out (locking is immediate)
   float action_limit_std = 3.0f;         // trajectory clipped like PlaneVecEnv; <= 0: not clipped
   float transition_cost = 0.0f;          // continuation bias (controller.hpp); 0: the paper's rule
 };
