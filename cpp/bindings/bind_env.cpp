@@ -85,20 +85,7 @@ void bind_env(py::module_& m) {
       .def(
           "state",
           [](const PyPlaneVecEnv& s, int i) {
-            if (i < 0 || i >= s.env.num_envs()) throw py::index_error("env index out of range");
-            const TargetEnvState& st = s.env.state(i);
-            py::dict d;
-            d["x"] = st.root.x;
-            d["z"] = st.root.z;
-            d["yaw"] = st.root.yaw;
-            d["frame"] = st.frame;
-            d["target"] = py::make_tuple(st.target_x, st.target_z);
-            d["steps"] = st.steps;
-            d["last_match"] = st.last_match;
-            d["last_transition"] = st.last_transition;
-            d["last_cost"] = st.last_cost;
-            d["last_step_frames"] = st.last_step_frames;
-            return d;
+            return target_state_dict(s.env.state(checked_env_index(s, i)));
           },
           py::arg("index"), "The world-space state of environment i (root, frame, target).")
       .def(

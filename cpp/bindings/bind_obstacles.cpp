@@ -168,16 +168,7 @@ void bind_obstacles(py::module_& m) {
           "state",
           [](const PyObstacleVecEnv& s, int i) {
             const ObstacleEnvState& st = s.env.state(checked_index(s, i));
-            py::dict d;
-            d["x"] = st.root.x;
-            d["z"] = st.root.z;
-            d["yaw"] = st.root.yaw;
-            d["frame"] = st.frame;
-            d["target"] = py::make_tuple(st.target_x, st.target_z);
-            d["steps"] = st.steps;
-            d["last_match"] = st.last_match;
-            d["last_transition"] = st.last_transition;
-            d["last_cost"] = st.last_cost;
+            py::dict d = target_state_dict(st);
             d["max_speed"] = st.max_speed;
             d["target_half_extent"] = st.target_half_extent;
             d["last_hits"] = st.last_hits;
@@ -186,7 +177,6 @@ void bind_obstacles(py::module_& m) {
             d["hit_points"] = pts;
             d["hit_inside"] = py::make_tuple(bool(st.hit_inside[0]), bool(st.hit_inside[1]), bool(st.hit_inside[2]));
             d["collided"] = st.collided;
-            d["last_step_frames"] = st.last_step_frames;
             return d;
           },
           py::arg("index"), "World-space state of env i: root, frame, target, stage, last action's hit points.")

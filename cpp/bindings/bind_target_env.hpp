@@ -6,6 +6,7 @@
 #include <string>
 
 #include "bindings.hpp"
+#include "mmrl/vecenv.hpp"
 
 namespace mmrl {
 
@@ -16,6 +17,22 @@ int checked_env_index(const Wrapper& s, int i) {
     throw py::index_error("env index " + std::to_string(i) + " out of range [0, " + std::to_string(s.env.num_envs()) +
                           ")");
   return i;
+}
+
+// The state every target env keeps (world meters, radians), as a dict; tasks add their own keys.
+inline py::dict target_state_dict(const TargetEnvState& st) {
+  py::dict d;
+  d["x"] = st.root.x;
+  d["z"] = st.root.z;
+  d["yaw"] = st.root.yaw;
+  d["frame"] = st.frame;
+  d["target"] = py::make_tuple(st.target_x, st.target_z);
+  d["steps"] = st.steps;
+  d["last_match"] = st.last_match;
+  d["last_transition"] = st.last_transition;
+  d["last_cost"] = st.last_cost;
+  d["last_step_frames"] = st.last_step_frames;
+  return d;
 }
 
 // current_frames, last_step_frames, last_step_matches, set_state and set_target.

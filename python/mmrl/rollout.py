@@ -19,6 +19,7 @@ motion-quality metrics are :func:`mmrl.metrics.quality`.
 """
 from __future__ import annotations
 
+import inspect
 from typing import Any, Dict, List, Optional
 
 import numpy as np
@@ -36,11 +37,13 @@ STEP_KEYS = ("transitions", "queries", "costs")
 
 
 def policy_actions(policy, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-    """``policy.act(obs, deterministic=...)`` (or ``policy.act(obs)`` for policies without the flag)."""
+    """``policy.act(obs, deterministic=...)`` (or ``policy.act(obs)`` for policies without the
+    flag). The signature decides, not a caught TypeError, so a bug inside ``act`` is never retried."""
     try:
-        actions = policy.act(obs, deterministic=deterministic)
-    except TypeError:
-        actions = policy.act(obs)
+        takes_flag = "deterministic" in inspect.signature(policy.act).parameters
+    except (TypeError, ValueError):  # builtins without a signature
+        takes_flag = False
+    actions = policy.act(obs, deterministic=deterministic) if takes_flag else policy.act(obs)
     return np.asarray(actions, np.float32)
 
 
@@ -61,25 +64,21 @@ def first_episodes(env, policy, seed: int, deterministic: bool = True) -> Dict[s
     n = env.num_envs
     obs, _ = env.reset(seed=seed)
     done = np.zeros(n, bool)
-    out: Dict[str, np.ndarray] = {"success": np.zeros(n, bool), "length": np.zeros(n, np.int64),
-                                  "frames": np.zeros(n, np.int64)}
+    out: Dict[str, np.ndarray] = {"success": np.zeros(n, bool), "truncated": np.zeros(n, bool),
+                                  "length": np.zeros(n, np.int64), "frames": np.zeros(n, np.int64)}
     while not done.all():
         obs, _, term, trunc, info = env.step(policy_actions(policy, obs, deterministic))
         ended = (term | trunc) & ~done
-        if ended.any():
-            out["length"][ended] = info["episode_length"][ended]
-            out["frames"][ended] = info["episode_frames"][ended]
-            out.setdefault("truncated", np.zeros(n, bool))[ended] = (trunc & ~term)[ended]
-            for key, value in info.items():
-                if key.startswith("_") or key in out or np.asarray(value).dtype != bool:
-                    continue
-                out.setdefault(key, np.zeros(n, bool))
-            for key in out:
-                if out[key].dtype == bool and key in info:
-                    out[key][ended] = info[key][ended]
-            done |= ended
+        if not ended.any():
+            continue
+        out["length"][ended] = info["episode_length"][ended]
+        out["frames"][ended] = info["episode_frames"][ended]
+        out["truncated"][ended] = (trunc & ~term)[ended]
+        for key, value in info.items():  # success and the task's boolean outcomes (collision, ...)
+            if not key.startswith("_") and np.asarray(value).dtype == bool:
+                out.setdefault(key, np.zeros(n, bool))[ended] = value[ended]
+        done |= ended
     env.close()
-    out.setdefault("truncated", np.zeros(n, bool))
     return out
 
 

@@ -51,12 +51,16 @@ class RunDir:
 
     @classmethod
     def create(cls, path: "str | os.PathLike[str]", *, task: Task, data: Dict[str, Any], num_envs: int,
-               task_config, ppo_config) -> "RunDir":
-        """Make ``path`` (if needed) and write its config.json atomically."""
+               task_config, ppo_config, callback_options: Optional[Dict[str, Any]] = None) -> "RunDir":
+        """Make ``path`` (if needed) and write its config.json atomically (``callback_options``:
+        the task switches its callbacks read, e.g. ``{"curriculum": False}``)."""
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)
-        write_config(path, {"task": task.name, "data": data, "num_envs": int(num_envs),
-                            "task_config": asdict(task_config), "ppo": asdict(ppo_config)})
+        config = {"task": task.name, "data": data, "num_envs": int(num_envs), "task_config": asdict(task_config),
+                  "ppo": asdict(ppo_config)}
+        if callback_options:
+            config["callback_options"] = dict(callback_options)
+        write_config(path, config)
         return cls(path)
 
     # -- what the run holds --------------------------------------------------------------------
@@ -107,10 +111,6 @@ class RunDir:
             raise InputError(f"{self.checkpoint}: no trained policy in this run directory")
         return load_policy(self.checkpoint, device=device)
 
-    def update_config(self, **values) -> None:
-        """Merge ``values`` into config.json (atomically), e.g. options changed on resume."""
-        self.config.update(values)
-        write_config(self.path, self.config)
 
 
 def write_config(path: Path, config: Dict[str, Any]) -> None:

@@ -180,9 +180,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     callbacks.append(MatchQualityLog(envs))  # last: the task's callbacks keep their checkpoint indices
     policy_factory = task.policy_factory(envs) if task.policy_factory else None
     # config.json always holds the options the run trains with now, so eval and render read them.
-    RunDir.create(out, task=task, data=data, num_envs=num_envs, task_config=task_cfg, ppo_config=cfg)
-    if options:
-        RunDir(out).update_config(callback_options=options)
+    RunDir.create(out, task=task, data=data, num_envs=num_envs, task_config=task_cfg, ppo_config=cfg,
+                  callback_options=options)
     try:
         result = ppo.train(envs, cfg, out, policy_factory=policy_factory, resume=bool(args.resume),
                            callbacks=callbacks)
