@@ -195,15 +195,17 @@ def test_single_env_renders_the_character(synth_db):
 
 def test_a_locked_foot_does_not_move(synth_db):
     """Foot locking (deliverable 3 of issue 14): on consecutive frames where a foot is fully
-    locked, its ankle stays where it was locked (IK reaches it unless the leg is too short:
-    allowed in at most 10% of frames), and locking starts without a jump: the first locked
-    frame moves the ankle no more than the animation moves it."""
+    locked, its ankle keeps the ground position (x, z) where it was locked and takes the
+    animated ankle's height (the heel lifts before toe-off); the IK reaches both unless the
+    leg is too short, allowed in at most 10% of frames. Locking starts without a jump: the
+    first locked frame moves the ankle no more than the animation moves it, and a foot planted
+    when an episode starts is locked from its first frame."""
     from mmrl.rollout import FullPath, policy_actions
 
     run = FullPath(get_task("plane"), synth_db, seed=3)
     pol = JoystickPolicy.preset(synth_db, "joystick")
     feet = [synth_db.joint_names.index(synth_db.roles[k]) for k in ("left_foot", "right_foot")]
-    held, starts = [], []
+    held, heights, starts, first = [], [], [], []
     for _ in range(20):
         while not run.step(policy_actions(pol, run.obs[None]).reshape(-1))["done"]:
             pass
@@ -211,10 +213,17 @@ def test_a_locked_foot_does_not_move(synth_db):
         p, w, anim = rec["positions"], rec["lock_weights"], rec["animated_feet"]
         for s, j in enumerate(feet):
             step = np.linalg.norm(np.diff(p[:, j], axis=0), axis=1)
+            ground_step = np.linalg.norm(np.diff(p[:, j][:, [0, 2]], axis=0), axis=1)
             anim_step = np.linalg.norm(np.diff(anim[:, s], axis=0), axis=1)
-            held.extend(step[(w[1:, s] >= 1.0) & (w[:-1, s] >= 1.0)].tolist())
+            if rec["contacts"][0, s]:  # a foot planted in an episode's first frame is locked there
+                first.append(w[0, s])
+            both = (w[1:, s] >= 1.0) & (w[:-1, s] >= 1.0)
+            held.extend(ground_step[both].tolist())
+            heights.extend(np.abs(p[1:, j, 1] - anim[1:, s, 1])[both].tolist())
             start = (w[1:, s] >= 1.0) & (w[:-1, s] == 0.0)
             starts.extend((step[start] - anim_step[start]).tolist())
-    held = np.array(held)
+    held, heights = np.array(held), np.array(heights)
     assert held.size > 500 and np.mean(held < 1e-3) >= 0.9, (held.size, np.mean(held < 1e-3))
+    assert np.mean(heights < 1e-3) >= 0.9, np.mean(heights < 1e-3)
+    assert len(first) >= 10 and min(first) == 1.0, first
     assert len(starts) > 20 and max(starts) < 1e-4

@@ -52,12 +52,15 @@ def test_presets_set_their_options_and_set_overrides_them(tmp_path, capsys):
                      *extra]) == 0
         return json.loads((run / "config.json").read_text())
 
-    paper = config("paper")
+    paper = config("paper", "--preset", "paper")
     assert paper["task_config"]["success_bonus"] == 10.0 and not paper["task_config"]["hit_penalty"]
     ours = config("mmrl", "--preset", "mmrl", "--set", "hit_weight=3")
+    default = config("default")  # a plain `mmrl train obstacles` trains with the preset that works
     for key, value in OBSTACLE_PRESETS["mmrl"].items():
         section = "ppo" if key in ours["ppo"] else "task_config"
         assert ours[section][key] == (3.0 if key == "hit_weight" else value), key
+        assert default[section][key] == value, key
+        assert paper[section][key] != value, key
     capsys.readouterr()
     assert main(["train", "plane", "--steps", "512", "--out", str(tmp_path / "p"), "--preset", "mmrl"]) == 2
     assert "--preset mmrl: the plane task has presets paper, quality (mmrl is a preset of the obstacles task)" in capsys.readouterr().err

@@ -11,7 +11,7 @@ import pytest
 
 from mmrl import get_task, register_task
 from mmrl.cli import main
-from mmrl.tasks import SingleEnv, Task, TaskFlag, unregister_task
+from mmrl.tasks import SingleEnv, Task, TaskFlag, task_names, unregister_task
 from mmrl.tasks.plane import PlaneConfig, PlaneVectorEnv
 
 
@@ -107,3 +107,12 @@ def test_flags_of_one_task_are_refused_by_another(short_walk, tmp_path, capsys):
     assert main(["train", "plane", "--steps", "64", "--out", str(tmp_path / "p"), "--far"]) == 2
     assert "--far applies to the short-walk task only" in capsys.readouterr().err
     assert get_task("short-walk") is SHORT_WALK
+
+
+def test_a_default_preset_must_be_one_of_the_tasks_presets():
+    import dataclasses
+
+    bad = dataclasses.replace(SHORT_WALK, name="short-walk-bad", gym_id=None, default_preset="fast")
+    with pytest.raises(ValueError, match="default_preset 'fast' of the short-walk-bad task is not one of its presets"):
+        register_task(bad)
+    assert "short-walk-bad" not in task_names()

@@ -110,6 +110,14 @@ def test_plane_quality_preset_sets_its_options(tmp_path):
     assert main(["train", "plane", "--steps", "512", "--envs", "8", "--out", str(run), "--no-progress", "--preset",
                  "quality"]) == 0
     saved = json.loads((run / "config.json").read_text())
+    # A plain `mmrl train plane` uses the quality preset; --preset paper is the paper's rule.
+    assert main(["train", "plane", "--steps", "512", "--envs", "8", "--out", str(tmp_path / "d"), "--no-progress"]) == 0
+    default = json.loads((tmp_path / "d" / "config.json").read_text())
+    assert main(["train", "plane", "--steps", "512", "--envs", "8", "--out", str(tmp_path / "p"), "--no-progress",
+                 "--preset", "paper"]) == 0
+    paper = json.loads((tmp_path / "p" / "config.json").read_text())
+    assert paper["task_config"]["transition_cost"] == 0.0 and paper["ppo"]["gamma"] == 0.99
     for key, value in PLANE_PRESETS["quality"].items():
         section = "ppo" if key in saved["ppo"] else "task_config"
         assert saved[section][key] == value, key
+        assert default[section][key] == value, key

@@ -68,6 +68,10 @@ void bind_character(py::module_& m) {
           },
           py::arg("trajectory_query"))
       .def_property_readonly("num_joints", &Character::num_joints)
+      .def_property(
+          "transition_cost", [](const Character& c) { return c.options().transition_cost; },
+          [](Character& c, float cost) { c.set_transition_cost(cost); },
+          "continuation bias of the next matches (finite, >= 0)")
       .def_property_readonly("frames_per_step", [](const Character& c) { return c.options().frames_per_step; })
       .def_property_readonly("root",
                              [](const Character& c) { return py::make_tuple(c.root().x, c.root().z, c.root().yaw); })
@@ -124,6 +128,13 @@ void bind_character(py::module_& m) {
             return make_view(c.current_animated_feet(), {2, 3}, self);
           },
           "View (2, 3): the ankles of the pose shown now before foot locking and IK.")
+      .def(
+          "current_lock_weights",
+          [](py::object self) {
+            const Character& c = self.cast<const Character&>();
+            return make_view(c.current_lock_weights(), {2}, self);
+          },
+          "View (2,): the left and right foot lock weights (0..1) of the pose shown now.")
       .def(
           "current_pose",
           [](py::object self) {

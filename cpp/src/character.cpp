@@ -32,8 +32,7 @@ Character::Character(const Database& db, const Matcher& matcher, const Character
     throw std::invalid_argument("inertialization_halflife must be finite (<= 0 turns it off)");
   if (!(options.ik_margin >= 0) || !(options.lock_release_distance > 0) || !(options.lock_blend_time >= 0))
     throw std::invalid_argument("ik_margin must be >= 0, lock_release_distance > 0 and lock_blend_time >= 0");
-  if (!(options.transition_cost >= 0.0f) || !std::isfinite(options.transition_cost))
-    throw std::invalid_argument("transition_cost must be finite and >= 0");
+  set_transition_cost(options.transition_cost);
   if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("matcher was not built over this database");
   if (db.contacts.size() != static_cast<size_t>(db.num_frames) * 2)
     throw std::invalid_argument("database has no foot contacts (rebuild it)");
@@ -75,6 +74,11 @@ Character::Character(const Database& db, const Matcher& matcher, const Character
     anim_feet_.assign(F * 2 * 3, 0);
   }
   reset(0, RootState{});
+}
+
+void Character::set_transition_cost(float cost) {
+  if (!(cost >= 0.0f) || !std::isfinite(cost)) throw std::invalid_argument("transition_cost must be finite and >= 0");
+  options_.transition_cost = cost;
 }
 
 void Character::reset(int64_t frame, const RootState& root) {
@@ -215,7 +219,7 @@ void Character::show_frame(int64_t f, bool decay) {
     const Vec3 animated = glob_t_[db_.roles.foot[side]];
     if (!locking || !decay) {
       locked_[side] = released_in_contact_[side] = false;
-      lock_weight_[side] = 0;
+      lock_weight_[side] = cur_lock_w_[side] = 0;
       if (!locking) continue;
     }
     if (!contact) released_in_contact_[side] = false;
@@ -223,11 +227,12 @@ void Character::show_frame(int64_t f, bool decay) {
       locked_[side] = false;
       released_in_contact_[side] = contact;
     }
-    if (contact && !locked_[side] && !released_in_contact_[side] && decay) {
+    if (contact && !locked_[side] && !released_in_contact_[side]) {
       // Lock at once where the foot would be shown now (the animated ankle, or the ankle
       // still blending out of an earlier lock): no jump, and from this frame on the foot
       // does not move. Only the release is blended, since that is where the locked and
-      // animated ankles differ.
+      // animated ankles differ. A reset (no decay) locks too, at the new pose: a foot planted
+      // in the first frame stays planted in the second.
       const float w_prev = smoothstep(lock_weight_[side]);
       lock_position_[side] = animated + w_prev * (lock_position_[side] - animated);
       locked_[side] = true;
@@ -236,7 +241,15 @@ void Character::show_frame(int64_t f, bool decay) {
     const float rate = options_.lock_blend_time > 0 ? dt_ / options_.lock_blend_time : 1.0f;
     lock_weight_[side] = std::clamp(lock_weight_[side] + (locked_[side] ? rate : -rate), 0.0f, 1.0f);
     const float w = smoothstep(lock_weight_[side]);
-    if (w > 0) solve_leg(side, animated + w * (lock_position_[side] - animated));
+    cur_lock_w_[side] = w;
+    if (w > 0) {
+      // The lock holds the ankle's ground position; its height follows the animation (the
+      // heel rises before toe-off while the hips move on: holding the height too would ask
+      // for a longer leg than the character has, and a straight leg drags the ankle along).
+      Vec3 target = animated + w * (lock_position_[side] - animated);
+      target.y() = animated.y();
+      solve_leg(side, target);
+    }
   }
 
   for (int j = 0; j < J_; ++j) {
@@ -271,8 +284,8 @@ void Character::step(const float* trajectory) {
     contacts_[k * 2 + 1] = db_.contacts[f * 2 + 1];
     if (!options_.poses) continue;
     show_frame(f, true);
-    lock_w_out_[k * 2] = smoothstep(lock_weight_[0]);
-    lock_w_out_[k * 2 + 1] = smoothstep(lock_weight_[1]);
+    lock_w_out_[k * 2] = cur_lock_w_[0];
+    lock_w_out_[k * 2 + 1] = cur_lock_w_[1];
     std::copy(cur_gpos_.begin(), cur_gpos_.end(), gpos_.begin() + k * JJ * 3);
     std::copy(cur_lpos_.begin(), cur_lpos_.end(), lpos_.begin() + k * JJ * 3);
     std::copy(cur_grot_.begin(), cur_grot_.end(), grot_.begin() + k * JJ * 4);

@@ -376,6 +376,10 @@ class Character:
         """
         View (2, 3): the ankles of the pose shown now before foot locking and IK.
         """
+    def current_lock_weights(self) -> numpy.ndarray:
+        """
+        View (2,): the left and right foot lock weights (0..1) of the pose shown now.
+        """
     def current_pose(self) -> tuple[numpy.ndarray, numpy.ndarray, numpy.ndarray, numpy.ndarray]:
         """
         Views of the pose shown now.
@@ -421,10 +425,19 @@ class Character:
     @property
     def roots(self) -> numpy.ndarray:
         ...
+    @property
+    def transition_cost(self) -> float:
+        """
+        continuation bias of the next matches (finite, >= 0)
+        """
+    @transition_cost.setter
+    def transition_cost(self, arg1: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
 class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
+    bias_yields: bool
     hit_lookahead: bool
     hit_penalty: bool
     hit_played: bool

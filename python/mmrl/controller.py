@@ -105,6 +105,18 @@ class Controller:
         self._rec: Dict[str, List[np.ndarray]] = {}
         self.reset(start_frame, position, yaw)
 
+    @property
+    def transition_cost(self) -> float:
+        """The continuation bias of the next matches; settable between steps (a task may vary
+        it per decision, as the obstacles task's ``bias_yields`` does)."""
+        return float(self._core.transition_cost)
+
+    @transition_cost.setter
+    def transition_cost(self, cost: float) -> None:
+        if not np.isfinite(float(cost)) or float(cost) < 0:
+            raise ValueError(f"transition_cost must be finite and >= 0, got {cost!r}")
+        self._core.transition_cost = float(cost)
+
     # ------------------------------------------------------------------ state
     def reset(self, start_frame: Optional[int] = None, position: Sequence[float] = (0.0, 0.0),
               yaw: float = 0.0) -> None:
@@ -129,7 +141,7 @@ class Controller:
             self._rec["frames"].append(np.array([self.frame], np.int64))
             self._rec["roots"].append(np.array([self.root], np.float32))
             self._rec["contacts"].append(self.db.contacts[self.frame][None].copy())
-            self._rec["lock_weights"].append(np.zeros((1, 2), np.float32))
+            self._rec["lock_weights"].append(np.array(self._core.current_lock_weights())[None])
             if not self.fast:
                 for key, arr in zip(("positions", "rotations", "local_translations", "local_rotations"),
                                     self._core.current_pose()):

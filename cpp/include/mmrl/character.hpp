@@ -60,6 +60,9 @@ class Character {
   Character(const Database& db, const Matcher& matcher, const CharacterOptions& options);
 
   const CharacterOptions& options() const { return options_; }
+  // Changes the continuation bias of the next matches (finite, >= 0; else std::invalid_argument):
+  // a task may vary it per decision (the obstacles task's bias_yields).
+  void set_transition_cost(float cost);
   int num_joints() const { return J_; }
 
   // Puts the character on database frame `frame` (any frame) at the world root; clears
@@ -96,6 +99,7 @@ class Character {
   const float* current_local_translations() const { return cur_lpos_.data(); }
   const float* current_local_rotations() const { return cur_lrot_.data(); }
   const float* current_animated_feet() const { return cur_anim_feet_; }  // 2 x 3, see animated_feet
+  const float* current_lock_weights() const { return cur_lock_w_; }      // 2, see lock_weights
 
  private:
   void blend_pose_of(int64_t frame, BlendPose& pose) const;
@@ -134,6 +138,7 @@ class Character {
   std::vector<Quat> loc_r_, glob_r_;
   std::vector<float> cur_gpos_, cur_grot_, cur_lpos_, cur_lrot_;
   float cur_anim_feet_[6] = {0, 0, 0, 0, 0, 0};
+  float cur_lock_w_[2] = {0, 0};  // lock weights of the pose shown now
 
   // Step outputs.
   std::vector<int64_t> played_;

@@ -45,6 +45,7 @@ struct TargetEnvState {
   int64_t last_match = -1;  // frame chosen by the last match
   bool last_transition = false;
   float last_cost = 0;  // squared distance of the last match (normalized, weighted feature space)
+  float last_transition_cost = 0;  // the continuation bias the last match used
   // Frames the last step played before its episode ended: the index of the frame of the
   // ending event + 1, or frames_per_step when the step did not end the episode (truncation
   // included). Kept through the autoreset, so it describes the step just returned; 0 after
@@ -54,6 +55,9 @@ struct TargetEnvState {
   // like last_step_frames (last_transition and last_cost are cleared by it); 0 after reset(seed).
   bool last_step_transition = false;
   float last_step_cost = 0;
+  // The continuation bias the last step's match used (the config's transition_cost, or what
+  // the task's decision_transition_cost made of it); kept like last_step_frames.
+  float last_step_transition_cost = 0;
   Rng rng;
 };
 
@@ -115,6 +119,7 @@ class TargetVecEnv {
       envs_[i].last_step_frames = 0;
       envs_[i].last_step_transition = false;
       envs_[i].last_step_cost = 0;
+      envs_[i].last_step_transition_cost = 0;
     }
     pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
       for (int64_t i = b; i < e; ++i) reset_env(static_cast<int>(i), obs ? obs + i * Task::kObsDim : nullptr);
@@ -130,6 +135,7 @@ class TargetVecEnv {
     s.last_match = -1;
     s.last_transition = false;
     s.last_cost = 0;
+    s.last_transition_cost = 0;
     if (obs_row) task().observe(i, obs_row);
   }
 
@@ -205,6 +211,7 @@ class TargetVecEnv {
         s.last_step_frames = r.frames_played;
         s.last_step_transition = s.last_transition;
         s.last_step_cost = s.last_cost;
+        s.last_step_transition_cost = s.last_transition_cost;
         const bool truncated = !r.terminated && s.steps >= config_.max_steps;
         out.rewards[i] = r.reward;
         out.terminated[i] = r.terminated;
@@ -235,7 +242,8 @@ class TargetVecEnv {
   // and last_cost.
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
-    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, config_.transition_cost);
+    s.last_transition_cost = task().decision_transition_cost(i);
+    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost);
     s.last_transition = (j != s.frame);
     s.last_match = j;
     return j;
@@ -243,6 +251,10 @@ class TargetVecEnv {
 
   // Hook of set_state for tasks whose state depends on the root (a task hides it).
   void on_state_set(int) {}
+
+  // The continuation bias of env i's next match (a task hides it to make the bias depend on
+  // its state): the config's transition_cost.
+  float decision_transition_cost(int) const { return config_.transition_cost; }
 
   // Distance (meters) from env i's root to its target.
   float target_distance(const State& s) const { return std::hypot(s.target_x - s.root.x, s.target_z - s.root.z); }

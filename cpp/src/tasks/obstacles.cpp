@@ -122,6 +122,12 @@ void ObstacleVecEnv::begin_episode(int i) {
   refresh(i, false, true);
 }
 
+float ObstacleVecEnv::decision_transition_cost(int i) const {
+  if (!config_.bias_yields || config_.transition_cost == 0.0f) return config_.transition_cost;
+  const float* continuation = &db_.features[static_cast<size_t>(envs_[i].frame) * kFeatureDim + kPoseDim];
+  return trajectory_hits(i, continuation) > 0 ? 0.0f : config_.transition_cost;
+}
+
 int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8_t* inside) const {
   float clipped[kTrajectoryDim], raw[kTrajectoryDim];
   for (int k = 0; k < kTrajectoryDim; ++k) clipped[k] = std::min(high_[k], std::max(low_[k], action[k]));

@@ -39,8 +39,10 @@ def register_cli(sub) -> None:
     presets = sorted({p for n in tasks for p in get_task(n).presets})
     t.add_argument("--preset", choices=presets or None, default=None,
                    help="a task's named set of options; " + "; ".join(
-                       f"{n}: {', '.join(get_task(n).presets)}" for n in tasks if get_task(n).presets) +
-                   " (see docs/obstacles.md); --set overrides it")
+                       f"{n}: {', '.join(get_task(n).presets)}"
+                       + (f" (default {get_task(n).default_preset})" if get_task(n).default_preset else "")
+                       for n in tasks if get_task(n).presets) +
+                   "; paper is the paper's task as written (docs/quality.md, docs/obstacles.md); --set overrides it")
     seen = set()
     for name in tasks:
         for flag in get_task(name).flags:
@@ -114,15 +116,16 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
         _apply(task_cfg, {k: v for k, v in saved.get("task_config", {}).items() if hasattr(task_cfg, k)})
         _apply(cfg, {k: v for k, v in saved.get("ppo", {}).items() if hasattr(cfg, k)})
     sets = list(args.set)
-    if args.preset is not None:
-        if args.preset not in task.presets:
+    preset = args.preset if args.preset is not None or saved else task.default_preset
+    if preset is not None:
+        if preset not in task.presets:
             owners = [n for n in task_names() if args.preset in get_task(n).presets]
             has = f"presets {', '.join(task.presets)}" if task.presets else "no presets"
-            raise InputError(f"--preset {args.preset}: the {task.name} task has {has} "
-                             f"({args.preset} is a preset of the {' and '.join(owners)} task)")
-        if saved:
+            raise InputError(f"--preset {preset}: the {task.name} task has {has} "
+                             f"({preset} is a preset of the {' and '.join(owners)} task)")
+        if saved and args.preset is not None:
             raise InputError("--preset: a resumed run keeps its configuration (change options with --set)")
-        sets = [f"{k}={v}" for k, v in task.presets[args.preset].items()] + sets
+        sets = [f"{k}={v}" for k, v in task.presets[preset].items()] + sets
     options: Dict[str, Any] = dict(saved.get("callback_options", {})) if saved else {}
     own_flags = {f.flag for f in task.flags}
     for name in task_names():

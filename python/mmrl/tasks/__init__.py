@@ -22,6 +22,9 @@ def register_task(task: Task, *, replace: bool = False) -> Task:
         raise TypeError(f"register_task: expected an mmrl.tasks.Task, got {type(task).__name__}")
     if task.name in _TASKS and not replace and _TASKS[task.name] is not task:
         raise ValueError(f"register_task: a task named {task.name!r} is already registered")
+    if task.default_preset is not None and task.default_preset not in task.presets:
+        raise ValueError(f"register_task: default_preset {task.default_preset!r} of the {task.name} task is not one "
+                         f"of its presets ({', '.join(task.presets) or 'none'})")
     _TASKS[task.name] = task
     if task.gym_id is not None and (replace or task.gym_id not in gym.registry):
         gym.register(id=task.gym_id, entry_point=task.env, vector_entry_point=task.vector_env)

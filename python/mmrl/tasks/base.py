@@ -349,6 +349,10 @@ class Task:
     """PPOConfig fields this task trains best with (``--set`` overrides them)."""
     presets: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     """``--preset NAME``: overrides of task options and PPOConfig fields."""
+    default_preset: Optional[str] = None
+    """The preset ``mmrl train`` applies to a new run when ``--preset`` is not given (one of
+    ``presets``; None: the config classes' own defaults). The config classes themselves keep
+    the paper's values, so ``--preset paper`` (an empty preset) is the paper's task."""
     flags: Tuple[TaskFlag, ...] = ()
     """Task-specific ``mmrl train`` switches."""
     policy_factory: Optional[Callable[[TargetVectorEnv], Callable[[int, int], Any]]] = None

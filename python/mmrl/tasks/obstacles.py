@@ -105,6 +105,10 @@ class ObstaclesConfig(TaskConfig):
     the character frame at the step's start) instead of the action's; False is the paper's
     test of the action. ``env_state``'s hit points follow the test; ``mmrl render`` draws the
     action's points either way."""
+    bias_yields: bool = False
+    """With a ``transition_cost``: a decision whose continuation would run into an obstacle
+    (the current frame's own future trajectory, tested as the hit reward tests a trajectory)
+    matches without the bias, so the clip being played never holds back a dodge."""
     max_steps: int = 1500
     """Safety cap on the episode length (truncation; 1500 steps = 300 s). The paper has none."""
     num_obstacles: int = 100
@@ -142,7 +146,7 @@ class ObstaclesConfig(TaskConfig):
 #: (docs/obstacles.md): a success bonus of 1000 (with 10, and even 300, the agent learns to
 #: wander), the hit term as a penalty of weight 10 that is 0 for a clear action, tested with
 #: the body's radius against where each obstacle will be at the point's time, and a linearly
-#: annealed learning rate.
+#: annealed learning rate. ``mmrl train obstacles`` uses "mmrl" unless told otherwise.
 OBSTACLE_PRESETS: Dict[str, Dict[str, Any]] = {
     "paper": {},
     "mmrl": {"success_bonus": 1000.0, "hit_penalty": True, "hit_weight": 10.0, "hit_radius": 0.25,
@@ -299,6 +303,7 @@ TASK = Task(
     ppo_defaults={"obs_norm_exclude": OBSTACLE_MAP_RANGE, "torch_threads": 2, "update_epochs": 2,
                   "num_minibatches": 2, "learning_rate": 1e-3},
     presets=OBSTACLE_PRESETS,
+    default_preset="mmrl",
     flags=(TaskFlag("--no-hit-reward", "hit_reward", False, "drop the hit reward (ablation)"),
            TaskFlag("--no-curriculum", "curriculum", False, "start at the hardest stage (ablation)",
                     target="callbacks")),

@@ -70,6 +70,10 @@ struct ObstacleTaskConfig {
   float action_limit_std = 3.0f;     // action box half-width, in standard deviations
   bool random_heading = true;        // start heading uniform in [-pi, pi)
   float transition_cost = 0.0f;      // continuation bias of the match (controller.hpp); 0: the paper's rule
+  // The bias yields: a decision whose continuation would run into an obstacle (the current
+  // frame's own future trajectory, tested as the hit reward tests a trajectory) matches with
+  // the paper's rule (no bias), so a dodge is never held back by the clip being played.
+  bool bias_yields = false;
   int num_obstacles = 100;
   float obstacle_square_half = 10.0f;  // obstacle centres in a 20 x 20 m square around the start
   float obstacle_min_side = 0.25f;     // rectangle sides uniform in [min, max] meters
@@ -166,6 +170,8 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   friend class TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState>;
   // After set_state: rebuild the grid and both sensor maps around the new root.
   void on_state_set(int i) { refresh(i, false, true); }
+  // transition_cost, or 0 when bias_yields and env i's continuation hits an obstacle.
+  float decision_transition_cost(int i) const;
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   // Steps between grid rebuilds for env i, and the margin that keeps the grid exact over them.
