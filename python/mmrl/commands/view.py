@@ -9,6 +9,7 @@ port is replaced by the next free one, and the address is printed.
 from __future__ import annotations
 
 import argparse
+import signal
 import threading
 import webbrowser
 
@@ -56,14 +57,21 @@ def _wait(scene, app_run, args) -> int:
     if not args.no_browser:
         threading.Timer(0.5, webbrowser.open, (scene.url,)).start()
     stop = threading.Event()
+    # SIGTERM (a test harness, `timeout`, a service manager) stops as Ctrl+C does: cleanly, with the report.
+    previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         app_run(stop)
     except KeyboardInterrupt:
         pass
     finally:
+        signal.signal(signal.SIGTERM, previous)
         stop.set()
         scene.close()
     return 0
+
+
+def _interrupt(_signum, _frame):
+    raise KeyboardInterrupt
 
 
 def cmd_view(args: argparse.Namespace) -> int:
