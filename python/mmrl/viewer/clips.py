@@ -116,7 +116,6 @@ def database_playback(path: Path) -> Playback:
 
 def run_playback(path: Path, *, seconds: float = 20.0, seed: int = 0, stage: Optional[int] = None) -> Playback:
     """The run's policy on its task for ``seconds`` of shown motion (episodes cut as in ``mmrl render``)."""
-    from ..metrics import body_joints, feet
     from ..rollout import follow
     from ..runs import RunDir
 
@@ -132,15 +131,22 @@ def run_playback(path: Path, *, seconds: float = 20.0, seed: int = 0, stage: Opt
     config = run.task_config(task)
     db = run.database()
     rec = follow(task, db, run.policy(), seconds=seconds, seed=seed, config=config, stage=stage)
+    return recording_playback(f"{path.name} ({task.name})", db, rec, task, config)
+
+
+def recording_playback(name: str, db, rec: Dict[str, Any], task, config) -> Playback:
+    """A :func:`mmrl.rollout.follow` recording as a Playback whose clips are its episodes."""
+    from ..metrics import body_joints, feet
+
     add_matched_queries(db, rec)
     episode = np.asarray(rec["episode"])
     starts = np.flatnonzero(np.r_[True, episode[1:] != episode[:-1]])
     ends = np.r_[starts[1:], len(episode)]
     clips = [(f"episode {int(episode[a]) + 1}", int(a), int(b)) for a, b in zip(starts, ends)]
-    return Playback(name=f"{path.name} ({task.name})", parents=np.asarray(db.parents, np.int64),
-                    joint_names=list(db.joint_names), fps=float(db.fps), recording=rec, clips=clips,
-                    body_joints=body_joints(db), feet=feet(db), success_radius=float(config.success_radius),
-                    info={"task": task.name, "outcomes": rec["outcomes"].tolist()})
+    return Playback(name=name, parents=np.asarray(db.parents, np.int64), joint_names=list(db.joint_names),
+                    fps=float(db.fps), recording=rec, clips=clips, body_joints=body_joints(db), feet=feet(db),
+                    success_radius=float(getattr(config, "success_radius", 0.5)),
+                    info={"task": task.name, "outcomes": np.asarray(rec["outcomes"]).tolist()})
 
 
 def add_matched_queries(db, rec: Dict[str, Any]) -> None:

@@ -57,8 +57,9 @@ class Painter:
 
     def __init__(self, scene, parents: Sequence[int], joint_names: Sequence[str], *,
                  body_joints: Optional[Sequence[int]] = None, feet: Optional[Sequence[int]] = None,
-                 success_radius: float = 0.5):
+                 success_radius: float = 0.5, root: str = ""):
         self.scene = scene
+        self.root = root  # scene-tree parent of every node ("/world" when the export moves the world)
         self.bones = skeleton_bones(parents, body_joints)
         side = joint_sides(joint_names)
         self.bone_colors = np.array([SIDE_COLORS[side[j]] for j, _ in self.bones], np.float32).reshape(-1, 3)
@@ -69,32 +70,32 @@ class Painter:
 
     def figure(self, positions: np.ndarray) -> None:
         p = np.asarray(positions, np.float32)
-        self.scene.lines("/figure/bones", np.stack([p[self.bones[:, 0]], p[self.bones[:, 1]]], 1), self.bone_colors,
+        self.scene.lines(self.root + "/figure/bones", np.stack([p[self.bones[:, 0]], p[self.bones[:, 1]]], 1), self.bone_colors,
                          thickness=0.045)
         if self.head is not None:
-            self.scene.points("/figure/head", p[self.head][None] + [0, 0.06, 0], (0.7, 0.7, 0.72), size=0.16)
+            self.scene.points(self.root + "/figure/head", p[self.head][None] + [0, 0.06, 0], (0.7, 0.7, 0.72), size=0.16)
 
     def contacts(self, positions: np.ndarray, contacts: Optional[np.ndarray]) -> None:
         if self.feet is None or contacts is None:
             return
         planted = np.asarray(contacts, bool).reshape(2)
         ankles = np.asarray(positions, np.float64)[self.feet][planted]
-        self.scene.points("/figure/contacts", _flat(ankles[:, [0, 2]], 0.02), CONTACT, size=0.12)
+        self.scene.points(self.root + "/figure/contacts", _flat(ankles[:, [0, 2]], 0.02), CONTACT, size=0.12)
 
     def target(self, target) -> None:
         if target is None:
-            self.scene.visible("/target", False)
+            self.scene.visible(self.root + "/target", False)
             return
         t = np.asarray(target, np.float64).reshape(-1, 2)[0]
-        self.scene.lines("/target", np.concatenate([ring(t, self.success_radius), ring(t, 0.05, 8)]), TARGET,
+        self.scene.lines(self.root + "/target", np.concatenate([ring(t, self.success_radius), ring(t, 0.05, 8)]), TARGET,
                          thickness=0.04)
-        self.scene.visible("/target", True)
+        self.scene.visible(self.root + "/target", True)
 
     def obstacles(self, corners: Optional[np.ndarray]) -> None:
         if corners is None:
             return
         v, f = box_mesh(corners)
-        self.scene.mesh("/obstacles", v, f, OBSTACLE)
+        self.scene.mesh(self.root + "/obstacles", v, f, OBSTACLE)
 
     def sensors(self, sensors: Optional[Dict[str, np.ndarray]]) -> None:
         if sensors is None:
@@ -102,7 +103,7 @@ class Painter:
         pos = _flat(np.asarray(sensors["positions"]).reshape(-1, 2), 0.02)
         occupied = np.asarray(sensors["map"], bool).reshape(-1)
         colors = np.where(occupied[:, None], SENSOR_OCCUPIED, SENSOR_FREE)
-        self.scene.points("/sensors", pos, colors, size=0.08)
+        self.scene.points(self.root + "/sensors", pos, colors, size=0.08)
 
     def queries(self, name: str, points, directions, color, hit_inside=None) -> None:
         """Three trajectory points (3, 2) with facing directions (3, 2), world (x, z); None hides them."""
@@ -124,7 +125,7 @@ class Painter:
     def trajectory(self, xz: np.ndarray) -> None:
         """The root's path over the ground, (T, 2) world (x, z)."""
         p = _flat(np.asarray(xz, np.float64)[::2], 0.005)
-        self.scene.lines("/trajectory", np.stack([p[:-1], p[1:]], 1) if len(p) > 1 else np.zeros((0, 2, 3)),
+        self.scene.lines(self.root + "/trajectory", np.stack([p[:-1], p[1:]], 1) if len(p) > 1 else np.zeros((0, 2, 3)),
                          TRAJECTORY, thickness=0.015)
 
     def show(self, shown: Dict[str, object]) -> None:
@@ -138,7 +139,7 @@ class Painter:
             self.obstacles(shown.get("obstacles"))
             self.sensors(shown.get("sensors"))
             if "query_points" in shown:
-                self.queries("/query", shown["query_points"], shown.get("query_directions"), QUERY,
+                self.queries(self.root + "/query", shown["query_points"], shown.get("query_directions"), QUERY,
                              shown.get("hit_inside"))
             if "match_points" in shown:
-                self.queries("/matched", shown["match_points"], shown.get("match_directions"), MATCHED)
+                self.queries(self.root + "/matched", shown["match_points"], shown.get("match_directions"), MATCHED)

@@ -132,9 +132,9 @@ class Scene:
         return len(self.server.get_clients())
 
     # ------------------------------------------------------------------ scene objects
-    def ground(self, size: float = 60.0) -> None:
+    def ground(self, size: float = 60.0, name: str = "/ground") -> None:
         """A ground grid of ``size`` meters, lines every 0.5 m, sections every 1 m, on y = 0."""
-        self.server.scene.add_grid("/ground", size, size, plane="xz", cell_size=0.5, section_size=1.0,
+        self.server.scene.add_grid(name, size, size, plane="xz", cell_size=0.5, section_size=1.0,
                                    plane_color=(236, 236, 230), plane_opacity=1.0, shadow_opacity=0.0)
 
     def camera(self, position: Sequence[float], look_at: Sequence[float]) -> None:
@@ -205,6 +205,16 @@ class Scene:
         handle = self.server.scene.add_mesh_simple(name, v, f, color=rgb, opacity=None if opacity >= 1 else opacity,
                                                    flat_shading=True, side="double")
         self._nodes[name] = ("mesh", handle, f.shape[0])
+
+    def frame(self, name: str, position: Sequence[float]) -> None:
+        """A parent node at ``position`` (world meters): its children move with it."""
+        node = self._nodes.get(name)
+        pos = tuple(float(v) for v in position)
+        if node is None:
+            handle = self.server.scene.add_frame(name, show_axes=False, position=pos)
+            self._nodes[name] = ("frame", handle, 0)
+        else:
+            node[1].position = pos
 
     def visible(self, name: str, on: bool) -> None:
         node = self._nodes.get(name)
