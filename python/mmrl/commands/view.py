@@ -36,6 +36,8 @@ def register_cli(sub) -> None:
     p = sub.add_parser("play", help="steer a trained policy live in the browser (click the ground to set the target)")
     p.add_argument("run", metavar="RUN", help="a training run directory")
     _server_options(p)
+    p.add_argument("--policy", choices=("trained", "joystick"), default="trained",
+                   help="the policy to start with (switchable in the page; default: trained)")
     p.add_argument("--trace", metavar="FILE", help="append one JSON line per decision step to FILE")
     p.add_argument("--seed", type=int, default=0, help="random seed of the start (and obstacles) (default: 0)")
     p.add_argument("--stage", type=int, default=None, metavar="K", help="curriculum stage (default: the last)")
@@ -76,8 +78,10 @@ def _interrupt(_signum, _frame):
 
 def cmd_view(args: argparse.Namespace) -> int:
     from ..viewer.clips import load_playback
+    from ..viewer.scene import check_port
     from ..viewer.view_app import ViewApp
 
+    check_port(args.port)
     playback = load_playback(args.source, seconds=args.seconds, seed=args.seed, stage=args.stage)
     scene = _serve(args, f"mmrl view {playback.name}")
     app = ViewApp(scene, playback)
@@ -90,6 +94,9 @@ def cmd_play(args: argparse.Namespace) -> int:
     from ..viewer.live import LiveSession
     from ..viewer.play_app import PlayApp
 
+    from ..viewer.scene import check_port
+
+    check_port(args.port)
     run = RunDir(args.run)
     task = run.task
     if task is None:
@@ -97,6 +104,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     _check_stage(task, args.stage)
     session = LiveSession(task, run.database(), run.policy(), config=run.task_config(task), stage=args.stage,
                           seed=args.seed, trace=args.trace)
+    session.policy_name = args.policy
     scene = _serve(args, f"mmrl play {run.path.name}")
     app = PlayApp(scene, session)
     try:

@@ -54,7 +54,7 @@ class LiveSession:
         self.last: Optional[Any] = None  # the last decision's StepResult
         self.k = self.F  # frames of the last decision shown
         self.shown: Dict[str, Any] = {}
-        self.window: deque = deque(maxlen=int(window_steps))
+        self.window: deque = deque(maxlen=int(window_steps) + 1)  # + the step whose last frame leads
         self.timing = {"policy": [], "env_and_controller": [], "controller": [], "click_to_decision": []}
         self._wrap_controller_timing()
         self._trace = open(trace, "a", encoding="utf-8") if trace else None
@@ -210,9 +210,10 @@ class LiveSession:
 
     def _edit_obstacles(self, moves: Dict[int, tuple], pause: Optional[bool]) -> None:
         o = {k: np.array(v, np.float32) for k, v in self.run.env.obstacles(0).items()}
+        half = float(self.config.obstacle_square_half)  # obstacles live (and bounce) in this world square
         for i, (x, z) in moves.items():
             if 0 <= i < len(o["centres"]):
-                o["centres"][i] = (x, z)
+                o["centres"][i] = np.clip((x, z), -half, half)
         if pause is not None and pause != self.obstacles_paused:
             self.obstacles_paused = pause
             if pause:
@@ -230,18 +231,22 @@ class LiveSession:
 
     # ------------------------------------------------------------------ quality, trace, timing
     def quality(self) -> Dict[str, Any]:
-        """:func:`mmrl.metrics.quality` of the last ``window_steps`` decisions."""
+        """:func:`mmrl.metrics.quality` of the last ``window_steps`` decisions' frames (the frame
+        shown before them leads, as a recording's reset pose does); {} before two decisions."""
         steps = list(self.window)
-        if not steps:
+        if len(steps) < 2:
             return {}
-        rec = {"positions": np.concatenate([s.positions for s in steps]),
-               "roots": np.concatenate([s.roots for s in steps]),
-               "frames": np.concatenate([s.frames for s in steps]),
-               "contacts": np.concatenate([s.contacts for s in steps]),
-               "animated_feet": np.concatenate([s.animated_feet for s in steps]),
-               "transitions": np.array([s.transition for s in steps]),
-               "costs": np.array([s.cost for s in steps], np.float32)}
-        return metrics.quality(self.db, rec)
+        lead, steps = steps[0], steps[1:]
+
+        def frames(key):
+            return np.concatenate([getattr(lead, key)[-1:]] + [getattr(s, key) for s in steps])
+
+        rec = {key: frames(key) for key in ("positions", "roots", "frames", "contacts", "animated_feet")}
+        rec["transitions"] = np.array([s.transition for s in steps])
+        rec["costs"] = np.array([s.cost for s in steps], np.float32)
+        out = metrics.quality(self.db, rec)
+        out["seconds"] = len(steps) * self.F / self.fps
+        return out
 
     def _write_trace(self, root, res) -> None:
         if self._trace is None:

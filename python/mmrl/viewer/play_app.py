@@ -45,7 +45,7 @@ class PlayApp:
         if sess.has_obstacles:
             help_text += "; **shift+click** picks an obstacle to drag"
         s.text(f"**{sess.task.name}** · {help_text}")
-        self.policy_menu = s.dropdown("policy", ["trained", "joystick"])
+        self.policy_menu = s.dropdown("policy", ["trained", "joystick"], sess.policy_name)
         self.ik_box = s.checkbox("IK + foot locking", True)
         self.inert_box = s.checkbox("inertialization", True)
         self.follow_box = s.checkbox("camera follows", True)
@@ -98,7 +98,7 @@ class PlayApp:
         q = self.session.quality()
         fmt = lambda v: "n/a" if v is None else f"{v:.2f}"  # noqa: E731
         self.quality_text.set_text(
-            f"last {len(self.session.window) * self.session.F / self.session.fps:.0f} s: "
+            f"last {q.get('seconds', 0):.0f} s: "
             f"transitions/s **{fmt(q.get('transitions_per_s'))}** · "
             f"foot sliding **{fmt(q.get('foot_sliding_cm_per_s'))}** cm/s "
             f"(IK off {fmt(q.get('foot_sliding_ik_off_cm_per_s'))}) · "
