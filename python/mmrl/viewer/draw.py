@@ -103,7 +103,7 @@ class Painter:
         pos = _flat(np.asarray(sensors["positions"]).reshape(-1, 2), 0.02)
         occupied = np.asarray(sensors["map"], bool).reshape(-1)
         colors = np.where(occupied[:, None], SENSOR_OCCUPIED, SENSOR_FREE)
-        self.scene.points(self.root + "/sensors", pos, colors, size=0.08)
+        self.scene.points(self.root + "/sensors", pos, colors, size=0.05)
 
     def queries(self, name: str, points, directions, color, hit_inside=None) -> None:
         """Three trajectory points (3, 2) with facing directions (3, 2), world (x, z); None hides them."""
