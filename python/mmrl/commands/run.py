@@ -48,7 +48,8 @@ def register_cli(sub) -> None:
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.set_defaults(func=cmd_eval)
 
-    r = sub.add_parser("render", help="render a policy following a sequence of targets to MP4, GIF or a standalone HTML page")
+    r = sub.add_parser("render", help="render a policy following a sequence of targets to MP4, GIF or a "
+                       "standalone HTML page")
     add_shared_options(r)
     r.add_argument("-o", "--output", help="output .mp4 or .gif")
     r.add_argument("--html", metavar="FILE", help="output a standalone .html page with a playback bar that opens "

@@ -107,11 +107,17 @@ def database_playback(path: Path) -> Playback:
     frames = np.arange(db.num_frames, dtype=np.int64)
     positions = np.asarray(_core.database_global_positions(db._db, frames), np.float32)
     names = db.clip_names
-    clips = [(str(names[i]) if i < len(names) else f"clip {i + 1}", int(a), int(b))
+    clips = [(_short(names[i]) if i < len(names) else f"clip {i + 1}", int(a), int(b))
              for i, (a, b) in enumerate(np.asarray(db.clip_ranges).reshape(-1, 2))]
     return Playback(name=path.name, parents=np.asarray(db.parents, np.int64), joint_names=list(db.joint_names),
                     fps=float(db.fps), recording={"positions": positions, "contacts": np.asarray(db.contacts, bool)},
                     clips=clips, body_joints=body_joints(db), feet=feet(db))
+
+
+def _short(name: str) -> str:
+    """A clip's file as its folder and name (``walk/clip_001.bvh``), short enough for a menu."""
+    p = Path(str(name))
+    return f"{p.parent.name}/{p.name}" if p.parent.name else p.name
 
 
 def run_playback(path: Path, *, seconds: float = 20.0, seed: int = 0, stage: Optional[int] = None) -> Playback:

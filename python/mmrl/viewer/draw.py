@@ -23,6 +23,9 @@ OBSTACLE = (0.55, 0.52, 0.62)
 SENSOR_FREE, SENSOR_OCCUPIED = (0.55, 0.55, 0.6), (0.95, 0.55, 0.1)
 CONTACT = (0.95, 0.75, 0.1)
 TRAJECTORY = (0.35, 0.35, 0.45)
+#: Camera offset from the character (meters): close behind it, or higher above an obstacle
+#: scene (as the MP4 renderer does) so the boxes do not hide it.
+CAMERA_OFFSET, CAMERA_OFFSET_OBSTACLES = (2.6, 1.1, 2.6), (3.0, 4.0, 3.0)
 LIFT = 0.01  # meters above the ground for flat marks, so they do not flicker against the grid
 
 
@@ -70,37 +73,38 @@ class Painter:
 
     def figure(self, positions: np.ndarray) -> None:
         p = np.asarray(positions, np.float32)
-        self.scene.lines(self.root + "/figure/bones", np.stack([p[self.bones[:, 0]], p[self.bones[:, 1]]], 1), self.bone_colors,
-                         thickness=0.045)
+        bones = np.stack([p[self.bones[:, 0]], p[self.bones[:, 1]]], 1)
+        self.scene.lines(self.root + "/figure/bones", bones, self.bone_colors, thickness=0.045)
         if self.head is not None:
-            self.scene.points(self.root + "/figure/head", p[self.head][None] + [0, 0.06, 0], (0.7, 0.7, 0.72), size=0.16)
+            head = p[self.head][None] + [0, 0.06, 0]
+            self.scene.points(self.root + "/figure/head", head, (0.7, 0.7, 0.72), size=0.16)
 
     def contacts(self, positions: np.ndarray, contacts: Optional[np.ndarray]) -> None:
         if self.feet is None or contacts is None:
             return
         planted = np.asarray(contacts, bool).reshape(2)
         ankles = np.asarray(positions, np.float64)[self.feet][planted]
-        self.scene.points(self.root + "/figure/contacts", _flat(ankles[:, [0, 2]], 0.02), CONTACT, size=0.12)
+        self.scene.points(self.root + "/figure/contacts", _flat(ankles[:, [0, 2]], 0.05), CONTACT, size=0.1)
 
     def target(self, target) -> None:
         if target is None:
             self.scene.visible(self.root + "/target", False)
             return
         t = np.asarray(target, np.float64).reshape(-1, 2)[0]
-        self.scene.lines(self.root + "/target", np.concatenate([ring(t, self.success_radius), ring(t, 0.05, 8)]), TARGET,
-                         thickness=0.04)
+        marks = np.concatenate([ring(t, self.success_radius), ring(t, 0.05, 8)])
+        self.scene.lines(self.root + "/target", marks, TARGET, thickness=0.04)
         self.scene.visible(self.root + "/target", True)
 
     def obstacles(self, corners: Optional[np.ndarray]) -> None:
         if corners is None:
             return
         v, f = box_mesh(corners)
-        self.scene.mesh(self.root + "/obstacles", v, f, OBSTACLE)
+        self.scene.mesh(self.root + "/obstacles", v, f, OBSTACLE, opacity=0.85)
 
     def sensors(self, sensors: Optional[Dict[str, np.ndarray]]) -> None:
         if sensors is None:
             return
-        pos = _flat(np.asarray(sensors["positions"]).reshape(-1, 2), 0.02)
+        pos = _flat(np.asarray(sensors["positions"]).reshape(-1, 2), 0.03)
         occupied = np.asarray(sensors["map"], bool).reshape(-1)
         colors = np.where(occupied[:, None], SENSOR_OCCUPIED, SENSOR_FREE)
         self.scene.points(self.root + "/sensors", pos, colors, size=0.05)
@@ -111,11 +115,11 @@ class Painter:
             self.scene.visible(name + "/points", False)
             self.scene.visible(name + "/directions", False)
             return
-        p = _flat(points, 0.03)
+        p = _flat(points, 0.05)  # discs face the camera: lifted by their radius to sit on the ground
         colors = np.tile(np.asarray(color, np.float64), (len(p), 1))
         if hit_inside is not None:
             colors[np.asarray(hit_inside, bool).reshape(-1)] = HIT_INSIDE
-        self.scene.points(name + "/points", p, colors, size=0.12)
+        self.scene.points(name + "/points", p, colors, size=0.1)
         if directions is not None:
             tips = p + 0.35 * _flat(directions, 0.0)
             self.scene.lines(name + "/directions", np.stack([p, tips], 1), colors, thickness=0.02)
@@ -125,8 +129,8 @@ class Painter:
     def trajectory(self, xz: np.ndarray) -> None:
         """The root's path over the ground, (T, 2) world (x, z)."""
         p = _flat(np.asarray(xz, np.float64)[::2], 0.005)
-        self.scene.lines(self.root + "/trajectory", np.stack([p[:-1], p[1:]], 1) if len(p) > 1 else np.zeros((0, 2, 3)),
-                         TRAJECTORY, thickness=0.015)
+        segments = np.stack([p[:-1], p[1:]], 1) if len(p) > 1 else np.zeros((0, 2, 3))
+        self.scene.lines(self.root + "/trajectory", segments, TRAJECTORY, thickness=0.015)
 
     def show(self, shown: Dict[str, object]) -> None:
         """One frame of :func:`mmrl.render.recording_frame` (plus ``contacts`` and the matched

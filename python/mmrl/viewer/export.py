@@ -11,9 +11,11 @@ import os
 import re
 from pathlib import Path
 
+import numpy as np
+
 from ..io import atomic_write_text
 from .clips import Playback
-from .draw import Painter
+from .draw import CAMERA_OFFSET, CAMERA_OFFSET_OBSTACLES, Painter
 from .scene import LOCALHOST, Scene
 
 WORLD = "/world"
@@ -27,10 +29,14 @@ def playback_html(playback: Playback) -> str:
                           feet=playback.feet, success_radius=playback.success_radius, root=WORLD)
         scene.frame(WORLD, (0.0, 0.0, 0.0))
         scene.ground(200.0, name=WORLD + "/ground")
-        scene.camera((2.6, 2.0, 2.6), (0.0, 0.9, 0.0))
-        painter.trajectory(playback.ground_path(0, playback.num_frames))
+        offset = CAMERA_OFFSET_OBSTACLES if "obstacles" in playback.recording else CAMERA_OFFSET
+        scene.camera(np.array(offset) + (0.0, 0.9, 0.0), (0.0, 0.9, 0.0))
+        starts = {a: b for _, a, b in playback.clips}
+        painter.trajectory(playback.ground_path(0, playback.clips[0][2]))
         with scene.recording() as rec:
             for t in range(playback.num_frames):
+                if t in starts:  # each episode (clip) shows its own path
+                    painter.trajectory(playback.ground_path(t, starts[t]))
                 x, z = playback.ground_path(t, t + 1)[0]
                 scene.frame(WORLD, (-x, 0.0, -z))  # the character's ground point stays at the origin
                 painter.show(playback.frame(t))

@@ -14,7 +14,7 @@ from typing import Dict, List, Optional
 
 import numpy as np
 
-from .draw import Painter
+from .draw import CAMERA_OFFSET, CAMERA_OFFSET_OBSTACLES, Painter
 from .live import LiveSession
 from .scene import Scene
 
@@ -80,7 +80,8 @@ class PlayApp:
         self.painter.show(shown)
         if self.follow_box.value:
             root = self.session.root
-            self.scene.follow((root[0], 0.9, root[1]))
+            offset = CAMERA_OFFSET_OBSTACLES if self.session.has_obstacles else CAMERA_OFFSET
+            self.scene.follow((root[0], 0.9, root[1]), offset)
         self.frames += 1
         sess = self.session
         x, z, _ = sess.root

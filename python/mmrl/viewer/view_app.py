@@ -12,7 +12,7 @@ from typing import Optional
 import numpy as np
 
 from .clips import Playback
-from .draw import Painter
+from .draw import CAMERA_OFFSET, CAMERA_OFFSET_OBSTACLES, Painter
 from .scene import Scene
 
 
@@ -85,7 +85,8 @@ class ViewApp:
         self.painter.show(self.pb.frame(a + k))
         if self.follow.value:
             xz = self.pb.ground_path(a + k, a + k + 1)[0]
-            self.scene.follow((xz[0], 0.9, xz[1]))
+            offset = CAMERA_OFFSET_OBSTACLES if "obstacles" in self.pb.recording else CAMERA_OFFSET
+            self.scene.follow((xz[0], 0.9, xz[1]), offset)
         self.status.set_text(f"frame {k} / {b - a - 1} · {k / self.pb.fps:.2f} s")
 
     def advance(self, seconds: float) -> None:
