@@ -6,8 +6,6 @@ target at walking speed), so no training is needed."""
 import importlib.util
 import json
 import socket
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -115,7 +113,7 @@ def test_ik_toggle_shows_the_animated_ankles(db):
 
 def test_policy_switch_follows_the_same_target(db):
     s = session(db)
-    s.policies["trained"] = s.policies["joystick"]  # stand-in; the switch itself is what is tested
+    s.policies["trained"] = None  # never asked once the switch has applied
     calls = []
 
     class Spy:
@@ -126,8 +124,13 @@ def test_policy_switch_follows_the_same_target(db):
     s.policies["joystick"] = Spy()
     s.set_policy("joystick")
     s.set_target(2.0, 2.0)
+    x, z, yaw = s.root
     s.step()
     assert s.policy_name == "joystick" and len(calls) == 1
+    # It sees the clicked target in the character frame of the decision's root.
+    dx, dz = 2.0 - x, 2.0 - z
+    c, sn = np.cos(yaw), np.sin(yaw)
+    np.testing.assert_allclose(calls[0][0, -2:], [c * dx - sn * dz, sn * dx + c * dz], atol=1e-4)
     with pytest.raises(ValueError, match="policy must be one of"):
         s.set_policy("nope")
 
@@ -208,11 +211,6 @@ def test_database_playback_clips(db, tmp_path):
 
 
 # ----------------------------------------------------------------------------- command line
-def mmrl_cli(*args, timeout=120):
-    return subprocess.run([sys.executable, "-m", "mmrl", *map(str, args)], capture_output=True, text=True,
-                          timeout=timeout)
-
-
 def one_line_error(capsys, args, *fragments):
     """``mmrl ARGS`` (in this process) fails with one ``mmrl: error:`` line naming ``fragments``."""
     from mmrl.cli import main
@@ -271,9 +269,10 @@ def test_host_beyond_this_machine_warns():
 
 @needs_viser
 def test_html_export_of_20_seconds(tmp_path):
+    from mmrl.cli import main
+
     out = tmp_path / "plane.html"
-    r = mmrl_cli("render", "--policy", "joystick", "--seconds", "20", "--html", out)
-    assert r.returncode == 0, r.stderr
+    assert main(["render", "--policy", "joystick", "--seconds", "20", "--html", str(out)]) == 0
     page = out.read_text()
     assert out.stat().st_size < 10e6
     assert "window.__VISER_EMBED_DATA__=" in page

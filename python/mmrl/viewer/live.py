@@ -205,6 +205,8 @@ class LiveSession:
                 "velocities": after["velocities"]}
 
     def _restore_obstacles(self, o: Dict[str, np.ndarray]) -> None:
+        # The C++ env's scene editing (bound for tests and tools); ObstaclesVectorEnv has no
+        # wrapper for it and the task module is not the viewer's to change.
         self.run.env._core.set_obstacles(0, *(np.ascontiguousarray(o[k], np.float32) for k in
                                               ("centres", "half_sizes", "angles", "velocities")))
 
