@@ -1,7 +1,8 @@
 """The viewer in a real browser: Debian's chromium driven by Playwright (its own executable
 path; no downloaded browser build). Software WebGL (SwiftShader) renders the canvas.
 
-- ``mmrl view`` of a BVH file: the canvas shows the character, and frames advance;
+- ``mmrl view`` of a BVH file on a second skeleton (Mixamo names, other channel orders): the
+  canvas shows the character, and frames advance;
 - ``mmrl play``: a click on the ground moves the target (the trace shows the new target at
   a decision step) and the root then gets closer to it;
 - ``mmrl render --html``: the page opens from file:// with the network disabled, shows the
@@ -26,7 +27,8 @@ import pytest
 
 pytestmark = pytest.mark.browser
 
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+# MMRL_CHROMIUM points at another chromium build (a distribution's, never a downloaded one).
+CHROMIUM = os.environ.get("MMRL_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 VIEWPORT = {"width": 960, "height": 600}
 # The figure's right-side bones (mmrl.render.RIGHT, orange) as the page draws them (RGB 0..255).
 FIGURE_ORANGE = np.array([230, 128, 51])
@@ -35,7 +37,7 @@ FIGURE_ORANGE = np.array([230, 128, 51])
 def _missing():
     missing = []
     if not os.path.exists(CHROMIUM):
-        missing.append("chromium (apt-get install chromium)")
+        missing.append(f"chromium at {CHROMIUM} (apt-get install chromium, or set MMRL_CHROMIUM)")
     if importlib.util.find_spec("playwright") is None:
         missing.append("playwright (pip install playwright)")
     if importlib.util.find_spec("viser") is None:
@@ -47,13 +49,13 @@ def _missing():
 def browser():
     missing = _missing()
     if missing:
-        message = f"the browser tests need {', '.join(missing)}"
+        needs = ", ".join(missing)
         if os.environ.get("CI"):
-            pytest.fail(message)
+            pytest.fail(f"the browser tests need {needs}")
         from conftest import note_browser_skip
 
-        note_browser_skip(message)
-        pytest.skip(message)
+        note_browser_skip(f"they need {needs}")
+        pytest.skip(f"the browser tests need {needs}")
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as p:
@@ -132,10 +134,14 @@ def shown_frame(page):
 
 
 def test_view_shows_the_character_and_plays(browser, tmp_path):
+    """On a second skeleton: Mixamo joint names, other channel orders, meters."""
+    from test_import_axes_fps import other_skeleton, read_clip
+
     from mmrl import synth
 
     synth.write_clip(tmp_path / "walk.bvh", speed=1.4, turn_rate=0.3, seconds=6.0, seed=1)
-    server = Server("view", tmp_path / "walk.bvh")
+    (tmp_path / "mixamo.bvh").write_text(other_skeleton(read_clip((tmp_path / "walk.bvh").read_text())).text())
+    server = Server("view", tmp_path / "mixamo.bvh")
     try:
         page = open_page(browser, server.url)
         first = wait_for(lambda: shown_frame(page))
