@@ -43,7 +43,19 @@ def require_shared_data() -> Path:
     return found
 
 
+_browser_skips = []
+
+
+def note_browser_skip(message: str) -> None:
+    """The browser tests (tests/test_viewer_browser.py) skip outside CI when chromium,
+    Playwright or viser is missing; the run ends with one line saying what to install."""
+    if message not in _browser_skips:
+        _browser_skips.append(message)
+
+
 def pytest_terminal_summary(terminalreporter):
+    for message in _browser_skips:
+        terminalreporter.write_line(f"The browser tests were skipped: {message}.")
     if _skipped:
         terminalreporter.write_line(f"The tests that need the Bandai-Namco mocap were skipped: it is not here; "
                                     f"{HOW_TO_GET}.")

@@ -36,6 +36,30 @@ OBSTACLE_VIEW_RADIUS = 16.0  # meters from the camera focus; farther boxes are n
 LEFT, RIGHT, CENTER = np.array([0.25, 0.45, 0.85]), np.array([0.90, 0.50, 0.20]), np.array([0.70, 0.70, 0.72])
 
 
+#: Bone colors by side: center, left, right (RGB 0..1).
+SIDE_COLORS = (CENTER, LEFT, RIGHT)
+
+
+def skeleton_bones(parents: Sequence[int], body_joints: Optional[Sequence[int]] = None) -> np.ndarray:
+    """(B, 2) (joint, parent) pairs of the drawn bones: both ends among ``body_joints`` (default all)."""
+    parents = np.asarray(parents, np.int64)
+    in_body = np.zeros(len(parents), bool)
+    in_body[np.arange(len(parents)) if body_joints is None else np.asarray(body_joints, np.int64)] = True
+    return np.array([(j, p) for j, p in enumerate(parents) if p >= 0 and in_body[j] and in_body[p]],
+                    np.int64).reshape(-1, 2)
+
+
+def joint_sides(joint_names: Sequence[str]) -> np.ndarray:
+    """(J,) side of each joint from its name: 0 center, 1 left, 2 right (``_l``, ``Left...``, ...)."""
+    side = np.zeros(len(joint_names), np.int64)
+    for j, n in enumerate(n.lower() for n in joint_names):
+        if n.endswith(("_l", ".l", "left")) or n.startswith(("left", "l_")) or ":left" in n:
+            side[j] = 1
+        elif n.endswith(("_r", ".r", "right")) or n.startswith(("right", "r_")) or ":right" in n:
+            side[j] = 2
+    return side
+
+
 def _rectangle_corners(rect) -> np.ndarray:
     """(4, 2) world (x, z) corners of an obstacle: (x_min, z_min, x_max, z_max) or 4 corners."""
     r = np.asarray(rect, np.float64)
@@ -69,21 +93,12 @@ class Renderer:
         from matplotlib.figure import Figure
 
         self.parents = np.asarray(parents, np.int64)
-        J = len(self.parents)
-        body = np.arange(J) if body_joints is None else np.asarray(body_joints, np.int64)
-        in_body = np.zeros(J, bool)
-        in_body[body] = True
-        self.bones = np.array([(j, p) for j, p in enumerate(self.parents) if p >= 0 and in_body[j] and in_body[p]],
-                              np.int64).reshape(-1, 2)
+        body = np.arange(len(self.parents)) if body_joints is None else np.asarray(body_joints, np.int64)
+        self.bones = skeleton_bones(self.parents, body)
         self.body = body
-        names = [n.lower() for n in (joint_names or [""] * J)]
-        side = np.zeros(J, np.int64)  # 0 center, 1 left, 2 right
-        for j, n in enumerate(names):
-            if n.endswith(("_l", ".l", "left")) or n.startswith(("left", "l_")):
-                side[j] = 1
-            elif n.endswith(("_r", ".r", "right")) or n.startswith(("right", "r_")):
-                side[j] = 2
-        self.bone_color = np.array([[CENTER, LEFT, RIGHT][side[j]] for j, _ in self.bones]).reshape(-1, 3)
+        names = [n.lower() for n in (joint_names or [""] * len(self.parents))]
+        side = joint_sides(names)
+        self.bone_color = np.array([SIDE_COLORS[side[j]] for j, _ in self.bones]).reshape(-1, 3)
         self.head = next((j for j, n in enumerate(names) if "head" in n), None)
         self.camera = Camera(width, height, distance=camera_distance, elevation_deg=camera_elevation_deg)
         self.follow_lag = follow_lag
@@ -409,27 +424,40 @@ def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray
     return pos.shape[0]
 
 
-def _draw_recording_frame(renderer: "Renderer", recording: Dict[str, np.ndarray], t: int, q: int, fps: float,
-                          obstacles) -> np.ndarray:
-    """Frame t of a recording, with decision q's query (shown only within its own episode)."""
+def recording_frame(recording: Dict[str, np.ndarray], t: int, q: int) -> Dict[str, object]:
+    """What frame t of a recording shows (the video and the browser viewer draw the same):
+    ``positions`` (J, 3), ``targets``, ``obstacles`` ((n, 4, 2) world corners or None), and
+    of decision q (shown only within its own episode, else None): ``query_points``,
+    ``query_directions`` (3, 2), ``sensors`` ({positions, map}) and ``hit_inside`` (3,);
+    ``new_episode`` is True on an episode's first frame."""
     episode = recording.get("episode")
     qframes = recording.get("query_frames")
     frame_obstacles = recording.get("obstacles")
     targets = recording.get("targets")
-    new_episode = t == 0 or (episode is not None and episode[t] != episode[t - 1])
     has_q = q >= 0 and (episode is None or episode[qframes[q]] == episode[t])
     sensors = None
     if has_q and "sensor_maps" in recording:
         sensors = {"positions": recording["sensor_positions"][q], "map": recording["sensor_maps"][q]}
+    return {"positions": recording["positions"][t], "targets": None if targets is None else targets[t],
+            "query_points": recording["query_points"][q] if has_q else None,
+            "query_directions": recording["query_directions"][q] if has_q else None,
+            "obstacles": frame_obstacles[t] if frame_obstacles is not None else None, "sensors": sensors,
+            "hit_inside": recording["hit_inside"][q] if has_q and "hit_inside" in recording else None,
+            "new_episode": t == 0 or (episode is not None and episode[t] != episode[t - 1])}
+
+
+def _draw_recording_frame(renderer: "Renderer", recording: Dict[str, np.ndarray], t: int, q: int, fps: float,
+                          obstacles) -> np.ndarray:
+    """Frame t of a recording, with decision q's query (see :func:`recording_frame`)."""
+    shown = recording_frame(recording, t, q)
+    episode = recording.get("episode")
     text = f"{t / fps:5.2f} s"
     if episode is not None:
         text += f"   episode {int(episode[t]) + 1}"
-    return renderer.draw(recording["positions"][t], targets=None if targets is None else targets[t],
-                         query_points=recording["query_points"][q] if has_q else None,
-                         query_directions=recording["query_directions"][q] if has_q else None,
-                         obstacles=frame_obstacles[t] if frame_obstacles is not None else obstacles,
-                         sensors=sensors, hit_inside=recording["hit_inside"][q] if has_q and
-                         "hit_inside" in recording else None, text=text, snap_camera=new_episode)
+    new_episode = shown.pop("new_episode")
+    if shown["obstacles"] is None:
+        shown["obstacles"] = obstacles
+    return renderer.draw(shown.pop("positions"), text=text, snap_camera=new_episode, **shown)
 
 
 def render_topdown(states, size: int = 256, extent: float = 8.0) -> np.ndarray:

@@ -48,9 +48,12 @@ def register_cli(sub) -> None:
     e.add_argument("--json", action="store_true", help="print one JSON object")
     e.set_defaults(func=cmd_eval)
 
-    r = sub.add_parser("render", help="render a policy following a sequence of targets to MP4 or GIF")
+    r = sub.add_parser("render", help="render a policy following a sequence of targets to MP4, GIF or a "
+                       "standalone HTML page")
     add_shared_options(r)
-    r.add_argument("-o", "--output", required=True, help="output .mp4 or .gif")
+    r.add_argument("-o", "--output", help="output .mp4 or .gif")
+    r.add_argument("--html", metavar="FILE", help="output a standalone .html page with a playback bar that opens "
+                   "offline in any browser (needs mmrl[viewer]); with or instead of -o")
     r.add_argument("--size", default="640x360", help="video size WxH (default: 640x360)")
     r.add_argument("--still", metavar="PNG", help="also write the middle frame as a PNG")
     r.set_defaults(func=cmd_render)
@@ -147,6 +150,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
+    if args.output is None and args.html is None:
+        raise InputError("mmrl render needs -o OUT.mp4|.gif, --html OUT.html, or both")
+    if args.html is not None and Path(args.html).suffix.lower() not in (".html", ".htm"):
+        raise InputError(f"{args.html}: the --html output must end in .html")
+    if args.output is None:
+        return _render_html(args, *_follow(args))
     try:
         w, h = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
@@ -168,6 +177,23 @@ def cmd_render(args: argparse.Namespace) -> int:
     print(f"{where}episodes: " + ", ".join(names.get(int(o), "?") for o in rec["outcomes"]))
     if args.still:
         print(f"wrote {args.still}")
+    if args.html is not None:
+        _render_html(args, s, rec)
+    return 0
+
+
+def _render_html(args: argparse.Namespace, s: "Setup", rec) -> int:
+    from ..errors import require_extra
+
+    require_extra("viser", "viewer", "mmrl render --html")
+    from ..viewer.clips import recording_playback
+    from ..viewer.export import write_html
+
+    t0 = time.perf_counter()
+    playback = recording_playback(Path(args.run or s.task.name).name, s.db, rec, s.task, s.config)
+    size = write_html(args.html, playback)
+    print(f"wrote {args.html}: {playback.num_frames} frames ({playback.num_frames / s.db.fps:.1f} s), "
+          f"{size / 1e6:.1f} MB, in {time.perf_counter() - t0:.1f} s (opens offline from file://)")
     return 0
 
 

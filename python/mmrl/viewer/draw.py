@@ -1,0 +1,149 @@
+"""What the browser viewer draws for one frame, on a :class:`~mmrl.viewer.scene.Scene`.
+
+The same shown values as the MP4 renderer (:func:`mmrl.render.recording_frame`): the figure
+as bones colored by side (:func:`mmrl.render.skeleton_bones`, :func:`mmrl.render.joint_sides`),
+the target as a ring of the success radius, obstacles as low boxes, the sensor map (occupied
+cells orange), the policy's three trajectory points with their facing directions (green, red
+when inside an obstacle) and the matched frame's three (blue), and foot contacts (a dot under
+each planted ankle). World meters, Y up.
+"""
+from __future__ import annotations
+
+from typing import Dict, Optional, Sequence
+
+import numpy as np
+
+from ..render import OBSTACLE_HEIGHT, SIDE_COLORS, joint_sides, skeleton_bones
+
+TARGET = (0.85, 0.2, 0.2)
+QUERY = (0.1, 0.6, 0.2)
+MATCHED = (0.15, 0.35, 0.85)
+HIT_INSIDE = (0.9, 0.1, 0.1)
+OBSTACLE = (0.55, 0.52, 0.62)
+SENSOR_FREE, SENSOR_OCCUPIED = (0.55, 0.55, 0.6), (0.95, 0.55, 0.1)
+CONTACT = (0.95, 0.75, 0.1)
+TRAJECTORY = (0.35, 0.35, 0.45)
+#: Camera offset from the character (meters): close behind it, or higher above an obstacle
+#: scene (as the MP4 renderer does) so the boxes do not hide it.
+CAMERA_OFFSET, CAMERA_OFFSET_OBSTACLES = (2.6, 1.1, 2.6), (3.0, 4.0, 3.0)
+LIFT = 0.01  # meters above the ground for flat marks, so they do not flicker against the grid
+
+
+def _flat(xz: np.ndarray, y: float = LIFT) -> np.ndarray:
+    xz = np.asarray(xz, np.float64).reshape(-1, 2)
+    return np.column_stack([xz[:, 0], np.full(len(xz), y), xz[:, 1]])
+
+
+def ring(center_xz, radius: float, n: int = 32) -> np.ndarray:
+    """(n, 2, 3) segments of a circle of ``radius`` meters on the ground around ``center_xz``."""
+    a = np.linspace(0, 2 * np.pi, n + 1)
+    p = _flat(np.column_stack([center_xz[0] + radius * np.cos(a), center_xz[1] + radius * np.sin(a)]))
+    return np.stack([p[:-1], p[1:]], 1)
+
+
+def box_mesh(corners: np.ndarray, height: float = OBSTACLE_HEIGHT):
+    """Vertices (8n, 3) and faces (10n, 3) of boxes ``height`` m high over (n, 4, 2) ground corners
+    (sides and top; the bottom lies on the ground)."""
+    c = np.asarray(corners, np.float64).reshape(-1, 4, 2)
+    n = len(c)
+    lo = np.concatenate([c[..., :1], np.zeros((n, 4, 1)), c[..., 1:]], -1)
+    hi = lo + np.array([0.0, height, 0.0])
+    verts = np.concatenate([lo, hi], 1).reshape(-1, 3)
+    one = [[k, (k + 1) % 4, 4 + (k + 1) % 4] for k in range(4)] + [[k, 4 + (k + 1) % 4, 4 + k] for k in range(4)]
+    one += [[4, 5, 6], [4, 6, 7]]
+    faces = (np.array(one)[None] + 8 * np.arange(n)[:, None, None]).reshape(-1, 3)
+    return verts, faces
+
+
+class Painter:
+    """Draws frames of one character (and its task's scene) on a Scene."""
+
+    def __init__(self, scene, parents: Sequence[int], joint_names: Sequence[str], *,
+                 body_joints: Optional[Sequence[int]] = None, feet: Optional[Sequence[int]] = None,
+                 success_radius: float = 0.5, root: str = ""):
+        self.scene = scene
+        self.root = root  # scene-tree parent of every node ("/world" when the export moves the world)
+        self.bones = skeleton_bones(parents, body_joints)
+        side = joint_sides(joint_names)
+        self.bone_colors = np.array([SIDE_COLORS[side[j]] for j, _ in self.bones], np.float32).reshape(-1, 3)
+        names = [n.lower() for n in joint_names]
+        self.head = next((j for j, n in enumerate(names) if "head" in n), None)
+        self.feet = None if feet is None else np.asarray(feet, np.int64)
+        self.success_radius = float(success_radius)
+
+    def figure(self, positions: np.ndarray) -> None:
+        p = np.asarray(positions, np.float32)
+        bones = np.stack([p[self.bones[:, 0]], p[self.bones[:, 1]]], 1)
+        self.scene.lines(self.root + "/figure/bones", bones, self.bone_colors, thickness=0.045)
+        if self.head is not None:
+            head = p[self.head][None] + [0, 0.06, 0]
+            self.scene.points(self.root + "/figure/head", head, (0.7, 0.7, 0.72), size=0.16)
+
+    def contacts(self, positions: np.ndarray, contacts: Optional[np.ndarray]) -> None:
+        if self.feet is None or contacts is None:
+            return
+        planted = np.asarray(contacts, bool).reshape(2)
+        ankles = np.asarray(positions, np.float64)[self.feet][planted]
+        self.scene.points(self.root + "/figure/contacts", _flat(ankles[:, [0, 2]], 0.05), CONTACT, size=0.1)
+
+    def target(self, target) -> None:
+        if target is None:
+            self.scene.visible(self.root + "/target", False)
+            return
+        t = np.asarray(target, np.float64).reshape(-1, 2)[0]
+        marks = np.concatenate([ring(t, self.success_radius), ring(t, 0.05, 8)])
+        self.scene.lines(self.root + "/target", marks, TARGET, thickness=0.04)
+        self.scene.visible(self.root + "/target", True)
+
+    def obstacles(self, corners: Optional[np.ndarray]) -> None:
+        if corners is None:
+            return
+        v, f = box_mesh(corners)
+        self.scene.mesh(self.root + "/obstacles", v, f, OBSTACLE, opacity=0.85)
+
+    def sensors(self, sensors: Optional[Dict[str, np.ndarray]]) -> None:
+        if sensors is None:
+            return
+        pos = _flat(np.asarray(sensors["positions"]).reshape(-1, 2), 0.03)
+        occupied = np.asarray(sensors["map"], bool).reshape(-1)
+        colors = np.where(occupied[:, None], SENSOR_OCCUPIED, SENSOR_FREE)
+        self.scene.points(self.root + "/sensors", pos, colors, size=0.05)
+
+    def queries(self, name: str, points, directions, color, hit_inside=None) -> None:
+        """Three trajectory points (3, 2) with facing directions (3, 2), world (x, z); None hides them."""
+        if points is None:
+            self.scene.visible(name + "/points", False)
+            self.scene.visible(name + "/directions", False)
+            return
+        p = _flat(points, 0.05)  # discs face the camera: lifted by their radius to sit on the ground
+        colors = np.tile(np.asarray(color, np.float64), (len(p), 1))
+        if hit_inside is not None:
+            colors[np.asarray(hit_inside, bool).reshape(-1)] = HIT_INSIDE
+        self.scene.points(name + "/points", p, colors, size=0.1)
+        if directions is not None:
+            tips = p + 0.35 * _flat(directions, 0.0)
+            self.scene.lines(name + "/directions", np.stack([p, tips], 1), colors, thickness=0.02)
+        self.scene.visible(name + "/points", True)
+        self.scene.visible(name + "/directions", True)
+
+    def trajectory(self, xz: np.ndarray) -> None:
+        """The root's path over the ground, (T, 2) world (x, z)."""
+        p = _flat(np.asarray(xz, np.float64)[::2], 0.005)
+        segments = np.stack([p[:-1], p[1:]], 1) if len(p) > 1 else np.zeros((0, 2, 3))
+        self.scene.lines(self.root + "/trajectory", segments, TRAJECTORY, thickness=0.015)
+
+    def show(self, shown: Dict[str, object]) -> None:
+        """One frame of :func:`mmrl.render.recording_frame` (plus ``contacts`` and the matched
+        frame's ``match_points`` / ``match_directions``, when present)."""
+        with self.scene.atomic():
+            self.figure(shown["positions"])
+            self.contacts(shown["positions"], shown.get("contacts"))
+            if "targets" in shown:
+                self.target(shown["targets"])
+            self.obstacles(shown.get("obstacles"))
+            self.sensors(shown.get("sensors"))
+            if "query_points" in shown:
+                self.queries(self.root + "/query", shown["query_points"], shown.get("query_directions"), QUERY,
+                             shown.get("hit_inside"))
+            if "match_points" in shown:
+                self.queries(self.root + "/matched", shown["match_points"], shown.get("match_directions"), MATCHED)
