@@ -121,3 +121,37 @@ def test_plane_quality_preset_sets_its_options(tmp_path):
         section = "ppo" if key in saved["ppo"] else "task_config"
         assert saved[section][key] == value, key
         assert default[section][key] == value, key
+
+
+@pytest.mark.parametrize("task_name", ["plane", "obstacles"])
+def test_transition_pose_weight_charges_the_pose_distance_of_each_jump(db, task_name):
+    """The reward term is -weight x the squared distance between the pose features (the first
+    15 normalized columns) of the continuation and of the matched frame, by numpy; 0 when the
+    clip continues. Two envs with the same seed and actions differ by exactly that."""
+    task = get_task(task_name)
+    envs = [task.make_vector_env(6, db=db, num_threads=1, transition_pose_weight=w) for w in (0.0, 0.25)]
+    for e in envs:
+        e.reset(seed=11)
+    rows = np.asarray(db.normalized_features, np.float64)
+    rng = np.random.default_rng(1)
+    jumps = 0
+    for _ in range(30):
+        before = [envs[0].env_state(i)["frame"] for i in range(6)]
+        a = (rng.normal(size=(6, 12)) * 0.7).astype(np.float32)
+        r0 = envs[0].step(a)[1]
+        r1 = envs[1].step(a)[1]
+        for i in range(6):
+            st = envs[0].env_state(i)
+            match = st["last_match"] if st["steps"] else None
+            if match is None:  # the episode ended and the env reset: read the kept decision
+                continue
+            expected = 0.0 if match == before[i] else ((rows[before[i], :15] - rows[match, :15]) ** 2).sum()
+            jumps += match != before[i]
+            assert st["last_pose_jump"] == pytest.approx(expected, rel=1e-4, abs=1e-4)
+            assert r0[i] - r1[i] == pytest.approx(0.25 * expected, rel=1e-3, abs=1e-3)
+    assert jumps > 20
+
+
+def test_transition_pose_weight_is_checked(db):
+    with pytest.raises(ValueError, match="transition_pose_weight must be finite and >= 0"):
+        PlaneVectorEnv(2, db=db, transition_pose_weight=-1.0)

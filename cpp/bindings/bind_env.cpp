@@ -28,7 +28,8 @@ void bind_env(py::module_& m) {
       .def_readwrite("max_steps", &TargetTaskConfig::max_steps)
       .def_readwrite("action_limit_std", &TargetTaskConfig::action_limit_std)
       .def_readwrite("random_heading", &TargetTaskConfig::random_heading)
-      .def_readwrite("transition_cost", &TargetTaskConfig::transition_cost);
+      .def_readwrite("transition_cost", &TargetTaskConfig::transition_cost)
+      .def_readwrite("transition_pose_weight", &TargetTaskConfig::transition_pose_weight);
 
   py::class_<PyPlaneVecEnv> plane(m, "PlaneVecEnv", "Batched plane-task environments (C++ core of mmrl.tasks.plane).");
   plane.def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const TargetTaskConfig& config,

@@ -31,6 +31,7 @@ inline py::dict target_state_dict(const TargetEnvState& st) {
   d["last_match"] = st.last_match;
   d["last_transition"] = st.last_transition;
   d["last_cost"] = st.last_cost;
+  d["last_pose_jump"] = st.last_pose_jump;
   d["last_step_frames"] = st.last_step_frames;
   d["last_step_transition_cost"] = st.last_step_transition_cost;
   return d;

@@ -260,6 +260,12 @@ class TargetTaskConfig:
     @transition_cost.setter
     def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
+    @property
+    def transition_pose_weight(self) -> float:
+        ...
+    @transition_pose_weight.setter
+    def transition_pose_weight(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
 class PlaneVecEnv:
     """
     Batched plane-task environments (C++ core of mmrl.tasks.plane).
@@ -582,6 +588,12 @@ class ObstacleTaskConfig:
         ...
     @transition_cost.setter
     def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def transition_pose_weight(self) -> float:
+        ...
+    @transition_pose_weight.setter
+    def transition_pose_weight(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
 class ObstacleVecEnv:
     """

@@ -46,6 +46,9 @@ struct TargetEnvState {
   bool last_transition = false;
   float last_cost = 0;  // squared distance of the last match (normalized, weighted feature space)
   float last_transition_cost = 0;  // the continuation bias the last match used
+  // Squared normalized, weighted distance between the pose features (kPoseDim) of the
+  // continuation and of the last match's frame; 0 without a transition.
+  float last_pose_jump = 0;
   // Frames the last step played before its episode ended: the index of the frame of the
   // ending event + 1, or frames_per_step when the step did not end the episode (truncation
   // included). Kept through the autoreset, so it describes the step just returned; 0 after
@@ -136,6 +139,7 @@ class TargetVecEnv {
     s.last_transition = false;
     s.last_cost = 0;
     s.last_transition_cost = 0;
+    s.last_pose_jump = 0;
     if (obs_row) task().observe(i, obs_row);
   }
 
@@ -192,6 +196,8 @@ class TargetVecEnv {
         pool_(num_threads) {
     if (!(config.transition_cost >= 0.0f) || !std::isfinite(config.transition_cost))
       throw std::invalid_argument("transition_cost must be finite and >= 0");
+    if (!(config.transition_pose_weight >= 0.0f) || !std::isfinite(config.transition_pose_weight))
+      throw std::invalid_argument("transition_pose_weight must be finite and >= 0");
     trajectory_action_box(db, config.action_limit_std, low_, high_);
     for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
   }
@@ -205,7 +211,8 @@ class TargetVecEnv {
       for (int64_t i = b; i < e; ++i) {
         const int env = static_cast<int>(i);
         State& s = envs_[i];
-        const TaskStep r = task().advance(env, actions + i * Task::kActionDim);
+        TaskStep r = task().advance(env, actions + i * Task::kActionDim);
+        r.reward -= config_.transition_pose_weight * s.last_pose_jump;
         s.steps += 1;
         s.episode_return += r.reward;
         s.last_step_frames = r.frames_played;
@@ -246,6 +253,12 @@ class TargetVecEnv {
     const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost);
     s.last_transition = (j != s.frame);
     s.last_match = j;
+    s.last_pose_jump = 0;
+    if (s.last_transition) {
+      const float* a = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
+      const float* b = &db_.normalized[static_cast<size_t>(j) * kFeatureDim];
+      for (int k = 0; k < kPoseDim; ++k) s.last_pose_jump += (a[k] - b[k]) * (a[k] - b[k]);
+    }
     return j;
   }
 

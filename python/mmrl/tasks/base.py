@@ -60,6 +60,10 @@ class TaskConfig:
     """Continuation bias of the match, in squared normalized feature distance: another frame
     replaces the current clip's continuation only when its cost is lower by more than this.
     0 is the paper's rule (any strictly better frame wins)."""
+    transition_pose_weight: float = 0.0
+    """Reward term: minus this weight times the squared normalized, weighted distance between
+    the pose features of the clip's continuation and of the matched frame (what a transition
+    asks the blend to hide; 0 when the clip continues). 0 is the paper's reward."""
 
     def replace(self, **overrides) -> "TaskConfig":
         """A copy with ``overrides`` applied; an unknown name raises TypeError listing the options."""

@@ -70,6 +70,10 @@ struct ObstacleTaskConfig {
   float action_limit_std = 3.0f;     // action box half-width, in standard deviations
   bool random_heading = true;        // start heading uniform in [-pi, pi)
   float transition_cost = 0.0f;      // continuation bias of the match (controller.hpp); 0: the paper's rule
+  // Reward - transition_pose_weight * (the squared normalized, weighted distance between the pose
+  // features of the continuation and of the matched frame: what a transition asks the blend
+  // to hide; 0 without a transition). 0: the paper's reward.
+  float transition_pose_weight = 0.0f;
   // The bias yields: a decision whose continuation would run into an obstacle (the current
   // frame's own future trajectory, tested as the hit reward tests a trajectory) matches with
   // the paper's rule (no bias), so a dodge is never held back by the clip being played.
