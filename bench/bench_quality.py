@@ -17,13 +17,15 @@ import argparse
 import json
 from pathlib import Path
 
-#: Variants: name -> extra ``mmrl train`` arguments.
+#: Variants: name -> extra ``mmrl train`` arguments (``mmrl train plane`` alone is "quality").
 VARIANTS = {
-    "paper": [],
-    "bias-20": ["--set", "transition_cost=20"],
-    "bias-60": ["--set", "transition_cost=60"],
-    "bias-100": ["--set", "transition_cost=100"],
+    "paper": ["--preset", "paper"],
+    "bias-20": ["--preset", "paper", "--set", "transition_cost=20"],
+    "bias-60": ["--preset", "paper", "--set", "transition_cost=60"],
+    "bias-100": ["--preset", "paper", "--set", "transition_cost=100"],
     "quality": ["--preset", "quality"],
+    "pose-2": ["--preset", "quality", "--set", "transition_pose_weight=2"],
+    "smooth": ["--preset", "smooth"],
 }
 KEYS = ("success_rate", "mean_time_to_target_s", "foot_sliding_cm_per_s", "foot_sliding_ik_off_cm_per_s",
         "transitions_per_s", "pose_jump_p99_cm", "matched_cost_mean")

@@ -63,6 +63,6 @@ def test_presets_set_their_options_and_set_overrides_them(tmp_path, capsys):
         assert paper[section][key] != value, key
     capsys.readouterr()
     assert main(["train", "plane", "--steps", "512", "--out", str(tmp_path / "p"), "--preset", "mmrl"]) == 2
-    assert "--preset mmrl: the plane task has presets paper, quality (mmrl is a preset of the obstacles task)" in capsys.readouterr().err
+    assert "--preset mmrl: the plane task has presets paper, quality, smooth (mmrl is a preset of the obstacles task)" in capsys.readouterr().err
     assert main(["train", "obstacles", "--steps", "512", "--out", str(tmp_path / "b"), "--set", "hit_penalty=maybe"]) == 2
     assert "expected true or false, got 'maybe'" in capsys.readouterr().err

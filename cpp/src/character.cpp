@@ -212,7 +212,18 @@ void Character::show_frame(int64_t f, bool decay) {
   // The ankles before locking and IK (solve_leg of one side leaves the other ankle alone).
   for (int side = 0; side < 2; ++side) store3(glob_t_[db_.roles.foot[side]], &cur_anim_feet_[side * 3]);
 
-  // Foot locking and IK.
+  lock_feet(f, decay);
+
+  for (int j = 0; j < J_; ++j) {
+    store3(glob_t_[j], &cur_gpos_[j * 3]);
+    store3(loc_t_[j], &cur_lpos_[j * 3]);
+    quat_store(glob_r_[j], &cur_grot_[j * 4]);
+    quat_store(loc_r_[j], &cur_lrot_[j * 4]);
+  }
+}
+
+// Foot locking and IK on frame f's pose (glob_t_ holds the animated pose; decay false: a reset).
+void Character::lock_feet(int64_t f, bool decay) {
   const bool locking = options_.ik && options_.foot_locking;
   for (int side = 0; side < 2; ++side) {
     const bool contact = db_.contacts[static_cast<size_t>(f) * 2 + side] != 0;
@@ -250,13 +261,6 @@ void Character::show_frame(int64_t f, bool decay) {
       target.y() = animated.y();
       solve_leg(side, target);
     }
-  }
-
-  for (int j = 0; j < J_; ++j) {
-    store3(glob_t_[j], &cur_gpos_[j * 3]);
-    store3(loc_t_[j], &cur_lpos_[j * 3]);
-    quat_store(glob_r_[j], &cur_grot_[j * 4]);
-    quat_store(loc_r_[j], &cur_lrot_[j * 4]);
   }
 }
 

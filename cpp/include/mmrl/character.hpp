@@ -106,6 +106,7 @@ class Character {
   void blend_velocity_of(int64_t frame, BlendVelocity& vel);
   // Shows database frame f (root_ already advanced to it): fills the current pose.
   void show_frame(int64_t f, bool decay);
+  void lock_feet(int64_t f, bool decay);
   void forward_kinematics_joint(int j);
   void forward_kinematics();
   void solve_leg(int side, const Vec3& target);
