@@ -115,6 +115,8 @@ ControllerFile ControllerFile::parse(std::vector<uint8_t> bytes, const std::stri
     cf.fail("controller file version " + std::to_string(version) + ", this runtime reads version " +
             std::to_string(kControllerVersion) + "; export it again with 'mmrl export'");
   if (crc32(d, 44) != load_le<uint32_t>(d + 44)) cf.fail("corrupt header (checksum mismatch)");
+  for (uint32_t k = 48; k < kControllerHeaderSize; ++k)
+    if (d[k] != 0) cf.fail("corrupt header (reserved bytes are not zero)");
   const uint32_t header_size = load_le<uint32_t>(d + 16), count = load_le<uint32_t>(d + 20);
   const uint64_t table_offset = load_le<uint64_t>(d + 24), file_size = load_le<uint64_t>(d + 32);
   if (header_size != kControllerHeaderSize || table_offset != kControllerHeaderSize) cf.fail("corrupt header (sizes)");

@@ -124,6 +124,8 @@ def _check_header(path: Path, data: bytes) -> tuple:
                   "'mmrl export'")
     if zlib.crc32(data[:44]) != head_crc:
         raise bad("corrupt header (checksum mismatch)")
+    if any(data[48:HEADER_SIZE]):
+        raise bad("corrupt header (reserved bytes are not zero)")
     if header_size != HEADER_SIZE or table_offset != HEADER_SIZE:
         raise bad("corrupt header (sizes)")
     if file_size != len(data):
