@@ -13,6 +13,7 @@ from mmrl import _core
 from mmrl.cli import main
 from mmrl.commands.export import sample_observations
 from mmrl.networks import PlaneActorCritic
+from mmrl.rollout import FullPath
 from mmrl.runs import RunDir
 from mmrl.runtime_export import read_controller, write_controller
 from mmrl.tasks.plane import PlaneConfig
@@ -120,3 +121,52 @@ def test_runtime_on_another_skeleton(tmp_path):
     np.testing.assert_array_equal(out["rt_matches"], out["py_matches"])
     assert out["frame_mismatches"] == 0 and out["root_error"] <= 1e-5 and out["pose_error"] <= 1e-4, out
     assert np.count_nonzero(np.diff(out["py_matches"]) != 6) >= 5
+
+
+def random_obstacle_policy(seed: int) -> Policy:
+    from mmrl.networks import ObstacleActorCritic
+
+    torch.manual_seed(seed)
+    model = ObstacleActorCritic(12)
+    with torch.no_grad():
+        model.actor.head[-1].weight.normal_(0, 0.3)
+    norm = ObsNormalizer(529, True, ObstacleActorCritic.map_range(), 10.0, torch.device("cpu"))
+    norm.refresh()
+    return Policy(model, norm, torch.device("cpu"))
+
+
+def test_obstacle_runtime_equals_python_full_path(tmp_path):
+    """The obstacles task: the engine hands the runtime the env's obstacles before each
+    decision; the sensor maps (current and previous), the CNN's actions and the decisions agree
+    with the Python full path until the episode ends (a collision resets the env's map history,
+    which an engine does not do)."""
+    from mmrl.tasks.obstacles import ObstaclesConfig
+
+    task, db = mmrl.get_task("obstacles"), mmrl.default_database()
+    config = ObstaclesConfig(transition_cost=5.0, num_obstacles=40)
+    path = tmp_path / "obstacles.mmrl"
+    write_controller(path, db, random_obstacle_policy(3), "obstacles", config)
+    c = _core.RuntimeController.load(str(path))
+    assert c.obs_dim == 529 and c.task_name == "obstacles"
+    compared = transitions = seen = 0
+    for seed in range(20):
+        fp = FullPath(task, db, config=config, seed=seed, record=False)
+        ch = _core.RuntimeCharacter(c, *fp.ctrl.root, fp.ctrl.frame)
+        ch.set_target(*fp.target)
+        for _ in range(300):
+            o = fp.env.obstacles(0)
+            ch.set_obstacles(*(np.ascontiguousarray(o[k], np.float32) for k in ("centres", "half_sizes", "angles")))
+            np.testing.assert_array_equal(ch.observe(), fp.obs)
+            seen += fp.obs[:512].any()
+            step = fp.step(c.act(fp.obs))
+            for k in range(step["res"].frames.size):
+                ch.advance_frame()
+                assert ch.frame == step["res"].frames[k]
+                np.testing.assert_allclose(ch.global_positions(), step["res"].positions[k], atol=1e-4)
+            assert ch.last_decision()["match"] == step["res"].match
+            compared += 1
+            transitions += step["res"].transition
+            if step["done"]:
+                break
+    # Not vacuous: many decisions, with obstacles in the sensor maps, and clip changes.
+    assert compared >= 150 and seen >= 100 and transitions >= 20, (compared, seen, transitions)

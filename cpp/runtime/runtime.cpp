@@ -240,7 +240,10 @@ void RuntimeCharacter::refresh_maps(bool keep_previous) {
   field_->set(0, n, local_centres_.data(), local_half_sizes_.data(), local_angles_.data(), zero_velocities_.data());
   field_->rebuild(0, controller_->task().hit_radius);
   const int slots = controller_->task().previous_map_lag + 1;
-  if (keep_previous) map_head_ = (map_head_ + 1) % slots;
+  // One new map per decision: observing again before the decision recomputes it in place.
+  const bool new_map = keep_previous && maps_decision_ != decision_.count;
+  if (new_map) map_head_ = (map_head_ + 1) % slots;
+  maps_decision_ = decision_.count;
   uint8_t* cur = &maps_[static_cast<size_t>(map_head_) * kMapCells];
   field_->sensor_map(0, 0.0f, 0.0f, r.yaw, cur);
   if (!keep_previous)

@@ -159,6 +159,7 @@ class RuntimeCharacter {
   int num_obstacles_ = 0;
   std::vector<uint8_t> maps_;
   int map_head_ = 0;
+  int64_t maps_decision_ = -1;  // the decision the newest map was made for
 };
 
 }  // namespace mmrl
