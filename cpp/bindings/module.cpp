@@ -10,4 +10,5 @@ PYBIND11_MODULE(_core, m) {
   mmrl::bind_env(m);
   mmrl::bind_character(m);
   mmrl::bind_obstacles(m);
+  mmrl::bind_runtime(m);
 }

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'POSE_DIM', 'PlaneVecEnv', 'TRAJECTORY_DIM', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose']
+__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'POSE_DIM', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -687,6 +687,73 @@ class ObstacleVecEnv:
         ...
     @property
     def stage(self) -> tuple[float, float]:
+        ...
+class ControllerFileError(ValueError):
+    pass
+class RuntimeController:
+    """
+    A loaded controller file (runtime.hpp), shared by characters.
+    """
+    @staticmethod
+    def load(path: str) -> RuntimeController:
+        ...
+    def act(self, obs: typing.Any) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The policy's deterministic action for one raw observation (policy_net.hpp).
+        """
+    @property
+    def fps(self) -> float:
+        ...
+    @property
+    def frames_per_step(self) -> int:
+        ...
+    @property
+    def memory_bytes(self) -> int:
+        ...
+    @property
+    def num_frames(self) -> int:
+        ...
+    @property
+    def num_joints(self) -> int:
+        ...
+    @property
+    def obs_dim(self) -> int:
+        ...
+    @property
+    def task_name(self) -> str:
+        ...
+class RuntimeCharacter:
+    """
+    A character driven by a loaded controller (runtime.hpp).
+    """
+    def __init__(self, controller: RuntimeController, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex, start_frame: typing.SupportsInt | typing.SupportsIndex = -1) -> None:
+        ...
+    def advance_frame(self) -> None:
+        ...
+    def global_positions(self) -> numpy.ndarray:
+        ...
+    def last_decision(self) -> dict:
+        ...
+    def local_rotations(self) -> numpy.ndarray:
+        ...
+    def local_translations(self) -> numpy.ndarray:
+        ...
+    def observe(self) -> numpy.ndarray:
+        ...
+    def set_obstacles(self, centres: typing.Any, half_sizes: typing.Any, angles: typing.Any) -> None:
+        ...
+    def set_target(self, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    def update(self, dt: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def frame(self) -> int:
+        ...
+    @property
+    def frames_shown(self) -> int:
+        ...
+    @property
+    def root(self) -> tuple[float, float, float]:
         ...
 def bvh_load(path: str, scale: typing.SupportsFloat | typing.SupportsIndex = 0.0, up: str = 'auto', fps: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> Motion:
     """

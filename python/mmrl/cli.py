@@ -11,7 +11,7 @@ from typing import List, Optional
 
 # Modules that contribute subcommands, in help order. A module that is missing (a partial
 # install) is skipped rather than breaking the whole command line.
-COMMAND_MODULES = ["mmrl.commands.db", "mmrl.data", "mmrl.commands.train", "mmrl.commands.run",
+COMMAND_MODULES = ["mmrl.commands.db", "mmrl.data", "mmrl.commands.train", "mmrl.commands.run", "mmrl.commands.export",
                    "mmrl.commands.view"]
 
 

@@ -120,6 +120,11 @@ class KDTree {
   int leaf_size() const { return leaf_size_; }
   int depth() const { return depth_; }
   int64_t num_nodes() const { return static_cast<int64_t>(nodes_.size()); }
+  // Bytes the tree holds (the rows it searches are borrowed, not counted).
+  size_t memory_bytes() const {
+    return sizeof(Node) * nodes_.size() + sizeof(float) * (box_.size() + blocks_.size() + block_init_.size()) +
+           sizeof(int32_t) * (perm_.size() + block_index_.size());
+  }
   const float* points() const { return points_; }
   const std::vector<int32_t>& permutation() const { return perm_; }
 

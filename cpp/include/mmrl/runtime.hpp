@@ -1,0 +1,165 @@
+// The engine-facing runtime: load an exported controller (.mmrl, docs/runtime.md) once, then
+// drive any number of characters with it. No Python, no torch: Eigen and the core only.
+//
+//   auto controller = mmrl::RuntimeController::load("controller.mmrl");  // shared, read-only
+//   mmrl::RuntimeCharacter hero(controller, x, z, yaw);                  // world meters, radians
+//   hero.set_target(tx, tz);                                             // world meters
+//   const mmrl::RuntimePose& pose = hero.update(dt);                     // seconds
+//
+// update(dt) plays the database at its own rate (30 fps): it shows one frame per 1/fps
+// seconds of accumulated time, and every frames_per_step frames (6 = 0.2 s) it decides: the
+// task's observation (plane: pose features + target in the character frame; obstacles: the
+// two sensor maps first), the policy (policy_net.hpp), then the match and playback of the
+// full path (character.hpp: inertialization, foot locking, two-bone leg IK). These are
+// exactly the decisions of Python's full path (mmrl.rollout.FullPath with the same file,
+// start and targets; tests/test_runtime.py compares them).
+//
+// Spaces: world Y up, X left, Z forward for yaw 0 (forward = (sin yaw, 0, cos yaw)).
+// Threads: a RuntimeController is immutable after load and may be shared by characters on
+// any threads; a RuntimeCharacter is used by one thread at a time. update() allocates nothing.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "mmrl/character.hpp"
+#include "mmrl/grid.hpp"
+#include "mmrl/policy_net.hpp"
+#include "mmrl/runtime_file.hpp"
+
+namespace mmrl {
+
+// The task's numbers the runtime uses (the rest of the file's task.* pairs are kept in values).
+struct RuntimeTask {
+  std::string name;                     // "plane", "obstacles", ...
+  std::map<std::string, double> values; // every task.keys / task.values pair of the file
+  int frames_per_step = 6;
+  float action_limit_std = 3.0f;
+  float transition_cost = 0.0f;
+  float success_radius = 0.5f;
+  // Obstacle tasks (observation: two 16 x 16 sensor maps, then pose and goal).
+  bool obstacles = false;
+  int previous_map_lag = 1;
+  bool bias_yields = false;
+  float hit_radius = 0.0f;
+  ObstacleFieldConfig field;            // sensor size and offset, obstacle limits
+};
+
+// Seconds spent in each part of loading (bench_runtime reports them).
+struct RuntimeLoadTimes {
+  double read_and_check = 0, database = 0, search_tree = 0, policy = 0;
+};
+
+class RuntimeController {
+ public:
+  // Loads and checks a controller file. Throws ControllerFileError naming the file and what is
+  // wrong (truncated, corrupt, wrong version or byte order, inconsistent sections).
+  static std::shared_ptr<const RuntimeController> load(const std::string& path);
+  // The same from a parsed file.
+  static std::shared_ptr<const RuntimeController> from_file(ControllerFile file);
+
+  const Database& database() const { return db_; }
+  const Matcher& matcher() const { return *matcher_; }
+  const PolicyNet& policy() const { return policy_; }
+  const RuntimeTask& task() const { return task_; }
+  const CharacterOptions& character_options() const { return options_; }
+  int num_joints() const { return db_.num_joints; }
+  float fps() const { return db_.fps; }
+  const RuntimeLoadTimes& load_times() const { return times_; }
+  // Bytes held: the database's arrays, the search tree and the policy's weights.
+  size_t memory_bytes() const;
+
+  RuntimeController(const RuntimeController&) = delete;
+  RuntimeController& operator=(const RuntimeController&) = delete;
+
+ private:
+  RuntimeController() = default;
+  Database db_;
+  std::unique_ptr<Matcher> matcher_;  // borrows db_.normalized
+  PolicyNet policy_;
+  RuntimeTask task_;
+  CharacterOptions options_;
+  RuntimeLoadTimes times_;
+};
+
+// The pose shown now. Arrays point into the character and stay valid until its next update.
+struct RuntimePose {
+  RootState root;                     // world (x, z, yaw) of the character frame
+  int64_t frame = 0;                  // the database frame shown
+  int num_joints = 0;
+  const float* local_rotations = nullptr;     // J x 4 (w, x, y, z), BVH locals, root joints in the world
+  const float* local_translations = nullptr;  // J x 3, meters
+  const float* global_positions = nullptr;    // J x 3, world meters
+  const float* global_rotations = nullptr;    // J x 4, world
+};
+
+// The last decision (one per frames_per_step frames).
+struct RuntimeDecision {
+  int64_t count = 0;          // decisions so far
+  int64_t frames_before = 0;  // frames shown before it (its time is frames_before / fps)
+  RootState root_before;      // the root when it was made
+  float target_x = 0, target_z = 0;
+  int64_t match = -1;         // the matched frame (played from match + 1)
+  bool transition = false;    // not the current clip's continuation
+  float cost = 0;             // the match's squared distance (normalized, weighted features)
+};
+
+class RuntimeCharacter {
+ public:
+  // A character on `start_frame` (-1: the first valid frame) at world (x, z) facing yaw.
+  RuntimeCharacter(std::shared_ptr<const RuntimeController> controller, float x, float z, float yaw,
+                   int64_t start_frame = -1);
+
+  // The target, world meters; used from the next decision on.
+  void set_target(float x, float z);
+  // Obstacle tasks: the obstacles now, world meters and radians (see grid.hpp: centres and
+  // half sizes n x 2, angles n). Read at the next decision (the sensor maps); the engine moves
+  // them. Throws std::invalid_argument for more obstacles than the task's num_obstacles or a
+  // half size over obstacle_max_side / 2. Obstacles over the task's square half (10 m) from
+  // the character cannot reach its sensors and are ignored.
+  void set_obstacles(int n, const float* centres, const float* half_sizes, const float* angles);
+
+  // Advances dt seconds: shows floor(accumulated / frame time) new frames, deciding whenever
+  // the last decision's frames are used up. Returns the pose shown now.
+  const RuntimePose& update(float dt);
+  // Shows exactly one more frame (the unit update() repeats).
+  const RuntimePose& advance_frame();
+
+  const RuntimePose& pose() const { return pose_; }
+  const RuntimeDecision& last_decision() const { return decision_; }
+  int64_t frames_shown() const { return frames_shown_; }
+  const Character& character() const { return character_; }
+  const RuntimeController& controller() const { return *controller_; }
+  // The observation of the next decision (obs_dim floats), for tools and tests.
+  const float* observe();
+
+ private:
+  void decide();
+  void fill_pose(int k);
+  void refresh_maps(bool keep_previous);
+
+  std::shared_ptr<const RuntimeController> controller_;
+  Character character_;
+  PolicyScratch scratch_;
+  std::vector<float> obs_, action_;
+  float target_x_ = 0, target_z_ = 0;
+  float clock_ = 0;
+  int k_ = 0;  // frames of the last decision shown
+  int64_t frames_shown_ = 0;
+  RuntimePose pose_;
+  RuntimeDecision decision_;
+  // Obstacle tasks: the obstacles relative to the character (one-env field) and a ring of
+  // previous_map_lag + 1 sensor maps (the newest at map_head_).
+  std::unique_ptr<ObstacleField> field_;
+  std::vector<float> obstacle_centres_, obstacle_half_sizes_, obstacle_angles_, zero_velocities_, local_centres_,
+      local_half_sizes_, local_angles_;
+  int num_obstacles_ = 0;
+  std::vector<uint8_t> maps_;
+  int map_head_ = 0;
+  int64_t maps_decision_ = -1;  // the decision the newest map was made for
+};
+
+}  // namespace mmrl

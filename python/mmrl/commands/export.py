@@ -1,0 +1,78 @@
+"""``mmrl export RUN``: a trained run for an engine.
+
+- ``-o controller.mmrl``: the controller file the C++ runtime (``mmrl_runtime``) loads: the
+  database, the policy and the task's numbers in one versioned binary file (docs/runtime.md);
+- ``--onnx policy.onnx``: the policy alone as ONNX (raw observation -> action), checked with
+  onnxruntime against the torch policy on observations of the task's own episodes.
+
+(``mmrl export-bvh`` writes generated motion as BVH; see ``mmrl.commands.run``.)
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from ..errors import InputError
+
+
+def register_cli(sub) -> None:
+    x = sub.add_parser("export", help="export a trained run: a controller file for the C++ runtime and/or the "
+                       "policy as ONNX")
+    x.add_argument("run", metavar="RUN", help="a training run directory")
+    x.add_argument("-o", "--output", metavar="FILE", help="write the controller file (.mmrl) for mmrl_runtime")
+    x.add_argument("--onnx", metavar="FILE", help="write the policy as ONNX (needs mmrl[onnx])")
+    x.add_argument("--check-observations", type=int, default=512, metavar="N",
+                   help="observations the ONNX check compares on (default: 512)")
+    x.set_defaults(func=cmd_export)
+
+
+def sample_observations(task, db, config, policy, count: int, seed: int = 0) -> np.ndarray:
+    """``count`` observations of ``task``'s fast path under ``policy`` (the first step of
+    each episode and the ones after it), so a check sees what the policy sees."""
+    from ..rollout import policy_actions
+
+    envs = max(1, min(64, count))
+    env = task.make_vector_env(envs, db=db, config=config, num_threads=1)
+    obs, _ = env.reset(seed=seed)
+    rows = [obs]
+    while sum(len(r) for r in rows) < count:
+        obs, *_ = env.step(policy_actions(policy, obs))
+        rows.append(obs)
+    env.close()
+    return np.concatenate(rows)[:count].astype(np.float32)
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    from ..runs import RunDir
+
+    if args.output is None and args.onnx is None:
+        raise InputError("export: nothing to write; pass -o FILE (controller) and/or --onnx FILE")
+    run = RunDir(args.run)
+    task = run.task
+    if task is None:
+        raise InputError(f"{args.run}: not a training run (no config.json)")
+    policy, db, config = run.policy(), run.database(), run.task_config(task)
+    if args.output is not None:
+        from ..runtime_export import write_controller
+
+        t0 = time.perf_counter()
+        size = write_controller(args.output, db, policy, task.name, config)
+        print(f"wrote {args.output}: {size / 1e6:.1f} MB, {db.num_frames} frames, {db.num_joints} joints "
+              f"({time.perf_counter() - t0:.1f} s)")
+    if args.onnx is not None:
+        from ..integrations.onnx_export import check_onnx, export_onnx
+
+        if args.check_observations < 1:
+            raise InputError(f"--check-observations must be >= 1, got {args.check_observations}")
+        env = task.make_vector_env(1, db=db, config=config, num_threads=1)
+        low, high = env.single_action_space.low, env.single_action_space.high
+        env.close()
+        export_onnx(policy, args.onnx, low, high)
+        obs = sample_observations(task, db, config, policy, args.check_observations)
+        error = check_onnx(args.onnx, policy, obs, low, high)
+        print(f"wrote {args.onnx}: onnxruntime vs torch over {len(obs)} observations: max |difference| "
+              f"{error['clipped_action']:.1e} (the env's clipped action), {error['action']:.1e} (raw action; "
+              f"{error['action_relative']:.1e} relative)")
+    return 0

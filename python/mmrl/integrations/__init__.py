@@ -1,0 +1,1 @@
+"""Bridges to other tools: the policy as ONNX (:mod:`mmrl.integrations.onnx_export`)."""

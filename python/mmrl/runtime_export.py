@@ -1,0 +1,181 @@
+"""``mmrl export``: a trained run as one controller file for the C++ runtime, and back.
+
+:func:`controller_sections` gathers what ``mmrl_runtime`` needs (docs/runtime.md lists every
+section): the database's saved arrays, the policy's layers with its observation
+normalization and action rescaling, the task's numbers and the character's options.
+:func:`write_controller` writes them with :mod:`mmrl.runtime_file`; :func:`read_controller`
+reads a file back into a Database, a numpy policy and the constants (tests, tools).
+Everything is float32 as trained: no quantization.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass
+from typing import Dict, List, Optional, Tuple
+
+import numpy as np
+
+from .errors import InputError
+from .runtime_file import ControllerFileError, Section, read_sections, write_sections
+
+__all__ = ["POLICY_MLP", "POLICY_CONV", "ACTIVATIONS", "CHARACTER_DEFAULTS", "controller_sections",
+           "write_controller", "read_controller", "ControllerContents", "policy_sections"]
+
+POLICY_MLP, POLICY_CONV = 1, 2
+#: Activation codes after a layer.
+ACTIVATIONS = {"none": 0, "tanh": 1, "relu": 2}
+#: The full path's character options (mmrl.rollout.FullPath's defaults).
+CHARACTER_DEFAULTS = {"inertialization_halflife": 0.1, "ik": 1.0, "foot_locking": 1.0}
+_DB_ARRAYS = ("parents", "offsets", "end_sites", "has_end_site", "clip_ranges", "clip_mirrored", "bone_translations",
+              "bone_rotations", "root_positions", "root_yaws", "root_deltas", "features", "contacts", "feature_mean",
+              "block_scale", "weights")
+_DB_TEXT = ("joint_names", "channels", "clip_names")
+
+
+def _dense_layers(modules) -> List[Tuple[object, str]]:
+    """(Linear, activation name) of a run of Linear / Tanh / ReLU modules."""
+    from torch import nn
+
+    out: List[list] = []
+    for m in modules:
+        if isinstance(m, nn.Linear):
+            out.append([m, "none"])
+        elif isinstance(m, (nn.Tanh, nn.ReLU)) and out and out[-1][1] == "none":
+            out[-1][1] = "tanh" if isinstance(m, nn.Tanh) else "relu"
+        else:
+            raise InputError(f"the runtime cannot evaluate a {type(m).__name__} layer (Linear, Tanh, ReLU only)")
+    return [tuple(x) for x in out]
+
+
+def _f32(t) -> np.ndarray:
+    return np.ascontiguousarray(t.detach().cpu().numpy(), np.float32)
+
+
+def _network_layers(model) -> Tuple[list, list, list]:
+    """(header fields, conv layers, dense layers) of a registered network."""
+    from torch import nn
+
+    from .networks import ObstacleActorCritic, PlaneActorCritic
+
+    if isinstance(model, PlaneActorCritic):
+        return [POLICY_MLP, 0, 0, 0, 0, 0, 0], [], _dense_layers(model.actor)
+    if isinstance(model, ObstacleActorCritic):
+        tower = model.actor
+        convs = []
+        for m in tower.conv:
+            if isinstance(m, nn.Conv2d):
+                if m.stride != (1, 1) or m.padding != (0, 0) or m.dilation != (1, 1) or m.groups != 1:
+                    raise InputError("the runtime's convolutions are stride 1, no padding, no dilation, no groups")
+                convs.append([m, "none"])
+            elif isinstance(m, nn.ReLU) and convs:
+                convs[-1][1] = "relu"
+            elif not isinstance(m, nn.Flatten):
+                raise InputError(f"the runtime cannot evaluate a {type(m).__name__} layer in a conv tower")
+        if not model._vector_contiguous:
+            raise InputError("the runtime needs the obstacle network's vector segments in one contiguous run")
+        c, h, w = model.map_shape
+        header = [POLICY_CONV, model._map_slice.start, c, h, w, model._vector_slice.start,
+                  model._vector_slice.stop - model._vector_slice.start]
+        dense = _dense_layers(tower.map_fc) + _dense_layers(tower.head)
+        return header, [tuple(x) for x in convs], dense
+    raise InputError(f"the runtime has no evaluator for the network {type(model).__name__} "
+                     "(PlaneActorCritic and ObstacleActorCritic are supported)")
+
+
+def policy_sections(policy) -> Dict[str, Section]:
+    """The policy's sections: header, layers, observation normalization, action rescaling."""
+    model, norm = policy.model, policy.obs_normalizer
+    obs_dim, act_dim = int(norm.scale.shape[0]), int(model.log_std.shape[0])
+    fields, convs, dense = _network_layers(model)
+    out: Dict[str, Section] = {}
+    # header: kind, obs_dim, act_dim, conv count, dense count, then the map layout (conv kind).
+    header = [fields[0], obs_dim, act_dim, len(convs), len(dense)] + fields[1:]
+    out["policy.header"] = np.array(header, np.int32)
+    out["policy.activations"] = np.array([ACTIVATIONS[a] for _, a in convs + dense], np.int32)
+    for k, (conv, _) in enumerate(convs):
+        out[f"policy.conv{k}.weight"] = _f32(conv.weight)
+        out[f"policy.conv{k}.bias"] = _f32(conv.bias)
+    for k, (lin, _) in enumerate(dense):
+        out[f"policy.dense{k}.weight"] = _f32(lin.weight)
+        out[f"policy.dense{k}.bias"] = _f32(lin.bias)
+    enabled = bool(norm.enabled)
+    out["policy.obs_scale"] = _f32(norm.scale) if enabled else np.ones(obs_dim, np.float32)
+    out["policy.obs_shift"] = _f32(norm.shift) if enabled else np.zeros(obs_dim, np.float32)
+    out["policy.obs_clip"] = np.array([norm.clip if enabled else np.inf], np.float32)
+    center = np.zeros(act_dim, np.float32) if policy.action_center is None else policy.action_center
+    half = np.ones(act_dim, np.float32) if policy.action_half is None else policy.action_half
+    out["policy.action_center"] = np.asarray(center, np.float32).reshape(act_dim)
+    out["policy.action_half"] = np.asarray(half, np.float32).reshape(act_dim)
+    return out
+
+
+def _numbers(prefix: str, values: Dict[str, float]) -> Dict[str, Section]:
+    return {f"{prefix}.keys": list(values), f"{prefix}.values": np.array([float(v) for v in values.values()], np.float64)}
+
+
+def controller_sections(db, policy, task_name: str, task_config,
+                        character: Optional[Dict[str, float]] = None) -> Dict[str, Section]:
+    """Every section of a controller file (docs/runtime.md)."""
+    state = db._state()
+    out: Dict[str, Section] = {f"db.{k}": list(state[k]) for k in _DB_TEXT}
+    out.update({f"db.{k}": np.ascontiguousarray(state[k]) for k in _DB_ARRAYS})
+    out["db.roles"] = np.array(state["roles"], np.int32)
+    out["db.scalars"] = np.array([state["fps"], state["source_scale"]], np.float32)
+    out["db.valid"] = np.ascontiguousarray(db.valid_mask, np.uint8)
+    out.update(policy_sections(policy))
+    out["task.name"] = [task_name]
+    numbers = {k: float(v) for k, v in asdict(task_config).items() if isinstance(v, (bool, int, float))}
+    out.update(_numbers("task", numbers))
+    out.update(_numbers("character", dict(CHARACTER_DEFAULTS, **(character or {}))))
+    return out
+
+
+def write_controller(path: "str | os.PathLike[str]", db, policy, task_name: str, task_config,
+                     character: Optional[Dict[str, float]] = None) -> int:
+    """Write the controller file atomically; returns its size in bytes."""
+    return write_sections(path, controller_sections(db, policy, task_name, task_config, character))
+
+
+@dataclass
+class ControllerContents:
+    """A controller file read back (:func:`read_controller`)."""
+
+    db: object
+    task_name: str
+    task: Dict[str, float]
+    character: Dict[str, float]
+    sections: Dict[str, Section]
+
+
+def _require(path, sections, name):
+    if name not in sections:
+        raise ControllerFileError(f"{path}: missing section '{name}'")
+    return sections[name]
+
+
+def read_controller(path: "str | os.PathLike[str]") -> ControllerContents:
+    """Read a controller file: its Database (rebuilt and validated by the C++ core), the
+    task's and character's numbers, and every section."""
+    from . import _core
+    from .database import Database
+
+    s = read_sections(path)
+    state = {k: _require(path, s, f"db.{k}") for k in _DB_TEXT + _DB_ARRAYS}
+    state = {k: (np.ascontiguousarray(v) if isinstance(v, np.ndarray) else v) for k, v in state.items()}
+    state["roles"] = [int(r) for r in _require(path, s, "db.roles")]
+    fps, scale = (float(v) for v in _require(path, s, "db.scalars"))
+    state.update(fps=fps, source_scale=scale)
+    try:
+        db = Database(_core.Database.from_state(state))
+    except (ValueError, TypeError) as e:
+        raise ControllerFileError(f"{path}: inconsistent database sections ({e})") from e
+    if not np.array_equal(db.valid_mask, _require(path, s, "db.valid").astype(bool)):
+        raise ControllerFileError(f"{path}: section 'db.valid' disagrees with the clip ranges")
+
+    def numbers(prefix):
+        keys, values = _require(path, s, f"{prefix}.keys"), _require(path, s, f"{prefix}.values")
+        if len(keys) != len(values):
+            raise ControllerFileError(f"{path}: '{prefix}.keys' and '{prefix}.values' differ in length")
+        return dict(zip(keys, (float(v) for v in values)))
+
+    return ControllerContents(db, _require(path, s, "task.name")[0], numbers("task"), numbers("character"), s)

@@ -1,0 +1,51 @@
+"""Shared by the runtime tests: drive the C++ runtime (mmrl_runtime, through mmrl._core) and
+Python's full path (mmrl.rollout.FullPath, as ``mmrl play`` does) side by side."""
+from __future__ import annotations
+
+import numpy as np
+
+from mmrl import _core
+from mmrl.rollout import FullPath
+
+
+def scripted_targets(n: int, seed: int, half: float = 6.0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-half, half, (n, 2))
+
+
+def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0, success_radius: float = 0.5):
+    """``decisions`` decisions of the runtime and of the Python full path from the same start,
+    through the same scripted targets (the next one once the root is within success_radius at
+    a decision). ``python_act(obs) -> action`` is the Python side's policy.
+
+    Returns per decision the matches of both, and the largest root and pose differences per frame."""
+    fp = FullPath(task, db, config=config, seed=seed, record=False, continuous=True)
+    x, z, yaw = fp.ctrl.root
+    controller = _core.RuntimeController.load(str(path))
+    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.ctrl.frame)
+    targets = scripted_targets(decisions + 1, seed)
+    t = 0
+    fp.set_target(*targets[0])
+    ch.set_target(*targets[0])
+    out = {"py_matches": [], "rt_matches": [], "frame_mismatches": 0, "root_error": 0.0, "pose_error": 0.0,
+           "obs_error": 0.0, "targets_reached": 0}
+    for _ in range(decisions):
+        root = fp.ctrl.root
+        if np.hypot(root[0] - targets[t][0], root[1] - targets[t][1]) < success_radius:
+            t += 1
+            fp.set_target(*targets[t])
+            ch.set_target(*targets[t])
+        out["obs_error"] = max(out["obs_error"], float(np.max(np.abs(ch.observe() - fp.obs))))
+        step = fp.step(np.asarray(python_act(fp.obs), np.float32).reshape(-1))
+        if step["done"]:
+            fp.continue_from_character(fp.target)
+        res = step["res"]
+        for k in range(res.frames.size):
+            ch.advance_frame()
+            out["frame_mismatches"] += int(ch.frame != res.frames[k])
+            out["root_error"] = max(out["root_error"], float(np.max(np.abs(np.array(ch.root) - res.roots[k]))))
+            out["pose_error"] = max(out["pose_error"], float(np.max(np.abs(ch.global_positions() - res.positions[k]))))
+        out["py_matches"].append(res.match)
+        out["rt_matches"].append(ch.last_decision()["match"])
+    out["targets_reached"] = t
+    out["py_matches"], out["rt_matches"] = np.array(out["py_matches"]), np.array(out["rt_matches"])
+    return out
