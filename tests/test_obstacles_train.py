@@ -18,7 +18,7 @@ def test_short_training_run_leaves_stage_1(tmp_path):
     # checkpoint -> resume. The paper's scene needs ~300k steps to leave stage 1 (bench/), so
     # this run uses a nearly empty one (2 obstacles, episodes capped at 12 s, a 1 m success
     # radius) on the synthetic data, with the success bonus the benchmarks use.
-    common = ["--envs", "64", "--no-progress", "--set", "success_bonus=1000", "--set", "num_obstacles=2",
+    common = ["--envs", "64", "--no-progress", "--preset", "paper", "--set", "success_bonus=1000", "--set", "num_obstacles=2",
               "--set", "max_steps=60", "--set", "success_radius=1.0", "--set", "update_epochs=4",
               "--set", "learning_rate=0.002"]
     assert main(["train", "obstacles", "--steps", "70000", "--out", str(run), *common]) == 0

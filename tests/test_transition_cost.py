@@ -4,7 +4,7 @@ brute force with the same rule, and the fast and full paths still agree step for
 import numpy as np
 import pytest
 
-from mmrl import default_database, get_task
+from mmrl import Controller, default_database, get_task
 from mmrl.policies import JoystickPolicy
 from mmrl.rollout import FullPath
 from mmrl.tasks.plane import PlaneVectorEnv
@@ -121,6 +121,10 @@ def test_plane_quality_preset_sets_its_options(tmp_path):
         section = "ppo" if key in saved["ppo"] else "task_config"
         assert saved[section][key] == value, key
         assert default[section][key] == value, key
+    assert main(["train", "plane", "--steps", "512", "--envs", "8", "--out", str(tmp_path / "s"), "--no-progress",
+                 "--preset", "smooth"]) == 0
+    smooth = json.loads((tmp_path / "s" / "config.json").read_text())
+    assert smooth["task_config"]["transition_pose_weight"] == 10.0 and smooth["task_config"]["transition_cost"] == 60.0
 
 
 @pytest.mark.parametrize("task_name", ["plane", "obstacles"])
@@ -155,3 +159,37 @@ def test_transition_pose_weight_charges_the_pose_distance_of_each_jump(db, task_
 def test_transition_pose_weight_is_checked(db):
     with pytest.raises(ValueError, match="transition_pose_weight must be finite and >= 0"):
         PlaneVectorEnv(2, db=db, transition_pose_weight=-1.0)
+
+
+def test_the_obstacles_bias_yields_when_the_continuation_hits(db):
+    """bias_yields: a decision matches without the bias exactly when the current frame's own
+    future trajectory (its normalized trajectory features, tested as an action is) hits an
+    obstacle; otherwise with the config's transition_cost."""
+    task = get_task("obstacles")
+    env = task.make_vector_env(8, db=db, num_threads=1, transition_cost=5.0, bias_yields=True, hit_radius=0.25,
+                               hit_lookahead=True)
+    env.reset(seed=2)
+    rows = np.asarray(db.normalized_features, np.float32)
+    low, high = env.single_action_space.low, env.single_action_space.high
+    rng = np.random.default_rng(3)
+    seen = {0.0: 0, 5.0: 0}
+    for _ in range(40):
+        expected = {}
+        for i in range(8):
+            cont = rows[env.env_state(i)["frame"], 15:]
+            if np.all((cont >= low) & (cont <= high)):  # the action test clips to the box
+                expected[i] = 0.0 if env.action_hits(i, cont)[0] > 0 else 5.0
+        env.step((rng.normal(size=(8, 12)) * 0.7).astype(np.float32))
+        for i, cost in expected.items():
+            assert env.env_state(i)["last_step_transition_cost"] == cost
+            seen[cost] += 1
+    assert seen[0.0] > 20 and seen[5.0] > 20, seen
+
+
+def test_controller_transition_cost_is_settable_and_checked(db):
+    ctrl = Controller(db, transition_cost=2.0)
+    ctrl.transition_cost = 7.5
+    assert ctrl.transition_cost == 7.5
+    for bad in (-1.0, float("nan"), "x"):
+        with pytest.raises(ValueError, match="transition_cost must be finite and >= 0"):
+            ctrl.transition_cost = bad

@@ -113,9 +113,13 @@ class Controller:
 
     @transition_cost.setter
     def transition_cost(self, cost: float) -> None:
-        if not np.isfinite(float(cost)) or float(cost) < 0:
+        try:
+            value = float(cost)
+        except (TypeError, ValueError):
+            value = float("nan")
+        if not np.isfinite(value) or value < 0:
             raise ValueError(f"transition_cost must be finite and >= 0, got {cost!r}")
-        self._core.transition_cost = float(cost)
+        self._core.transition_cost = value
 
     # ------------------------------------------------------------------ state
     def reset(self, start_frame: Optional[int] = None, position: Sequence[float] = (0.0, 0.0),
