@@ -71,8 +71,8 @@ class PlaneEnv(SingleEnv):
 #: transitions/s, where the paper's rule gives 2.49 s, 55 cm/s and 4.7/s.
 #: "smooth" adds a reward cost for what each jump asks the blend to hide (the pose-feature distance
 #: between the continuation and the matched frame, weight 10): smoother feet after a short
-#: training (20 s: foot sliding 15-18 cm/s with IK off, below the walking joystick's 19.7) at
-#: the price of speed (4.6-5.1 s to target after 20 s, 3.3 s after 1M steps).
+#: training (20 s, 3 seeds: foot sliding 14.9-18.3 cm/s with IK off, below the walking joystick's
+#: 19.7) at the price of speed (4.6-5.3 s to target after 20 s, 3.3 s after 1M steps).
 PLANE_PRESETS = {
     "paper": {},
     "quality": {"transition_cost": 60.0, "gamma": 0.97},
