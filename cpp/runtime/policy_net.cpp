@@ -4,6 +4,8 @@
 #include <cmath>
 #include <string>
 
+#include <Eigen/Core>
+
 namespace mmrl {
 
 namespace {
@@ -16,33 +18,37 @@ inline float activate(float x, Activation a) {
   }
 }
 
+using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+// y = act(W x + b): an Eigen matrix-vector product (SIMD; its sums run in another order than a
+// plain loop, within float rounding of torch's own).
 void dense_forward(const DenseLayer& l, const float* x, float* y) {
-  for (int o = 0; o < l.out; ++o) {
-    const float* w = &l.weight[static_cast<size_t>(o) * l.in];
-    float s = 0.0f;
-    for (int i = 0; i < l.in; ++i) s += w[i] * x[i];
-    y[o] = activate(s + l.bias[o], l.activation);
-  }
+  const Eigen::Map<const RowMatrix> w(l.weight.data(), l.out, l.in);
+  const Eigen::Map<const Eigen::VectorXf> xv(x, l.in);
+  Eigen::Map<Eigen::VectorXf> yv(y, l.out);
+  yv.noalias() = w * xv;
+  for (int o = 0; o < l.out; ++o) y[o] = activate(y[o] + l.bias[o], l.activation);
 }
 
-void conv_forward(const ConvLayer& l, const float* x, float* y) {
+// Valid convolution, stride 1, as im2col (cols: (in_channels * kh * kw) x (oh * ow), rows in
+// the weight's [in][kh][kw] order) and one matrix product with the (out x in*kh*kw) weights.
+void conv_forward(const ConvLayer& l, const float* x, float* y, float* cols) {
   const int oh = l.in_h - l.kernel_h + 1, ow = l.in_w - l.kernel_w + 1;
-  for (int o = 0; o < l.out_channels; ++o) {
-    float* out = y + static_cast<size_t>(o) * oh * ow;
-    std::fill(out, out + oh * ow, l.bias[o]);
-    for (int c = 0; c < l.in_channels; ++c) {
-      const float* in = x + static_cast<size_t>(c) * l.in_h * l.in_w;
-      const float* w = &l.weight[((static_cast<size_t>(o) * l.in_channels + c) * l.kernel_h) * l.kernel_w];
-      for (int r = 0; r < oh; ++r)
-        for (int q = 0; q < ow; ++q) {
-          float s = 0.0f;
-          for (int kr = 0; kr < l.kernel_h; ++kr)
-            for (int kq = 0; kq < l.kernel_w; ++kq) s += w[kr * l.kernel_w + kq] * in[(r + kr) * l.in_w + q + kq];
-          out[r * ow + q] += s;
-        }
-    }
-    for (int k = 0; k < oh * ow; ++k) out[k] = activate(out[k], l.activation);
+  const int k_size = l.in_channels * l.kernel_h * l.kernel_w, positions = oh * ow;
+  for (int c = 0; c < l.in_channels; ++c) {
+    const float* in = x + static_cast<size_t>(c) * l.in_h * l.in_w;
+    for (int kr = 0; kr < l.kernel_h; ++kr)
+      for (int kq = 0; kq < l.kernel_w; ++kq) {
+        float* row = cols + static_cast<size_t>((c * l.kernel_h + kr) * l.kernel_w + kq) * positions;
+        for (int r = 0; r < oh; ++r) std::copy(in + (r + kr) * l.in_w + kq, in + (r + kr) * l.in_w + kq + ow, row + r * ow);
+      }
   }
+  const Eigen::Map<const RowMatrix> w(l.weight.data(), l.out_channels, k_size);
+  const Eigen::Map<const RowMatrix> c(cols, k_size, positions);
+  Eigen::Map<RowMatrix> out(y, l.out_channels, positions);
+  out.noalias() = w * c;
+  for (int o = 0; o < l.out_channels; ++o)
+    for (int k = 0; k < positions; ++k) y[o * positions + k] = activate(y[o * positions + k] + l.bias[o], l.activation);
 }
 
 Activation activation_of(const ControllerFile& f, int32_t code) {
@@ -136,7 +142,12 @@ PolicyScratch PolicyNet::make_scratch() const {
     widest = std::max(widest, static_cast<size_t>(l.out_channels) * (l.in_h - l.kernel_h + 1) * (l.in_w - l.kernel_w + 1));
   }
   for (const auto& l : dense_) widest = std::max(widest, static_cast<size_t>(std::max(l.in, l.out)));
+  size_t cols = 0;
+  for (const auto& l : convs_)
+    cols = std::max(cols, static_cast<size_t>(l.in_channels) * l.kernel_h * l.kernel_w * (l.in_h - l.kernel_h + 1) *
+                              (l.in_w - l.kernel_w + 1));
   PolicyScratch s;
+  s.cols.assign(cols, 0.0f);
   s.a.assign(widest + vector_size_, 0.0f);
   s.b.assign(widest + vector_size_, 0.0f);
   return s;
@@ -159,7 +170,7 @@ void PolicyNet::act(const float* obs, float* action, PolicyScratch& scratch) con
     std::copy(normalized + vector_start_, normalized + vector_start_ + vector_size_, vec);
     std::copy(normalized + map_start_, normalized + map_start_ + map_size, x);
     for (const auto& l : convs_) {
-      conv_forward(l, x, y);
+      conv_forward(l, x, y, scratch.cols.data());
       std::swap(x, y);
     }
     dense_forward(dense_[0], x, y);

@@ -37,6 +37,7 @@ struct ConvLayer {
 
 struct PolicyScratch {
   std::vector<float> a, b;  // ping-pong buffers, sized for the widest layer
+  std::vector<float> cols;  // im2col buffer of the widest convolution
 };
 
 class PolicyNet {
