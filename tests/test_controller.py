@@ -227,3 +227,32 @@ def test_a_locked_foot_does_not_move(synth_db):
     assert np.mean(heights < 1e-3) >= 0.9, np.mean(heights < 1e-3)
     assert len(first) >= 10 and min(first) == 1.0, first
     assert len(starts) > 20 and max(starts) < 1e-4
+
+
+def test_a_lock_released_in_contact_locks_again_after_blending_out(synth_db):
+    """A lock released during a contact (the animated ankle moved beyond the release distance)
+    blends out, and then the foot locks again where it is shown for the rest of that contact,
+    rather than following the animation unlocked. A release distance of 2 cm makes such
+    releases frequent on the synthetic walk."""
+    from mmrl import _core
+
+    o = _core.CharacterOptions()
+    o.frames_per_step, o.ik, o.foot_locking, o.lock_release_distance = 6, True, True, 0.02
+    ch = _core.Character(synth_db._db, synth_db.matcher, o)
+    ch.reset(int(np.flatnonzero(synth_db.valid_mask)[0]), 0.0, 0.0, 0.0)
+    rng = np.random.default_rng(0)
+    c, w = [], []
+    for _ in range(300):
+        ch.step((rng.normal(size=12) * 0.5).astype(np.float32))
+        c.append(np.array(ch.contacts).astype(bool))
+        w.append(np.array(ch.lock_weights))
+    c, w = np.concatenate(c), np.concatenate(w)
+    released, relocks = 0, []
+    for s in range(2):
+        # A blend-out inside a contact: the weight falls below 1 while the foot stays planted.
+        released += int(np.sum((w[1:, s] < 1) & (w[:-1, s] == 1) & c[1:, s] & c[:-1, s]))
+        # t: the blend-out ends (the weight reaches 0) while the contact goes on through t + 1.
+        ends = np.flatnonzero((w[1:-1, s] == 0) & (w[:-2, s] > 0) & c[1:-1, s] & c[2:, s]) + 1
+        relocks.extend(w[ends + 1, s].tolist())
+    assert released >= 10 and len(relocks) >= 5, (released, len(relocks))
+    assert min(relocks) == 1.0, relocks

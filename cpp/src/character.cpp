@@ -233,7 +233,9 @@ void Character::lock_feet(int64_t f, bool decay) {
       lock_weight_[side] = cur_lock_w_[side] = 0;
       if (!locking) continue;
     }
-    if (!contact) released_in_contact_[side] = false;
+    // A lock released during a contact may lock again once it has blended out: the foot then
+    // stays where it is shown for the rest of the contact instead of following the animation.
+    if (!contact || lock_weight_[side] <= 0.0f) released_in_contact_[side] = false;
     if (locked_[side] && (!contact || (animated - lock_position_[side]).norm() > options_.lock_release_distance)) {
       locked_[side] = false;
       released_in_contact_[side] = contact;
