@@ -2,7 +2,14 @@
 
 Train character controllers that write motion-matching queries, in seconds on a CPU.
 """
+import os as _os
 from importlib.metadata import PackageNotFoundError, version as _version
+
+# OpenMP threads that sleep while they wait, unless the user chose otherwise (set before torch,
+# imported below, starts its OpenMP runtime). libgomp's default spins: two trainings sharing 2
+# cores then ran 4.6x slower each; sleeping, 1.8x (the fair share is 2x), and a training alone
+# is as fast (README, "Choices").
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from . import _core  # noqa: F401  (the C++ core)
 from .bvh import BVHError, JointRoleError, Motion, load_bvh, parse_bvh
