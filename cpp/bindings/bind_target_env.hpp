@@ -66,6 +66,12 @@ void bind_target_env_methods(py::class_<Wrapper>& c, const char* last_step_frame
           "current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, "
           "weighted feature space). Kept through the autoreset; 0 after reset.")
       .def(
+          "last_step_transition_cost",
+          [](const Wrapper& s, int i) { return s.env.state(checked_env_index(s, i)).last_step_transition_cost; },
+          py::arg("index"),
+          "The continuation bias env i's last step matched with (the config's transition_cost, or what the task "
+          "made of it for that decision). Kept through the autoreset; 0 after reset.")
+      .def(
           "set_state",
           [](Wrapper& s, int i, int64_t frame, float x, float z, float yaw) {
             s.env.set_state(checked_env_index(s, i), frame, x, z, yaw);

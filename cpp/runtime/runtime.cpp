@@ -18,34 +18,38 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
 // The database sections -> DatabaseState (database_from_state checks every shape).
 DatabaseState database_state(const ControllerFile& f) {
   DatabaseState s;
+  // A section as a StateArray with its stored shape.
   auto arr = [&](auto values, const char* name) {
     using T = typename decltype(values)::value_type;
     return StateArray<T>{std::move(values), f.section(name).shape};
   };
+  auto floats = [&](const char* name) { return arr(f.floats(name), name); };
+  auto ints = [&](const char* name) { return arr(f.ints(name), name); };
+  auto bytes = [&](const char* name) { return arr(f.bytes(name), name); };
   s.joint_names = f.texts("db.joint_names");
   s.channels = f.texts("db.channels");
   s.clip_names = f.texts("db.clip_names");
-  s.parents = arr(f.ints("db.parents"), "db.parents");
-  s.offsets = arr(f.floats("db.offsets"), "db.offsets");
-  s.end_sites = arr(f.floats("db.end_sites"), "db.end_sites");
-  s.has_end_site = arr(f.bytes("db.has_end_site"), "db.has_end_site");
+  s.parents = ints("db.parents");
+  s.offsets = floats("db.offsets");
+  s.end_sites = floats("db.end_sites");
+  s.has_end_site = bytes("db.has_end_site");
   const auto roles = f.ints("db.roles", {9});
   s.roles.assign(roles.begin(), roles.end());
   const auto scalars = f.floats("db.scalars", {2});
   s.fps = scalars[0];
   s.source_scale = scalars[1];
-  s.clip_ranges = arr(f.ints("db.clip_ranges"), "db.clip_ranges");
-  s.clip_mirrored = arr(f.bytes("db.clip_mirrored"), "db.clip_mirrored");
-  s.bone_translations = arr(f.floats("db.bone_translations"), "db.bone_translations");
-  s.bone_rotations = arr(f.floats("db.bone_rotations"), "db.bone_rotations");
-  s.root_positions = arr(f.floats("db.root_positions"), "db.root_positions");
-  s.root_yaws = arr(f.floats("db.root_yaws"), "db.root_yaws");
-  s.root_deltas = arr(f.floats("db.root_deltas"), "db.root_deltas");
-  s.features = arr(f.floats("db.features"), "db.features");
-  s.contacts = arr(f.bytes("db.contacts"), "db.contacts");
-  s.feature_mean = arr(f.floats("db.feature_mean"), "db.feature_mean");
-  s.block_scale = arr(f.floats("db.block_scale"), "db.block_scale");
-  s.weights = arr(f.floats("db.weights"), "db.weights");
+  s.clip_ranges = ints("db.clip_ranges");
+  s.clip_mirrored = bytes("db.clip_mirrored");
+  s.bone_translations = floats("db.bone_translations");
+  s.bone_rotations = floats("db.bone_rotations");
+  s.root_positions = floats("db.root_positions");
+  s.root_yaws = floats("db.root_yaws");
+  s.root_deltas = floats("db.root_deltas");
+  s.features = floats("db.features");
+  s.contacts = bytes("db.contacts");
+  s.feature_mean = floats("db.feature_mean");
+  s.block_scale = floats("db.block_scale");
+  s.weights = floats("db.weights");
   return s;
 }
 

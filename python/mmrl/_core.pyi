@@ -286,6 +286,10 @@ class PlaneVecEnv:
         """
         Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, weighted feature space). Kept through the autoreset; 0 after reset.
         """
+    def last_step_transition_cost(self, index: typing.SupportsInt | typing.SupportsIndex) -> float:
+        """
+        The continuation bias env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
+        """
     def observe(self, index: typing.SupportsInt | typing.SupportsIndex, out: typing.Any) -> None:
         """
         Writes environment i's current observation into out (float32, 17).
@@ -623,6 +627,10 @@ class ObstacleVecEnv:
     def last_step_matches(self, transitions: typing.Any, costs: typing.Any) -> None:
         """
         Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, weighted feature space). Kept through the autoreset; 0 after reset.
+        """
+    def last_step_transition_cost(self, index: typing.SupportsInt | typing.SupportsIndex) -> float:
+        """
+        The continuation bias env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
         """
     def observe(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
         """

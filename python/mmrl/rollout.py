@@ -198,7 +198,7 @@ class FullPath:
             out.update(self.scene.before_step(a[0]))
         obs, reward, term, trunc, info = self.env.step(a)
         # The bias the env's match used (a task may vary it per decision): the same match here.
-        self.ctrl.transition_cost = self.env.env_state(0)["last_step_transition_cost"]
+        self.ctrl.transition_cost = self.env.last_step_transition_cost(0)
         res = self.ctrl.step(a[0])
         self.episode_steps += 1
         done = bool(term[0] or trunc[0])

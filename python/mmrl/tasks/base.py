@@ -239,6 +239,10 @@ class TargetVectorEnv(VectorEnv):
         self._sum_steps = 0
         return out
 
+    def last_step_transition_cost(self, i: int) -> float:
+        """The continuation bias env i's last step matched with (a task may vary it per decision)."""
+        return float(self._core.last_step_transition_cost(int(i)))
+
     def env_state(self, i: int) -> dict:
         """World-space state of env i: root x, z, yaw, database frame, target (and the task's own)."""
         return self._core.state(int(i))
