@@ -71,6 +71,12 @@ void bind_target_env_methods(py::class_<Wrapper>& c, const char* last_step_frame
           py::arg("index"),
           "The continuation bias env i's last step matched with (the config's transition_cost, or what the task "
           "made of it for that decision). Kept through the autoreset; 0 after reset.")
+      .def_property(
+          "autoreset_next_step", [](const Wrapper& s) { return s.env.autoreset_next_step(); },
+          [](Wrapper& s, bool on) { s.env.set_autoreset_next_step(on); },
+          "Autoreset mode: False = SAME_STEP (an ended episode's env is reset in the same step, its last "
+          "observation in final_obs), True = NEXT_STEP (the ending step returns the last observation; the next "
+          "step ignores the env's action, resets it and returns its first observation with reward 0).")
       .def(
           "set_state",
           [](Wrapper& s, int i, int64_t frame, float x, float z, float yaw) {

@@ -319,6 +319,14 @@ class PlaneVecEnv:
     def action_low(self) -> numpy.typing.NDArray[numpy.float32]:
         ...
     @property
+    def autoreset_next_step(self) -> bool:
+        """
+        Autoreset mode: False = SAME_STEP (an ended episode's env is reset in the same step, its last observation in final_obs), True = NEXT_STEP (the ending step returns the last observation; the next step ignores the env's action, resets it and returns its first observation with reward 0).
+        """
+    @autoreset_next_step.setter
+    def autoreset_next_step(self, arg1: bool) -> None:
+        ...
+    @property
     def num_envs(self) -> int:
         ...
 class CharacterOptions:
@@ -689,6 +697,14 @@ class ObstacleVecEnv:
         ...
     @property
     def action_low(self) -> numpy.typing.NDArray[numpy.float32]:
+        ...
+    @property
+    def autoreset_next_step(self) -> bool:
+        """
+        Autoreset mode: False = SAME_STEP (an ended episode's env is reset in the same step, its last observation in final_obs), True = NEXT_STEP (the ending step returns the last observation; the next step ignores the env's action, resets it and returns its first observation with reward 0).
+        """
+    @autoreset_next_step.setter
+    def autoreset_next_step(self, arg1: bool) -> None:
         ...
     @property
     def num_envs(self) -> int:

@@ -10,8 +10,12 @@
 //   - the valid start frames and the action box (mean +- action_limit_std * std of the
 //     trajectory features over the valid frames, normalized units);
 //   - the constructor checks common to all tasks;
-//   - SAME_STEP autoreset: an environment whose episode ended writes its last observation
-//     to final_obs, its return and length, and is reset at once, its first observation in obs;
+//   - autoreset, in gymnasium's two modes. SAME_STEP (the default): an environment whose
+//     episode ended writes its last observation to final_obs, its return and length, and is
+//     reset at once, its first observation in obs. NEXT_STEP (what RLlib expects): the ending
+//     step writes the last observation to obs (and final_obs), and the env's next step ignores
+//     its action, resets it and returns the first observation with reward 0 and no flags.
+//     Each env draws its episodes from its own RNG, so both modes play the same episodes;
 //   - the bookkeeping: steps, truncation at max_steps, episode return, frames played.
 //
 // A task is a class Task deriving from TargetVecEnv<Task, Config, State> (CRTP) that defines
@@ -61,6 +65,8 @@ struct TargetEnvState {
   // The continuation bias the last step's match used (the config's transition_cost, or what
   // the task's decision_transition_cost made of it); kept like last_step_frames.
   float last_step_transition_cost = 0;
+  // NEXT_STEP autoreset: the episode ended on the last step and the next step resets it.
+  bool autoreset_pending = false;
   Rng rng;
 };
 
@@ -114,6 +120,10 @@ class TargetVecEnv {
   const float* action_high() const { return high_; }
   State& state(int i) { return envs_[i]; }
   const State& state(int i) const { return envs_[i]; }
+  // Autoreset mode (see the header comment): false = SAME_STEP, true = NEXT_STEP. Switching
+  // applies from the next step; an env whose reset is pending still gets it.
+  void set_autoreset_next_step(bool on) { next_step_autoreset_ = on; }
+  bool autoreset_next_step() const { return next_step_autoreset_; }
 
   // Reseeds every environment's RNG from (seed, index) and resets all; obs: N x kObsDim (or null).
   void reset(uint64_t seed, float* obs) {
@@ -133,6 +143,7 @@ class TargetVecEnv {
   void reset_env(int i, float* obs_row) {
     task().begin_episode(i);
     State& s = envs_[i];
+    s.autoreset_pending = false;
     s.steps = 0;
     s.episode_return = 0;
     s.last_match = -1;
@@ -211,6 +222,18 @@ class TargetVecEnv {
       for (int64_t i = b; i < e; ++i) {
         const int env = static_cast<int>(i);
         State& s = envs_[i];
+        float* row = out.obs + i * Task::kObsDim;
+        if (s.autoreset_pending) {  // NEXT_STEP: this step is the reset; the action is ignored
+          reset_env(env, row);
+          s.last_step_frames = 0;
+          s.last_step_transition = false;
+          s.last_step_cost = 0;
+          s.last_step_transition_cost = 0;
+          out.rewards[i] = 0;
+          out.terminated[i] = out.truncated[i] = out.success[i] = 0;
+          after_step(env);
+          continue;
+        }
         TaskStep r = task().advance(env, actions + i * Task::kActionDim);
         r.reward -= config_.transition_pose_weight * s.last_pose_jump;
         s.steps += 1;
@@ -225,12 +248,17 @@ class TargetVecEnv {
         out.truncated[i] = truncated;
         out.success[i] = r.success;
         after_step(env);
-        float* row = out.obs + i * Task::kObsDim;
         if (r.terminated || truncated) {
-          task().observe(env, out.final_obs + i * Task::kObsDim);
+          float* final_row = out.final_obs + i * Task::kObsDim;
+          task().observe(env, final_row);
           out.episode_return[i] = static_cast<float>(s.episode_return);
           out.episode_length[i] = s.steps;
-          reset_env(env, row);
+          if (next_step_autoreset_) {
+            std::copy(final_row, final_row + Task::kObsDim, row);
+            s.autoreset_pending = true;
+          } else {
+            reset_env(env, row);
+          }
         } else {
           task().observe(env, row);
         }
@@ -291,6 +319,7 @@ class TargetVecEnv {
   std::vector<int64_t> valid_frames_;
   std::vector<State> envs_;
   float low_[kTrajectoryDim], high_[kTrajectoryDim];
+  bool next_step_autoreset_ = false;
   ThreadPool pool_;
 
  private:

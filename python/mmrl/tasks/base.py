@@ -8,12 +8,19 @@ docs/architecture.md) declares a config dataclass (a :class:`TaskConfig`), a
 that Task (``mmrl.tasks.register_task``) is the one line that makes ``mmrl train NAME``,
 ``mmrl eval``, ``render`` and ``export-bvh`` work with it.
 
-The vector env contract (gymnasium 1.x, SAME_STEP autoreset): ``reset(seed=s)`` gives env i
-a random stream derived from (s, i); ``step`` returns ``(obs, rewards, terminated,
-truncated, infos)`` and, where episodes ended, ``infos`` holds ``final_obs``, ``success``,
-``episode_return``, ``episode_length`` and ``episode_frames`` (frames played in the episode,
-the last step counted up to the frame that ended it), each with its ``_key`` mask, plus
-the task's own keys (``Task.episode_infos``).
+The vector env contract (gymnasium 1.x): ``reset(seed=s)`` gives env i a random stream
+derived from (s, i); ``step`` returns ``(obs, rewards, terminated, truncated, infos)`` and,
+where episodes ended, ``infos`` holds ``final_obs``, ``success``, ``episode_return``,
+``episode_length`` and ``episode_frames`` (frames played in the episode, the last step
+counted up to the frame that ended it), each with its ``_key`` mask, plus the task's own
+keys (``Task.episode_infos``).
+
+Autoreset: SAME_STEP by default (the ending step returns the next episode's first
+observation; the last one is ``infos["final_obs"]``). ``autoreset_mode=AutoresetMode.NEXT_STEP``
+(what RLlib expects) returns the last observation itself, and the env's next step ignores its
+action and returns the first observation of the next episode, with reward 0 and both flags
+False. Each env draws its episodes from its own stream, so both modes play the same episodes
+(tests/test_autoreset.py).
 """
 from __future__ import annotations
 
@@ -102,6 +109,19 @@ def check_actions(actions, shape) -> np.ndarray:
     return a
 
 
+def parse_autoreset_mode(mode) -> AutoresetMode:
+    """``AutoresetMode.SAME_STEP``/``NEXT_STEP``, from the enum, its value (``"NextStep"``) or a
+    snake-case name (``"next_step"``); other modes raise ValueError."""
+    supported = (AutoresetMode.SAME_STEP, AutoresetMode.NEXT_STEP)
+    if not isinstance(mode, AutoresetMode):
+        key = str(mode).replace("_", "").lower()
+        mode = next((m for m in AutoresetMode if m.value.lower() == key), mode)
+    if mode not in supported:
+        raise ValueError(f"autoreset_mode must be one of {[m.value for m in supported]} (or same_step / next_step), "
+                         f"got {mode!r}")
+    return mode
+
+
 # ----------------------------------------------------------------------------- vector env
 class TargetVectorEnv(VectorEnv):
     """N characters of one task stepped together by a batched C++ core.
@@ -119,7 +139,9 @@ class TargetVectorEnv(VectorEnv):
     config_type: Any = None
 
     def __init__(self, num_envs: int = 64, *, db: Union[Database, str, os.PathLike, None] = None,
-                 data=None, config=None, num_threads: int = 0, render_mode: Optional[str] = None, **overrides):
+                 data=None, config=None, num_threads: int = 0, render_mode: Optional[str] = None,
+                 autoreset_mode: Union[AutoresetMode, str] = AutoresetMode.SAME_STEP, **overrides):
+        autoreset_mode = parse_autoreset_mode(autoreset_mode)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         if int(num_envs) < 1:
@@ -130,6 +152,9 @@ class TargetVectorEnv(VectorEnv):
         self.render_mode = render_mode
         self._core = self.core_type(self.db._db, self.db.matcher, self.num_envs,
                                     self.config.to_core(self.core_config_type), num_threads)
+        self.autoreset_mode = autoreset_mode
+        self.metadata = {**type(self).metadata, "autoreset_mode": autoreset_mode}
+        self._core.autoreset_next_step = autoreset_mode == AutoresetMode.NEXT_STEP
         self.obs_dim, self.act_dim = int(self.core_type.obs_dim), int(self.core_type.action_dim)
         self.single_observation_space = self._observation_space()
         self.single_action_space = gym.spaces.Box(self._core.action_low, self._core.action_high, (self.act_dim,),
@@ -154,7 +179,9 @@ class TargetVectorEnv(VectorEnv):
         self._sum_transitions = np.zeros(n, np.int64)
         self._sum_costs = np.zeros(n, np.float64)
         self._sum_frames = np.zeros(n, np.int64)
-        self._sum_steps = 0
+        self._sum_decisions = 0
+        # NEXT_STEP: envs whose next step is their reset (no decision is made in it).
+        self._pending = np.zeros(n, bool)
         self._seeded = False
 
     # -- hooks -------------------------------------------------------------------------------
@@ -186,6 +213,7 @@ class TargetVectorEnv(VectorEnv):
             for i in range(self.num_envs):
                 self._core.reset_env(i, self._obs)
         self._ep_frames[:] = 0
+        self._pending[:] = False
         self._on_reset(None)
         return self._obs.copy(), {}
 
@@ -193,12 +221,19 @@ class TargetVectorEnv(VectorEnv):
         a = check_actions(actions, (self.num_envs, self.act_dim))
         self._step_core(a)
         self._core.last_step_frames(self._step_frames)
-        self._ep_frames += self._step_frames
         self._core.last_step_matches(self._step_transitions, self._step_costs)
         self._sum_transitions += self._step_transitions
         self._sum_costs += self._step_costs
         self._sum_frames += self._step_frames
-        self._sum_steps += 1
+        if self._pending.any():  # NEXT_STEP: these envs were reset by this step
+            resetting = self._pending.copy()
+            self._ep_frames[resetting] = 0
+            self._on_reset(resetting)
+            self._sum_decisions += self.num_envs - int(resetting.sum())
+            self._pending[:] = False
+        else:
+            self._sum_decisions += self.num_envs
+        self._ep_frames += self._step_frames
         terminated = self._terminated.astype(bool)
         truncated = self._truncated.astype(bool)
         infos: Dict[str, Any] = {}
@@ -215,8 +250,11 @@ class TargetVectorEnv(VectorEnv):
             for key, value in values.items():
                 infos[key] = value
                 infos["_" + key] = done.copy()
-            self._ep_frames[done] = 0
-            self._on_reset(done)
+            if self.autoreset_mode == AutoresetMode.NEXT_STEP:
+                self._pending |= done
+            else:
+                self._ep_frames[done] = 0
+                self._on_reset(done)
         return self._obs.copy(), self._rewards.copy(), terminated, truncated, infos
 
     # -- inspection --------------------------------------------------------------------------
@@ -231,12 +269,12 @@ class TargetVectorEnv(VectorEnv):
         current clip's continuation), ``cost_sum`` (their matched costs, normalized weighted
         feature space, summed) and ``frames`` (frames played, each step up to the frame that
         ended its episode). :mod:`mmrl.quality_log` turns them into training-log columns."""
-        out = {"decisions": self._sum_steps * self.num_envs, "transitions": int(self._sum_transitions.sum()),
+        out = {"decisions": self._sum_decisions, "transitions": int(self._sum_transitions.sum()),
                "cost_sum": float(self._sum_costs.sum()), "frames": int(self._sum_frames.sum())}
         self._sum_transitions[:] = 0
         self._sum_costs[:] = 0.0
         self._sum_frames[:] = 0
-        self._sum_steps = 0
+        self._sum_decisions = 0
         return out
 
     def last_step_transition_cost(self, i: int) -> float:
