@@ -14,22 +14,29 @@ std::array<float, kNumBlocks> weights_from(const std::vector<float>& w) {
 }
 
 // The dict entry `key` as a stored array: a C-contiguous numpy array of dtype T, copied with
-// its shape (database_from_state checks the shapes).
+// its shape (database_from_state checks the shapes), or borrowed: the Buffer then points into
+// the numpy array's memory and keeps a reference to it (released with the GIL held).
 template <class T>
-StateArray<T> take(const py::dict& s, const char* key) {
+StateArray<T> take(const py::dict& s, const char* key, bool borrow = false) {
   if (!s.contains(key)) throw py::value_error(std::string("database state: missing '") + key + "'");
   const py::handle obj = s[key];
   if (!py::isinstance<py::array>(obj))
     throw py::type_error(std::string(key) + ": expected a numpy array, got " +
                          std::string(py::str(py::type::of(obj).attr("__name__"))));
   auto arr = py::reinterpret_borrow<py::array>(obj);
-  if (!arr.dtype().is(py::dtype::of<T>()))
+  if (!has_dtype<T>(arr))
     throw py::type_error(std::string(key) + ": expected dtype " + std::string(py::str(py::dtype::of<T>())) +
                          ", got " + std::string(py::str(arr.dtype())));
   if (!(arr.flags() & py::array::c_style))
     throw py::value_error(std::string(key) + ": array must be C-contiguous (use np.ascontiguousarray)");
   const T* data = static_cast<const T*>(arr.data());
-  return StateArray<T>{std::vector<T>(data, data + arr.size()), std::vector<int64_t>(arr.shape(), arr.shape() + arr.ndim())};
+  std::vector<int64_t> shape(arr.shape(), arr.shape() + arr.ndim());
+  if (!borrow) return StateArray<T>{std::vector<T>(data, data + arr.size()), std::move(shape)};
+  std::shared_ptr<const void> owner(new py::object(arr), [](const void* p) {
+    py::gil_scoped_acquire gil;
+    delete static_cast<const py::object*>(p);
+  });
+  return StateArray<T>{Buffer<T>::borrow(data, static_cast<size_t>(arr.size()), std::move(owner)), std::move(shape)};
 }
 
 py::dict database_state(py::object self) {
@@ -65,7 +72,8 @@ py::dict database_state(py::object self) {
 }
 
 // Converts the dict to a DatabaseState and forwards (the checks and rules: database_io.hpp).
-Database database_from_dict(const py::dict& s) {
+// borrow: the large per-frame float arrays (and "normalized", if given) are borrowed, not copied.
+Database database_from_dict(const py::dict& s, bool borrow) {
   DatabaseState st;
   st.joint_names = s["joint_names"].cast<std::vector<std::string>>();
   st.parents = take<int32_t>(s, "parents");
@@ -79,16 +87,18 @@ Database database_from_dict(const py::dict& s) {
   st.clip_names = s["clip_names"].cast<std::vector<std::string>>();
   st.clip_ranges = take<int32_t>(s, "clip_ranges");
   st.clip_mirrored = take<uint8_t>(s, "clip_mirrored");
-  st.bone_translations = take<float>(s, "bone_translations");
-  st.bone_rotations = take<float>(s, "bone_rotations");
-  st.root_positions = take<float>(s, "root_positions");
-  st.root_yaws = take<float>(s, "root_yaws");
-  st.root_deltas = take<float>(s, "root_deltas");
-  st.features = take<float>(s, "features");
+  st.bone_translations = take<float>(s, "bone_translations", borrow);
+  st.bone_rotations = take<float>(s, "bone_rotations", borrow);
+  st.root_positions = take<float>(s, "root_positions", borrow);
+  st.root_yaws = take<float>(s, "root_yaws", borrow);
+  st.root_deltas = take<float>(s, "root_deltas", borrow);
+  st.features = take<float>(s, "features", borrow);
   st.contacts = take<uint8_t>(s, "contacts");
   st.feature_mean = take<float>(s, "feature_mean");
   st.block_scale = take<float>(s, "block_scale");
   st.weights = take<float>(s, "weights");
+  if (s.contains("normalized")) st.normalized = take<float>(s, "normalized", borrow);
+  py::gil_scoped_release release;  // the checks read every frame
   return database_from_state(std::move(st));
 }
 
@@ -109,7 +119,24 @@ void bind_database(py::module_& m) {
           },
           py::arg("clips"), py::arg("mirror") = false, py::arg("roles") = std::map<std::string, std::string>(),
           py::arg("weights") = std::vector<float>{0.75f, 1.0f, 1.0f, 1.0f, 1.5f})
-      .def_static("from_state", &database_from_dict, py::arg("state"))
+      .def_static("from_state", &database_from_dict, py::arg("state"), py::arg("borrow") = false,
+                  "A database from the arrays of state() (plus, optionally, 'normalized'). borrow=True keeps the "
+                  "large per-frame float arrays where they are (read-only memory is fine: they are only read) "
+                  "instead of copying them; the database keeps references to them.")
+      .def_property_readonly(
+          "borrowed_arrays",
+          [](const Database& db) {
+            std::vector<std::string> names;
+            const std::pair<const char*, const Buffer<float>*> arrays[] = {
+                {"bone_translations", &db.bone_translations}, {"bone_rotations", &db.bone_rotations},
+                {"root_positions", &db.root_positions},       {"root_yaws", &db.root_yaws},
+                {"root_deltas", &db.root_deltas},             {"features", &db.features},
+                {"normalized", &db.normalized}};
+            for (const auto& [name, buffer] : arrays)
+              if (buffer->borrowed()) names.emplace_back(name);
+            return names;
+          },
+          "Names of the per-frame arrays this database borrows instead of owning.")
       .def("state", &database_state, "All arrays as a dict of read-only views (for saving).")
       .def_readonly("num_frames", &Database::num_frames)
       .def_readonly("num_joints", &Database::num_joints)

@@ -39,7 +39,7 @@ py::array check_mask(const py::handle& obj, py::ssize_t n) {
     throw py::type_error("valid_mask: expected a numpy array, got " +
                          std::string(py::str(py::type::of(obj).attr("__name__"))));
   py::array arr = py::reinterpret_borrow<py::array>(obj);
-  if (!arr.dtype().is(py::dtype::of<uint8_t>()) && !arr.dtype().is(py::dtype::of<bool>()))
+  if (!has_dtype<uint8_t>(arr) && !has_dtype<bool>(arr))
     throw py::type_error("valid_mask: expected dtype uint8 or bool, got " + std::string(py::str(arr.dtype())));
   if (arr.ndim() != 1 || arr.shape(0) != n)
     throw py::value_error("valid_mask: expected shape (" + std::to_string(n) + ",), got ndim " +

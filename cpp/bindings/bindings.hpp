@@ -25,6 +25,16 @@ void bind_runtime(py::module_& m);
 template <class T>
 using carray = py::array_t<T, py::array::c_style>;
 
+// True when arr's dtype equals T's (native byte order). Not only the same dtype object: an
+// array that crossed a pickle (Ray's object store, multiprocessing) has an equal dtype that
+// is another object.
+template <class T>
+bool has_dtype(const py::array& arr) {
+  const py::dtype d = arr.dtype(), want = py::dtype::of<T>();
+  if (d.is(want)) return true;  // the usual case, without a Python call
+  return want.attr("__eq__")(d).cast<bool>();  // numpy's equality: '<f4' == float32 here, '>f4' not
+}
+
 // Checks that obj is a C-contiguous numpy array of dtype T with the given shape
 // (-1 = any size in that dimension) and returns it without copying. Raises TypeError /
 // ValueError naming the argument otherwise.
@@ -34,7 +44,7 @@ carray<T> check_array(const py::handle& obj, const char* name, std::initializer_
     throw py::type_error(std::string(name) + ": expected a numpy array, got " +
                          std::string(py::str(py::type::of(obj).attr("__name__"))));
   py::array arr = py::reinterpret_borrow<py::array>(obj);
-  if (!arr.dtype().is(py::dtype::of<T>()))
+  if (!has_dtype<T>(arr))
     throw py::type_error(std::string(name) + ": expected dtype " + std::string(py::str(py::dtype::of<T>())) +
                          ", got " + std::string(py::str(arr.dtype())));
   if (arr.ndim() != static_cast<py::ssize_t>(shape.size()))

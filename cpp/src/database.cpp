@@ -56,12 +56,17 @@ void Database::index_clips() {
   }
 }
 
-void Database::set_weights(const std::array<float, kNumBlocks>& w) {
+void Database::check_weights(const std::array<float, kNumBlocks>& w) {
   for (float x : w)
     if (!(x > 0) || !std::isfinite(x)) throw std::invalid_argument("feature block weights must be positive and finite");
+}
+
+void Database::set_weights(const std::array<float, kNumBlocks>& w) {
+  check_weights(w);
   normalization.weights = w;
-  normalized.resize(features.size());
-  features_normalize(normalization, features.data(), num_frames, normalized.data());
+  std::vector<float> out(features.size());
+  features_normalize(normalization, features.data(), num_frames, out.data());
+  normalized = std::move(out);
 }
 
 void Database::refit_normalization() {
@@ -221,12 +226,14 @@ Database database_build(const std::vector<const Motion*>& clips_in, const Databa
   if (N > static_cast<size_t>(INT32_MAX)) throw std::invalid_argument("too many frames");
   const int J = db.num_joints;
   db.num_frames = static_cast<int>(N);
-  db.bone_translations.resize(N * J * 3);
-  db.bone_rotations.resize(N * J * 4);
-  db.root_positions.resize(N * 3);
-  db.root_yaws.resize(N);
-  db.root_deltas.resize(N * 3);
-  db.features.resize(N * kFeatureDim);
+  db.bone_translations = std::vector<float>(N * J * 3);
+  db.bone_rotations = std::vector<float>(N * J * 4);
+  db.root_positions = std::vector<float>(N * 3);
+  db.root_yaws = std::vector<float>(N);
+  db.root_deltas = std::vector<float>(N * 3);
+  db.features = std::vector<float>(N * kFeatureDim);
+  float* translations = db.bone_translations.mutable_data();
+  float* rotations = db.bone_rotations.mutable_data();
 
   const JointRoles& r = db.roles;
   size_t start = 0;
@@ -235,8 +242,8 @@ Database database_build(const std::vector<const Motion*>& clips_in, const Databa
   for (size_t c = 0; c < clips.size(); ++c) {
     const Motion& m = *clips[c];
     const int F = m.num_frames;
-    std::copy(m.translations.begin(), m.translations.end(), db.bone_translations.begin() + start * J * 3);
-    std::copy(m.rotations.begin(), m.rotations.end(), db.bone_rotations.begin() + start * J * 4);
+    std::copy(m.translations.begin(), m.translations.end(), translations + start * J * 3);
+    std::copy(m.rotations.begin(), m.rotations.end(), rotations + start * J * 4);
     gp.resize(static_cast<size_t>(F) * J * 3);
     motion_forward_kinematics(m, gp.data(), nullptr);
     auto track = [&](int joint, std::vector<float>& out) {
@@ -249,11 +256,11 @@ Database database_build(const std::vector<const Motion*>& clips_in, const Databa
     track(r.upper_leg[1], rul);
     track(r.foot[0], lf);
     track(r.foot[1], rf);
-    float* rp = &db.root_positions[start * 3];
-    float* ry = &db.root_yaws[start];
+    float* rp = db.root_positions.mutable_data() + start * 3;
+    float* ry = db.root_yaws.mutable_data() + start;
     clip_character_frames(F, db.fps, hips.data(), lul.data(), rul.data(), rp, ry);
-    clip_features(F, db.fps, lf.data(), rf.data(), hips.data(), rp, ry, &db.features[start * kFeatureDim]);
-    clip_root_deltas(F, rp, ry, &db.root_deltas[start * 3]);
+    clip_features(F, db.fps, lf.data(), rf.data(), hips.data(), rp, ry, db.features.mutable_data() + start * kFeatureDim);
+    clip_root_deltas(F, rp, ry, db.root_deltas.mutable_data() + start * 3);
     db.clip_ranges.push_back(static_cast<int32_t>(start));
     db.clip_ranges.push_back(static_cast<int32_t>(start + F));
     db.clip_names.push_back(m.source);

@@ -21,15 +21,37 @@ std::invalid_argument state_error(const std::string& message) {
   return std::invalid_argument("database state: " + message);
 }
 
-// Takes the values of a stored array after checking its shape.
+// Takes the values of a stored array after checking its shape (borrowed values stay borrowed).
 template <class T>
-std::vector<T> take(StateArray<T>& a, const char* name, std::vector<int64_t> shape) {
+Buffer<T> take(StateArray<T>& a, const char* name, std::vector<int64_t> shape) {
   int64_t size = 1;
   for (int64_t s : shape) size *= s;
   if (a.shape != shape || static_cast<int64_t>(a.values.size()) != size)
     throw state_error(std::string("'") + name + "' has shape " + shape_text(a.shape) + ", expected " +
                       shape_text(shape));
   return std::move(a.values);
+}
+
+// The same, copied into a vector (the small arrays a Database keeps as vectors).
+template <class T>
+std::vector<T> take_vector(StateArray<T>& a, const char* name, std::vector<int64_t> shape) {
+  const Buffer<T> b = take(a, name, std::move(shape));
+  return std::vector<T>(b.begin(), b.end());
+}
+
+// Adopts given normalized features after checking them against the normalization, row block
+// by row block (no N x 27 temporary): equal bit for bit, or std::invalid_argument.
+void adopt_normalized(Database& db, StateArray<float>& given) {
+  Buffer<float> values = take(given, "normalized", {db.num_frames, kFeatureDim});
+  constexpr int kRows = 1024;
+  float block[kRows * kFeatureDim];
+  for (int r0 = 0; r0 < db.num_frames; r0 += kRows) {
+    const int rows = std::min(kRows, db.num_frames - r0);
+    features_normalize(db.normalization, db.features.data() + static_cast<size_t>(r0) * kFeatureDim, rows, block);
+    if (!std::equal(block, block + rows * kFeatureDim, values.data() + static_cast<size_t>(r0) * kFeatureDim))
+      throw state_error("'normalized' disagrees with the features and their normalization");
+  }
+  db.normalized = std::move(values);
 }
 
 }  // namespace
@@ -61,14 +83,14 @@ Database database_from_state(DatabaseState s) {
   Database db;
   const int64_t J = static_cast<int64_t>(s.joint_names.size());
   db.skeleton.names = s.joint_names;
-  auto parents = take(s.parents, "parents", {J});
+  auto parents = take_vector(s.parents, "parents", {J});
   db.skeleton.parents.assign(parents.begin(), parents.end());
   for (int64_t j = 0; j < J; ++j)
     if (db.skeleton.parents[j] >= j || db.skeleton.parents[j] < -1)
       throw state_error("parents must precede their children");
-  const auto off = take(s.offsets, "offsets", {J, 3});
-  const auto es = take(s.end_sites, "end_sites", {J, 3});
-  db.skeleton.has_end_site = take(s.has_end_site, "has_end_site", {J});
+  const auto off = take_vector(s.offsets, "offsets", {J, 3});
+  const auto es = take_vector(s.end_sites, "end_sites", {J, 3});
+  db.skeleton.has_end_site = take_vector(s.has_end_site, "has_end_site", {J});
   if (static_cast<int64_t>(s.channels.size()) != J) throw state_error("channels size mismatch");
   for (int64_t j = 0; j < J; ++j) {
     db.skeleton.offsets.emplace_back(off[j * 3], off[j * 3 + 1], off[j * 3 + 2]);
@@ -92,8 +114,8 @@ Database database_from_state(DatabaseState s) {
   if (!(db.fps > 0)) throw state_error("fps must be positive");
   db.clip_names = s.clip_names;
   const int64_t C = static_cast<int64_t>(db.clip_names.size());
-  db.clip_ranges = take(s.clip_ranges, "clip_ranges", {C, 2});
-  db.clip_mirrored = take(s.clip_mirrored, "clip_mirrored", {C});
+  db.clip_ranges = take_vector(s.clip_ranges, "clip_ranges", {C, 2});
+  db.clip_mirrored = take_vector(s.clip_mirrored, "clip_mirrored", {C});
   const int64_t N = C > 0 ? db.clip_ranges[C * 2 - 1] : 0;
   if (N < 0) throw state_error("clip_ranges must not be negative");
   db.num_frames = static_cast<int>(N);
@@ -103,7 +125,7 @@ Database database_from_state(DatabaseState s) {
   db.root_yaws = take(s.root_yaws, "root_yaws", {N});
   db.root_deltas = take(s.root_deltas, "root_deltas", {N, 3});
   db.features = take(s.features, "features", {N, kFeatureDim});
-  db.contacts = take(s.contacts, "contacts", {N, 2});
+  db.contacts = take_vector(s.contacts, "contacts", {N, 2});
   const auto mean = take(s.feature_mean, "feature_mean", {kFeatureDim});
   const auto bs = take(s.block_scale, "block_scale", {kNumBlocks});
   const auto w = take(s.weights, "weights", {kNumBlocks});
@@ -113,7 +135,13 @@ Database database_from_state(DatabaseState s) {
   db.index_clips();
   std::array<float, kNumBlocks> weights{};
   std::copy(w.begin(), w.end(), weights.begin());
-  db.set_weights(weights);
+  if (s.normalized.shape.empty()) {
+    db.set_weights(weights);
+  } else {
+    db.check_weights(weights);
+    db.normalization.weights = weights;
+    adopt_normalized(db, s.normalized);
+  }
   return db;
 }
 

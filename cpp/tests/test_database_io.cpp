@@ -78,16 +78,18 @@ TEST(DatabaseIo, RefusesBadFieldsNamingThem) {
   const DatabaseState good = state_of(testing_db::database());
   DatabaseState s = good;
   s.features.shape[0] -= 1;
-  s.features.values.resize(s.features.values.size() - kFeatureDim);
+  s.features.values = std::vector<float>(s.features.values.begin(), s.features.values.end() - kFeatureDim);
   expect_refused(s, "'features' has shape");
   s = good;
   s.bone_rotations.shape = {s.bone_rotations.shape[1], s.bone_rotations.shape[0], 4};  // same size, wrong layout
   expect_refused(s, "bone_rotations");
   s = good;
-  s.weights.values.push_back(1.0f);
+  std::vector<float> w(s.weights.values.begin(), s.weights.values.end());
+  w.push_back(1.0f);
+  s.weights.values = w;
   expect_refused(s, "weights");  // values disagree with the shape
   s = good;
-  s.parents.values[2] = 5;
+  s.parents.values.mutable_data()[2] = 5;
   expect_refused(s, "parents");
   s = good;
   s.channels[1] = "Xrotation Wrotation";
@@ -102,10 +104,10 @@ TEST(DatabaseIo, RefusesBadFieldsNamingThem) {
   s.fps = 0;
   expect_refused(s, "fps");
   s = good;
-  s.clip_ranges.values[1] += 1;  // clip 0 overlaps clip 1
+  s.clip_ranges.values.mutable_data()[1] += 1;  // clip 0 overlaps clip 1
   expect_refused(s, "clip_ranges");
   s = good;
-  s.features.values[7] = NAN;
+  s.features.values.mutable_data()[7] = NAN;
   expect_refused(s, "NaN");
 }
 

@@ -102,8 +102,10 @@ class Database:
     def build(clips: collections.abc.Sequence[Motion], mirror: bool = False, roles: collections.abc.Mapping[str, str] = {}, weights: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex] = [0.75, 1.0, 1.0, 1.0, 1.5]) -> Database:
         ...
     @staticmethod
-    def from_state(state: dict) -> Database:
-        ...
+    def from_state(state: dict, borrow: bool = False) -> Database:
+        """
+        A database from the arrays of state() (plus, optionally, 'normalized'). borrow=True keeps the large per-frame float arrays where they are (read-only memory is fine: they are only read) instead of copying them; the database keeps references to them.
+        """
     def state(self) -> dict:
         """
         All arrays as a dict of read-only views (for saving).
@@ -111,6 +113,11 @@ class Database:
     def with_weights(self, weights: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> Database:
         """
         A new Database with other block weights (same mean and block scales).
+        """
+    @property
+    def borrowed_arrays(self) -> list[str]:
+        """
+        Names of the per-frame arrays this database borrows instead of owning.
         """
     @property
     def clip_names(self) -> list[str]:

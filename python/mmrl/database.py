@@ -11,7 +11,7 @@ import os
 import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -334,6 +334,33 @@ class Database:
             return cls(_core.Database.from_state(state), source_fps, source_up)
         except (KeyError, TypeError, ValueError) as e:
             raise DatabaseFileError(f"{path}: corrupt database file ({e})") from e
+
+    # ----------------------------------------------------------------- sharing between processes
+    def shared_arrays(self) -> Dict[str, Any]:
+        """Everything :meth:`from_shared_arrays` needs, as numpy arrays and plain lists: what
+        ``ray.put`` stores once in Ray's shared-memory object store (mmrl.integrations.rllib).
+        The arrays are views of this database's memory (nothing is copied here)."""
+        state = dict(self._db.state())
+        state["normalized"] = self.normalized_features
+        state["clip_source_fps"] = self._clip_source_fps
+        state["clip_source_up"] = self._clip_source_up
+        return state
+
+    @classmethod
+    def from_shared_arrays(cls, arrays: Mapping[str, Any]) -> "Database":
+        """A database over ``arrays`` (from :meth:`shared_arrays`) that borrows its large
+        per-frame arrays instead of copying them: features, normalized features, local poses
+        and root tracks stay wherever the arrays live (read-only memory is fine, e.g. what
+        ``ray.get`` returns from the object store). ``borrowed_arrays`` lists them. The small
+        arrays (clips, contacts, skeleton) are copied. Every array is checked as on load."""
+        state = dict(arrays)
+        fps, up = state.pop("clip_source_fps", None), state.pop("clip_source_up", None)
+        return cls(_core.Database.from_state(state, borrow=True), fps, up)
+
+    @property
+    def borrowed_arrays(self) -> List[str]:
+        """The per-frame arrays this database borrows (see :meth:`from_shared_arrays`)."""
+        return list(self._db.borrowed_arrays)
 
     # ----------------------------------------------------------------- matching
     def match(self, queries: np.ndarray, *, normalized: bool = False,

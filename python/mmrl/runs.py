@@ -51,13 +51,18 @@ class RunDir:
 
     @classmethod
     def create(cls, path: "str | os.PathLike[str]", *, task: Task, data: Dict[str, Any], num_envs: int,
-               task_config, ppo_config, callback_options: Optional[Dict[str, Any]] = None) -> "RunDir":
+               task_config, ppo_config, callback_options: Optional[Dict[str, Any]] = None,
+               backend: str = "ppo") -> "RunDir":
         """Make ``path`` (if needed) and write its config.json atomically (``callback_options``:
-        the task switches its callbacks read, e.g. ``{"curriculum": False}``)."""
+        the task switches its callbacks read, e.g. ``{"curriculum": False}``). ``backend``
+        "rllib": ``ppo_config`` is an ``RLlibConfig``, recorded under "rllib"."""
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)
-        config = {"task": task.name, "data": data, "num_envs": int(num_envs), "task_config": asdict(task_config),
-                  "ppo": asdict(ppo_config)}
+        config = {"task": task.name, "data": data, "num_envs": int(num_envs), "task_config": asdict(task_config)}
+        if backend == "rllib":
+            config.update(backend="rllib", rllib=asdict(ppo_config))
+        else:
+            config["ppo"] = asdict(ppo_config)
         if callback_options:
             config["callback_options"] = dict(callback_options)
         write_config(path, config)

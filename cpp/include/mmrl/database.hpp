@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "mmrl/buffer.hpp"
 #include "mmrl/bvh.hpp"
 #include "mmrl/features.hpp"
 #include "mmrl/skeleton.hpp"
@@ -41,19 +42,21 @@ struct Database {
   std::vector<std::string> clip_names;
   std::vector<uint8_t> clip_mirrored;
 
+  // The per-frame float arrays are Buffers: owned after building or loading a file, or
+  // borrowed from memory shared between processes (mmrl.integrations.rllib).
   // Per-frame local pose (meters; quaternions w x y z), N x J x 3 and N x J x 4.
-  std::vector<float> bone_translations;
-  std::vector<float> bone_rotations;
+  Buffer<float> bone_translations;
+  Buffer<float> bone_rotations;
 
   // Character frame in world space: root positions (N x 3, y = 0) and yaws (N, radians).
-  std::vector<float> root_positions;
-  std::vector<float> root_yaws;
+  Buffer<float> root_positions;
+  Buffer<float> root_yaws;
   // Root motion from frame i to i + 1 in frame i's character frame: (dx, dz, dyaw) (N x 3).
   // The last frame of a clip repeats the previous delta.
-  std::vector<float> root_deltas;
+  Buffer<float> root_deltas;
 
-  std::vector<float> features;    // N x 27, raw units
-  std::vector<float> normalized;  // N x 27, (f - mean) / column_scale
+  Buffer<float> features;    // N x 27, raw units
+  Buffer<float> normalized;  // N x 27, (f - mean) / column_scale
   FeatureNormalization normalization;
   // 1 where frame i + 30 stays inside frame i's clip: the frames a search may return.
   std::vector<uint8_t> valid;
@@ -66,6 +69,8 @@ struct Database {
 
   // Recomputes `normalized` for new block weights (the mean and block scales stay).
   void set_weights(const std::array<float, kNumBlocks>& weights);
+  // std::invalid_argument unless every block weight is positive and finite.
+  static void check_weights(const std::array<float, kNumBlocks>& weights);
   // Recomputes normalization (mean, block scales) from the features and current weights.
   void refit_normalization();
   // Fills the derived per-frame arrays (valid, frame_clip) from clip_ranges. Called by

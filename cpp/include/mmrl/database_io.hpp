@@ -8,14 +8,17 @@
 #include <string>
 #include <vector>
 
+#include "mmrl/buffer.hpp"
 #include "mmrl/database.hpp"
 
 namespace mmrl {
 
-// A stored array: values in C order and the shape they had in the file.
+// A stored array: values in C order and the shape they had in the file. The values may be
+// borrowed (Buffer::borrow): a database built from borrowed arrays keeps borrowing its large
+// per-frame arrays instead of copying them.
 template <class T>
 struct StateArray {
-  std::vector<T> values;
+  Buffer<T> values;
   std::vector<int64_t> shape;
 };
 
@@ -43,6 +46,10 @@ struct DatabaseState {
   StateArray<float> feature_mean;        // 27
   StateArray<float> block_scale;         // 5
   StateArray<float> weights;             // 5
+  // Optional (empty: derived from the features): N x 27, the normalized features. When given,
+  // they must equal what the normalization computes, bit for bit; a borrowed array is then
+  // kept as the database's own instead of a derived copy.
+  StateArray<float> normalized;
 };
 
 // A joint's channels as text: BVH channel names separated by single spaces, in file order

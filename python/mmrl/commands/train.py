@@ -36,13 +36,24 @@ def register_cli(sub) -> None:
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a PPOConfig field or a task option, e.g. --set learning_rate=3e-4 "
                         "--set max_steps=150 (repeatable)")
-    presets = sorted({p for n in tasks for p in get_task(n).presets})
+    presets = sorted({p for n in tasks for p in get_task(n).presets} | {"paper-rllib"})
     t.add_argument("--preset", choices=presets or None, default=None,
                    help="a task's named set of options; " + "; ".join(
                        f"{n}: {', '.join(get_task(n).presets)}"
                        + (f" (default {get_task(n).default_preset})" if get_task(n).default_preset else "")
                        for n in tasks if get_task(n).presets) +
-                   "; paper is the paper's task as written (docs/quality.md, docs/obstacles.md); --set overrides it")
+                   "; paper is the paper's task as written (docs/quality.md, docs/obstacles.md); paper-rllib "
+                   "(with --backend rllib) is the paper's task and the authors' RLlib PPO settings on 11 "
+                   "workers; --set overrides it")
+    r = t.add_argument_group("Ray RLlib (extra mmrl[rllib]; docs/cluster.md)")
+    r.add_argument("--backend", choices=("ppo", "rllib"), default=None,
+                   help="ppo: mmrl's own trainer (default); rllib: RLlib's PPO on Ray workers, the same run "
+                        "directory (a resumed run keeps its backend)")
+    r.add_argument("--workers", type=int, default=None, help="rllib: EnvRunner workers (default 1)")
+    r.add_argument("--envs-per-worker", type=int, default=None,
+                   help="rllib: characters per worker, one C++ vector env (default 32)")
+    r.add_argument("--address", default=None,
+                   help="rllib: a Ray cluster to join (e.g. HEAD_IP:6379, or 'auto'); default: a local Ray")
     seen = set()
     for name in tasks:
         for flag in get_task(name).flags:
@@ -150,6 +161,20 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     task = get_task(args.task)
     saved: Dict[str, Any] = {}
+    if args.resume:
+        saved_backend = RunDir(args.resume).config.get("backend", "ppo")
+        if args.backend is not None and args.backend != saved_backend:
+            raise InputError(f"{args.resume}: trained with --backend {saved_backend}; resume it with that backend")
+        args.backend = saved_backend
+    if args.backend == "rllib":
+        from .train_rllib import cmd_train_rllib
+
+        return cmd_train_rllib(args, task)
+    for name in ("workers", "envs_per_worker", "address"):
+        if getattr(args, name) is not None:
+            raise InputError(f"--{name.replace('_', '-')} applies to --backend rllib only")
+    if args.preset == "paper-rllib":
+        raise InputError("--preset paper-rllib is RLlib's trainer: add --backend rllib")
     if args.resume:
         run = RunDir(args.resume)
         saved = run.config

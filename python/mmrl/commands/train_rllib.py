@@ -1,0 +1,124 @@
+"""``mmrl train TASK --backend rllib``: argument handling only; the work is in
+:mod:`mmrl.integrations.rllib`."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any, Dict
+
+from ..errors import InputError
+from ..tasks import Task, task_names, get_task
+from .common import data_spec_from_args
+
+# Our trainer's option names for the knobs RLlib also has (a task preset may set them).
+PPO_TO_RLLIB = {"gamma": "gamma", "learning_rate": "lr", "gae_lambda": "lambda_", "clip_coef": "clip_param",
+                "ent_coef": "entropy_coeff", "seed": "seed"}
+
+
+def _configs(task: Task, args: argparse.Namespace, saved: Dict[str, Any]):
+    """(task config, RLlibConfig, callback options) from the defaults, a resumed run's saved
+    values, the preset (a task preset, or paper-rllib), the task's flags and --set."""
+    from ..integrations.rllib import RLLIB_PRESETS, RLlibConfig
+    from .train import _apply, split_overrides
+
+    task_cfg = task.default_config()
+    cfg = RLlibConfig(seed=args.seed)
+    if saved:
+        _apply(task_cfg, {k: v for k, v in saved.get("task_config", {}).items() if hasattr(task_cfg, k)})
+        _apply(cfg, {k: v for k, v in saved.get("rllib", {}).items() if hasattr(cfg, k)})
+        if args.preset is not None:
+            raise InputError("--preset: a resumed run keeps its configuration (change options with --set)")
+    preset = args.preset if args.preset is not None or saved else task.default_preset
+    sets = []
+    if preset == "paper-rllib":
+        sets += [f"{k}={v}" for k, v in task.presets.get("paper", {}).items()]
+        sets += [f"{k}={v}" for k, v in RLLIB_PRESETS["paper-rllib"].items()]
+    elif preset is not None:
+        if preset not in task.presets:
+            raise InputError(f"--preset {preset}: the {task.name} task has presets "
+                             f"{', '.join(list(task.presets) + ['paper-rllib'])}")
+        for k, v in task.presets[preset].items():
+            if hasattr(task_cfg, k):
+                sets.append(f"{k}={v}")
+            elif k in PPO_TO_RLLIB:
+                sets.append(f"{PPO_TO_RLLIB[k]}={v}")
+            # Other trainer options of the preset (e.g. anneal_lr) have no RLlib knob here.
+    options: Dict[str, Any] = dict(saved.get("callback_options", {})) if saved else {}
+    own_flags = {f.flag for f in task.flags}
+    for name in task_names():
+        for flag in get_task(name).flags:
+            if getattr(args, flag.flag.lstrip("-").replace("-", "_")) and flag.flag not in own_flags:
+                raise InputError(f"{flag.flag} applies to the {name} task only")
+    for flag in task.flags:
+        if getattr(args, flag.flag.lstrip("-").replace("-", "_")):
+            if flag.target == "callbacks":
+                options[flag.option] = flag.value
+            else:
+                sets.append(f"{flag.option}={flag.value}")
+    rllib_over, task_over = split_overrides(sets + list(args.set), cfg, task_cfg)
+    _apply(cfg, rllib_over)
+    _apply(task_cfg, task_over)
+    return task_cfg, cfg, options
+
+
+def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
+    try:
+        from ..integrations.rllib import RLlibRun, WorkerLost
+    except ImportError as e:
+        raise InputError(f"--backend rllib: {e}") from None
+    from ..runs import RunDir
+    from ..sources import database_from_spec
+
+    saved: Dict[str, Any] = {}
+    if args.resume:
+        run_dir = RunDir(args.resume)
+        saved = run_dir.config
+        if run_dir.task_name != task.name:
+            raise InputError(f"{run_dir.path} holds a '{run_dir.task_name}' run, not '{task.name}'")
+        out, data = run_dir.path, run_dir.data_spec
+    else:
+        out = Path(args.out or f"runs/{task.name}-rllib-seed{args.seed}")
+        if (out / "latest.pt").exists():
+            raise InputError(f"{out} already holds a run; use --resume {out} or another --out")
+        data = data_spec_from_args(args)
+    task_cfg, cfg, options = _configs(task, args, saved)
+    if args.steps is not None:
+        cfg.total_steps, cfg.max_seconds = args.steps, None
+    elif args.seconds is not None:
+        cfg.total_steps, cfg.max_seconds = 10**12, args.seconds
+    if args.workers is not None:
+        cfg.workers = args.workers
+    if args.envs_per_worker is not None:
+        cfg.envs_per_worker = args.envs_per_worker
+    cfg.device = args.device
+    cfg.progress = not args.no_progress
+    try:
+        cfg.check()
+    except ValueError as e:
+        raise InputError(str(e)) from None
+    db = database_from_spec(data)
+    callbacks = list(task.callbacks(None, options)) if task.callbacks else []
+    RunDir.create(out, task=task, data=data, num_envs=max(cfg.workers, 1) * cfg.envs_per_worker,
+                  task_config=task_cfg, ppo_config=cfg, callback_options=options, backend="rllib")
+    import ray
+
+    started_here = not ray.is_initialized()
+    run = None
+    try:
+        run = RLlibRun(task, db, task_cfg, cfg, out, callbacks=callbacks, address=args.address,
+                       resume=bool(args.resume))
+        row = run.train()
+    except WorkerLost as e:
+        raise InputError(f"{e}; resume with: mmrl train {task.name} --resume {out}") from None
+    finally:
+        if run is not None:
+            run.stop()
+        if started_here:
+            ray.shutdown()
+    print(f"trained {run.global_step:,} steps in {run.wall_s:.1f} s with RLlib ({cfg.workers} workers x "
+          f"{cfg.envs_per_worker} envs); success {row.get('success_rate', float('nan')):.3f}, return "
+          f"{row.get('episode_return', float('nan')):.1f}; checkpoint {out / 'latest.pt'}")
+    for cb in callbacks:
+        if hasattr(cb, "describe"):
+            print(cb.describe())
+    return 0
