@@ -11,8 +11,16 @@ from ..tasks import Task, task_names, get_task
 from .common import data_spec_from_args
 
 # Our trainer's option names for the knobs RLlib also has (a task preset may set them).
-PPO_TO_RLLIB = {"gamma": "gamma", "learning_rate": "lr", "gae_lambda": "lambda_", "clip_coef": "clip_param",
-                "ent_coef": "entropy_coeff", "seed": "seed"}
+PPO_TO_RLLIB = {"gamma": "gamma", "learning_rate": "lr", "anneal_lr": "anneal_lr", "gae_lambda": "lambda_",
+                "clip_coef": "clip_param", "ent_coef": "entropy_coeff", "update_epochs": "num_epochs",
+                "num_minibatches": "num_minibatches", "num_steps": "rollout_fragment_length",
+                "torch_threads": "torch_threads", "snapshot_steps": "snapshot_steps", "init_log_std": "init_log_std",
+                "max_grad_norm": "grad_clip", "seed": "seed"}
+
+
+def ppo_settings(values) -> Dict[str, Any]:
+    """Our trainer's options as RLlibConfig fields (those RLlib has; the rest have no knob here)."""
+    return {PPO_TO_RLLIB[k]: v for k, v in dict(values).items() if k in PPO_TO_RLLIB}
 
 
 def _configs(task: Task, args: argparse.Namespace, saved: Dict[str, Any]):
@@ -23,6 +31,7 @@ def _configs(task: Task, args: argparse.Namespace, saved: Dict[str, Any]):
 
     task_cfg = task.default_config()
     cfg = RLlibConfig(seed=args.seed)
+    _apply(cfg, ppo_settings(task.ppo_defaults))  # what the task trains best with, in RLlib's names
     if saved:
         _apply(task_cfg, {k: v for k, v in saved.get("task_config", {}).items() if hasattr(task_cfg, k)})
         _apply(cfg, {k: v for k, v in saved.get("rllib", {}).items() if hasattr(cfg, k)})
@@ -42,7 +51,7 @@ def _configs(task: Task, args: argparse.Namespace, saved: Dict[str, Any]):
                 sets.append(f"{k}={v}")
             elif k in PPO_TO_RLLIB:
                 sets.append(f"{PPO_TO_RLLIB[k]}={v}")
-            # Other trainer options of the preset (e.g. anneal_lr) have no RLlib knob here.
+            # Other trainer options of the preset have no RLlib knob here.
     options: Dict[str, Any] = dict(saved.get("callback_options", {})) if saved else {}
     own_flags = {f.flag for f in task.flags}
     for name in task_names():
@@ -98,7 +107,7 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
         raise InputError(str(e)) from None
     db = database_from_spec(data)
     callbacks = list(task.callbacks(None, options)) if task.callbacks else []
-    RunDir.create(out, task=task, data=data, num_envs=max(cfg.workers, 1) * cfg.envs_per_worker,
+    RunDir.create(out, task=task, data=data, num_envs=max(cfg.workers, 1) * cfg.envs(),
                   task_config=task_cfg, ppo_config=cfg, callback_options=options, backend="rllib")
     import ray
 
@@ -116,7 +125,7 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
         if started_here:
             ray.shutdown()
     print(f"trained {run.global_step:,} steps in {run.wall_s:.1f} s with RLlib ({cfg.workers} workers x "
-          f"{cfg.envs_per_worker} envs); success {row.get('success_rate', float('nan')):.3f}, return "
+          f"{cfg.envs()} envs); success {row.get('success_rate', float('nan')):.3f}, return "
           f"{row.get('episode_return', float('nan')):.1f}; checkpoint {out / 'latest.pt'}")
     for cb in callbacks:
         if hasattr(cb, "describe"):

@@ -22,15 +22,20 @@ class RLlibConfig:
     """Wall-clock training budget (training time, summed over resumes); checked between iterations."""
     workers: int = 1
     """RLlib EnvRunners (0 = sample in the driver process)."""
-    envs_per_worker: int = 32
-    """Characters per EnvRunner, stepped together by one C++ vector env."""
+    envs_per_worker: Optional[int] = None
+    """Characters per EnvRunner, stepped together by one C++ vector env. None: 64 in all
+    (our trainer's default), split over the workers."""
     rollout_fragment_length: int = 32
     """Steps per env per sample call; the train batch is workers x envs x this (at least 1 worker)."""
-    lr: float = 1e-3
+    lr: float = 2e-3
+    anneal_lr: bool = False
+    """Decay the learning rate linearly to 0 over total_steps (an RLlib lr schedule)."""
     gamma: float = 0.99
     lambda_: float = 0.95
     clip_param: float = 0.2
-    minibatch_size: int = 512
+    num_minibatches: int = 4
+    minibatch_size: Optional[int] = None
+    """None: the train batch / num_minibatches."""
     num_epochs: int = 8
     vf_loss_coeff: float = 0.5
     vf_clip_param: Optional[float] = None
@@ -53,7 +58,7 @@ class RLlibConfig:
     env_threads: int = 1
     """C++ threads per worker's vector env (the parallelism is across workers)."""
     torch_threads: int = 1
-    """torch threads in each worker (the driver's learner keeps torch's setting)."""
+    """torch threads of the learner in the driver (0 keeps torch's setting); each worker uses 1."""
     checkpoint_interval_steps: int = 100_000
     snapshot_steps: Tuple[int, ...] = ()
     max_worker_restarts: int = 100
@@ -63,16 +68,27 @@ class RLlibConfig:
     progress: bool = True
     tensorboard: bool = True
 
+    def envs(self) -> int:
+        """Characters per worker."""
+        if self.envs_per_worker is not None:
+            return int(self.envs_per_worker)
+        return max(1, 64 // max(self.workers, 1))
+
     def batch_size(self) -> int:
         if self.train_batch_size is not None:
             return int(self.train_batch_size)
-        return max(self.workers, 1) * self.envs_per_worker * self.rollout_fragment_length
+        return max(self.workers, 1) * self.envs() * self.rollout_fragment_length
+
+    def minibatch(self) -> int:
+        if self.minibatch_size is not None:
+            return int(self.minibatch_size)
+        return max(1, self.batch_size() // max(self.num_minibatches, 1))
 
     def check(self) -> None:
-        if self.workers < 0 or self.envs_per_worker < 1 or self.rollout_fragment_length < 1:
+        if self.workers < 0 or self.envs() < 1 or self.rollout_fragment_length < 1:
             raise ValueError("rllib: workers must be >= 0, envs_per_worker and rollout_fragment_length >= 1")
-        if self.minibatch_size < 1 or self.num_epochs < 1 or self.batch_size() < self.minibatch_size:
-            raise ValueError(f"rllib: need 1 <= minibatch_size ({self.minibatch_size}) <= train batch "
+        if self.minibatch() < 1 or self.num_epochs < 1 or self.batch_size() < self.minibatch():
+            raise ValueError(f"rllib: need 1 <= minibatch size ({self.minibatch()}) <= train batch "
                              f"({self.batch_size()}) and num_epochs >= 1")
         if not self.reward_scale > 0:
             raise ValueError(f"rllib: reward_scale must be > 0, got {self.reward_scale}")

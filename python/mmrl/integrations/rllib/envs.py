@@ -18,6 +18,7 @@ a database every worker borrows from Ray's object store.
 """
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional
@@ -104,15 +105,20 @@ def drain_worker(_runner=None) -> List[Dict[str, Any]]:
     return [log.drain() for log in _WORKER_ENVS]
 
 
+def _apply_stage(params, label: int, _runner=None) -> int:
+    for log in _WORKER_ENVS:
+        env = log.env.unwrapped
+        if hasattr(env, "set_stage"):
+            env.set_stage(*params, label=label)
+    return len(_WORKER_ENVS)
+
+
 def set_worker_stage(params, label: int):
-    """Put every env of this process at curriculum stage ``label`` for its next resets."""
-    def apply(_runner=None):
-        for log in _WORKER_ENVS:
-            env = log.env.unwrapped
-            if hasattr(env, "set_stage"):
-                env.set_stage(*params, label=label)
-        return len(_WORKER_ENVS)
-    return apply
+    """A function for ``foreach_env_runner`` that puts every env of the worker process at
+    curriculum stage ``label`` for its next resets. A partial of a module-level function:
+    Ray pickles it by reference, so it reaches the worker's own envs (a closure would be
+    pickled by value, with a copy of this process's env list)."""
+    return functools.partial(_apply_stage, tuple(params), int(label))
 
 
 def make_env(config) -> EpisodeLog:

@@ -49,6 +49,7 @@ def init_ray(address: Optional[str], workers: int) -> Dict[str, float]:
         return ray.cluster_resources()
     kwargs: Dict[str, Any] = dict(include_dashboard=False, log_to_driver=False, configure_logging=False)
     if address:
+        check_reachable(address)
         try:
             ray.init(address=address, **kwargs)
         except Exception as e:  # ConnectionError, or RuntimeError from the GCS client
@@ -58,6 +59,26 @@ def init_ray(address: Optional[str], workers: int) -> Dict[str, float]:
     else:
         ray.init(num_cpus=os.cpu_count() or 1, **kwargs)
     return ray.cluster_resources()
+
+
+def check_reachable(address: str, timeout: float = 5.0) -> None:
+    """A TCP connection to ``address``'s host:port, within ``timeout`` s, or InputError: Ray's own
+    client waits minutes for an address where nothing answers."""
+    import socket
+
+    if address == "auto":
+        return  # Ray finds the local cluster's address itself and fails at once without one
+    hostport = address.split("://", 1)[-1]
+    host, _, port = hostport.rpartition(":")
+    if not host or not port.isdigit():
+        raise InputError(f"--address {address}: expected HOST:PORT (e.g. 10.0.0.1:6379) or 'auto'")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout):
+            pass
+    except OSError as e:
+        raise InputError(f"--address {address}: nothing answers there ({e.strerror or e}); start the head with "
+                          f"`ray start --head --port {port}`, check the host and firewall, or drop --address "
+                          f"to train on this machine") from None
 
 
 def cpus_per_worker(resources: Dict[str, float], workers: int) -> float:
@@ -76,8 +97,8 @@ def build_algorithm(task, db_handle, task_config, cfg: RLlibConfig, obs_dim: int
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
     env_config = {"task": task.name, "db": db_handle, "task_config": dataclasses.asdict(task_config),
-                  "threads": cfg.env_threads, "torch_threads": cfg.torch_threads, "reward_scale": cfg.reward_scale}
-    runners: Dict[str, Any] = dict(num_env_runners=cfg.workers, num_envs_per_env_runner=cfg.envs_per_worker,
+                  "threads": cfg.env_threads, "torch_threads": 1, "reward_scale": cfg.reward_scale}
+    runners: Dict[str, Any] = dict(num_env_runners=cfg.workers, num_envs_per_env_runner=cfg.envs(),
                                    gym_env_vectorize_mode="vector_entry_point",
                                    rollout_fragment_length=cfg.rollout_fragment_length,
                                    num_cpus_per_env_runner=cpus)
@@ -89,8 +110,9 @@ def build_algorithm(task, db_handle, task_config, cfg: RLlibConfig, obs_dim: int
         .environment(ENV_PREFIX + task.name, env_config=env_config, normalize_actions=cfg.normalize_actions,
                      clip_actions=False)
         .env_runners(**runners)
-        .training(lr=cfg.lr, gamma=cfg.gamma, lambda_=cfg.lambda_, clip_param=cfg.clip_param,
-                  train_batch_size_per_learner=cfg.batch_size(), minibatch_size=cfg.minibatch_size,
+        .training(lr=[[0, cfg.lr], [cfg.total_steps, 0.0]] if cfg.anneal_lr else cfg.lr, gamma=cfg.gamma,
+                  lambda_=cfg.lambda_, clip_param=cfg.clip_param,
+                  train_batch_size_per_learner=cfg.batch_size(), minibatch_size=cfg.minibatch(),
                   num_epochs=cfg.num_epochs, vf_loss_coeff=cfg.vf_loss_coeff,
                   vf_clip_param=float("inf") if cfg.vf_clip_param is None else cfg.vf_clip_param,
                   entropy_coeff=cfg.entropy_coeff, use_kl_loss=cfg.use_kl_loss, kl_coeff=cfg.kl_coeff,
@@ -178,6 +200,8 @@ class RLlibRun:
         self.action_center = ((space.high + space.low) / 2).astype(np.float32) if cfg.normalize_actions else None
         self.action_half = ((space.high - space.low) / 2).astype(np.float32) if cfg.normalize_actions else None
         torch.manual_seed(cfg.seed)
+        if cfg.torch_threads > 0:
+            torch.set_num_threads(cfg.torch_threads)
         if task.policy_factory is not None:
             self.model = task.policy_factory(probe)(self.obs_dim, self.act_dim)
         else:
@@ -352,8 +376,7 @@ class RLlibRun:
         if self.cfg.workers and healthy == 0:
             raise WorkerLost(f"every RLlib worker is dead (restarts exhausted: max_worker_restarts="
                              f"{self.cfg.max_worker_restarts}); latest.pt holds step {self.global_step:,}")
-        if result.get("fault_tolerance", {}).get("num_remote_worker_restarts", 0):
-            self._push_stage()  # a restarted worker starts at the config's stage
+        self._push_stage()  # a restarted worker starts at the config's stage (a no-op without a curriculum)
         return result
 
     def worker_pids(self) -> List[int]:
