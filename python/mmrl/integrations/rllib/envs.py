@@ -121,6 +121,11 @@ def set_worker_stage(params, label: int):
     return functools.partial(_apply_stage, tuple(params), int(label))
 
 
+def worker_report(shared: SharedDatabase, _runner=None) -> Dict[str, Any]:
+    """This worker's memory (:func:`process_memory`) and which database arrays it borrows."""
+    return {"memory": process_memory(), "borrowed": worker_database(shared).borrowed_arrays}
+
+
 def make_env(config) -> EpisodeLog:
     """The RLlib env creator: ``config`` (RLlib's EnvContext) holds ``task``, ``db``
     (a :class:`SharedDatabase`), ``task_config`` (dict), ``num_envs`` (RLlib adds it),
