@@ -216,3 +216,47 @@ def test_bad_input_gives_one_line_and_what_to_do(tmp_path):
     # Options of one backend with the other.
     assert main(["train", "plane", "--workers", "2", "--steps", "10", "--out", str(tmp_path / "c")]) == 2
     assert main(["train", "plane", "--preset", "paper-rllib", "--steps", "10", "--out", str(tmp_path / "d")]) == 2
+
+
+def test_a_worker_that_cannot_be_restarted_stops_the_run_resumably(local_ray, tmp_path):
+    from mmrl.integrations.rllib import RLlibConfig, RLlibRun, WorkerLost
+
+    task = mmrl.get_task("plane")
+    cfg = RLlibConfig(workers=1, envs_per_worker=4, rollout_fragment_length=16, num_epochs=1, total_steps=10**9,
+                      max_worker_restarts=0, checkpoint_interval_steps=64, progress=False, tensorboard=False)
+    run = RLlibRun(task, mmrl.default_database(), task.default_config(), cfg, tmp_path)
+    try:
+        run.save()
+        os.kill(run.worker_pids()[0], signal.SIGKILL)
+        with pytest.raises(WorkerLost, match="latest.pt holds step"):
+            run.train()
+    finally:
+        run.stop()
+    state = torch.load(tmp_path / "latest.pt", weights_only=True)
+    assert state["backend"] == "rllib"
+
+
+def test_paper_rllib_is_the_papers_task_with_rllibs_defaults():
+    import argparse
+
+    from mmrl.commands.train_rllib import _configs
+    from mmrl.integrations.rllib import RLLIB_PRESETS
+
+    task = mmrl.get_task("plane")
+    args = argparse.Namespace(seed=3, preset="paper-rllib", set=["num_epochs=7"], **{
+        f.flag.lstrip("-").replace("-", "_"): False for name in mmrl.tasks.task_names()
+        for f in mmrl.get_task(name).flags})
+    task_cfg, cfg, _ = _configs(task, args, {})
+    assert task_cfg == task.default_config()  # the paper's task: the config classes' values
+    for key, value in RLLIB_PRESETS["paper-rllib"].items():
+        if key != "num_epochs":
+            assert getattr(cfg, key) == value, key
+    assert cfg.num_epochs == 7 and cfg.seed == 3 and cfg.workers == 11 and cfg.batch_size() == 4000
+    # Without a preset: the task's default preset, its trainer options in RLlib's names.
+    args.preset, args.set = None, []
+    task_cfg, cfg, _ = _configs(task, args, {})
+    quality = task.presets[task.default_preset]
+    assert task_cfg.transition_cost == quality["transition_cost"] and cfg.gamma == quality["gamma"]
+    obstacles = mmrl.get_task("obstacles")
+    _, cfg, _ = _configs(obstacles, args, {})
+    assert (cfg.num_epochs, cfg.num_minibatches, cfg.lr, cfg.anneal_lr) == (2, 2, 1e-3, True)

@@ -102,6 +102,19 @@ Database database_from_dict(const py::dict& s, bool borrow) {
   return database_from_state(std::move(st));
 }
 
+// Names of the per-frame arrays db borrows (Buffer::borrowed) instead of owning.
+std::vector<std::string> borrowed_array_names(const Database& db) {
+  std::vector<std::string> names;
+  const std::pair<const char*, const Buffer<float>*> arrays[] = {
+      {"bone_translations", &db.bone_translations}, {"bone_rotations", &db.bone_rotations},
+      {"root_positions", &db.root_positions},       {"root_yaws", &db.root_yaws},
+      {"root_deltas", &db.root_deltas},             {"features", &db.features},
+      {"normalized", &db.normalized}};
+  for (const auto& [name, buffer] : arrays)
+    if (buffer->borrowed()) names.emplace_back(name);
+  return names;
+}
+
 }  // namespace
 
 void bind_database(py::module_& m) {
@@ -124,18 +137,7 @@ void bind_database(py::module_& m) {
                   "large per-frame float arrays where they are (read-only memory is fine: they are only read) "
                   "instead of copying them; the database keeps references to them.")
       .def_property_readonly(
-          "borrowed_arrays",
-          [](const Database& db) {
-            std::vector<std::string> names;
-            const std::pair<const char*, const Buffer<float>*> arrays[] = {
-                {"bone_translations", &db.bone_translations}, {"bone_rotations", &db.bone_rotations},
-                {"root_positions", &db.root_positions},       {"root_yaws", &db.root_yaws},
-                {"root_deltas", &db.root_deltas},             {"features", &db.features},
-                {"normalized", &db.normalized}};
-            for (const auto& [name, buffer] : arrays)
-              if (buffer->borrowed()) names.emplace_back(name);
-            return names;
-          },
+          "borrowed_arrays", &borrowed_array_names,
           "Names of the per-frame arrays this database borrows instead of owning.")
       .def("state", &database_state, "All arrays as a dict of read-only views (for saving).")
       .def_readonly("num_frames", &Database::num_frames)
