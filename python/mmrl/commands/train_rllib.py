@@ -15,7 +15,7 @@ PPO_TO_RLLIB = {"gamma": "gamma", "learning_rate": "lr", "anneal_lr": "anneal_lr
                 "clip_coef": "clip_param", "ent_coef": "entropy_coeff", "update_epochs": "num_epochs",
                 "num_minibatches": "num_minibatches", "num_steps": "rollout_fragment_length",
                 "torch_threads": "torch_threads", "snapshot_steps": "snapshot_steps", "init_log_std": "init_log_std",
-                "max_grad_norm": "grad_clip", "seed": "seed"}
+                "max_grad_norm": "grad_clip", "obs_norm_exclude": "obs_filter_exclude", "seed": "seed"}
 
 
 def ppo_settings(values) -> Dict[str, Any]:

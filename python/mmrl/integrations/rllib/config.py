@@ -52,6 +52,9 @@ class RLlibConfig:
     our trainer divides by a running return std). Logged returns are unscaled."""
     obs_filter: bool = True
     """Normalize observations with RLlib's MeanStdFilter (its statistics go into latest.pt)."""
+    obs_filter_exclude: Optional[Tuple[int, int]] = None
+    """Observation entries [a, b) the filter leaves as they are (the task's obs_norm_exclude:
+    the obstacles' binary sensor maps)."""
     normalize_actions: bool = True
     """The policy acts in the action box's standardized units (RLlib's default; our rescale_actions)."""
     init_log_std: float = 0.0

@@ -30,7 +30,7 @@ from ...metrics import rate_per_second
 from ...networks import network_name
 from .config import RLlibConfig
 from .envs import ENV_PREFIX, drain_worker, register_envs, set_worker_stage, share_database
-from .module import MMRLTorchModule
+from .module import MMRLTorchModule, range_mean_std_filter
 
 LOG_2PI = math.log(2 * math.pi)
 
@@ -93,7 +93,6 @@ def cpus_per_worker(resources: Dict[str, float], workers: int) -> float:
 # ----------------------------------------------------------------------------- the algorithm
 def build_algorithm(task, db_handle, task_config, cfg: RLlibConfig, obs_dim: int, act_dim: int, model, cpus: float):
     from ray.rllib.algorithms.ppo import PPOConfig
-    from ray.rllib.connectors.env_to_module import MeanStdFilter
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
     env_config = {"task": task.name, "db": db_handle, "task_config": dataclasses.asdict(task_config),
@@ -103,7 +102,8 @@ def build_algorithm(task, db_handle, task_config, cfg: RLlibConfig, obs_dim: int
                                    rollout_fragment_length=cfg.rollout_fragment_length,
                                    num_cpus_per_env_runner=cpus)
     if cfg.obs_filter:
-        runners["env_to_module_connector"] = lambda env=None, spaces=None, device=None: MeanStdFilter()
+        runners["env_to_module_connector"] = range_mean_std_filter(
+            tuple(cfg.obs_filter_exclude) if cfg.obs_filter_exclude is not None else None)
     use_gpu = cfg.device == "cuda" or (cfg.device == "auto" and torch.cuda.is_available())
     config = (
         PPOConfig()
@@ -138,7 +138,7 @@ def _filter_stats(algo) -> Optional[Dict[str, np.ndarray]]:
     """The merged MeanStdFilter statistics (mean, unbiased variance, count), or None."""
     pipeline = algo.env_runner._env_to_module
     for connector in pipeline.connectors:
-        if type(connector).__name__ == "MeanStdFilter" and connector._filters is not None:
+        if "MeanStdFilter" in type(connector).__name__ and connector._filters is not None:
             rs = connector._filters[None].running_stats
             return {"mean": np.asarray(rs.mean, np.float64), "var": np.asarray(rs.var, np.float64),
                     "count": float(rs.n)}
@@ -151,7 +151,7 @@ def _set_filter_stats(algo, stats: Dict[str, np.ndarray]) -> None:
 
     def apply(runner):
         for connector in runner._env_to_module.connectors:
-            if type(connector).__name__ == "MeanStdFilter":
+            if "MeanStdFilter" in type(connector).__name__:
                 if connector._filters is None:
                     connector._init_new_filters()
                 rs = connector._filters[None].running_stats
@@ -233,7 +233,9 @@ class RLlibRun:
             # variance; load_policy's normalizer applies the same map up to the epsilon.
             "obs_normalizer": {"rms": {"mean": torch.from_numpy(stats["mean"]), "var": torch.from_numpy(stats["var"]),
                                        "count": float(stats["count"])},
-                               "enabled": bool(self.cfg.obs_filter), "exclude": None, "clip": 10.0},
+                               "enabled": bool(self.cfg.obs_filter), "clip": 10.0,
+                               "exclude": None if self.cfg.obs_filter_exclude is None
+                               else [int(v) for v in self.cfg.obs_filter_exclude]},
             "action_center": None if self.action_center is None else self.action_center.tolist(),
             "action_half": None if self.action_half is None else self.action_half.tolist(),
             "global_step": self.global_step, "iteration": self.iteration, "wall_s": self.wall_s,
