@@ -207,6 +207,7 @@ def test_bad_input_gives_one_line_and_what_to_do(tmp_path):
     assert out.returncode == 2 and time.time() - t0 < 60
     lines = [line for line in out.stderr.splitlines() if "127.0.0.1:9" in line]
     assert lines and "ray start --head" in lines[0] and "Traceback" not in out.stderr
+    assert not (tmp_path / "a").exists()  # refused before anything was written
     # The extra is missing: say what to install.
     code = ("import sys; sys.modules['ray'] = None; from mmrl.cli import main; "
             "sys.exit(main(['train', 'plane', '--backend', 'rllib', '--steps', '10', '--out', sys.argv[1]]))")

@@ -105,6 +105,10 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
         cfg.check()
     except ValueError as e:
         raise InputError(str(e)) from None
+    if args.address:
+        from ..integrations.rllib.trainer import check_reachable
+
+        check_reachable(args.address)  # before anything is written
     db = database_from_spec(data)
     callbacks = list(task.callbacks(None, options)) if task.callbacks else []
     RunDir.create(out, task=task, data=data, num_envs=max(cfg.workers, 1) * cfg.envs(),

@@ -215,7 +215,7 @@ class RLlibRun:
                                     cpus_per_worker(self.resources, cfg.workers))
         self.global_step, self.iteration, self.wall_s = 0, 0, 0.0
         self.snapshots: set = set()
-        if resume:
+        if resume and (self.out_dir / "latest.pt").exists():  # killed before its first checkpoint: start over
             self._load(self.out_dir / "latest.pt")
         self._push_stage()
 
@@ -357,8 +357,8 @@ class RLlibRun:
                     self.save(due)
                     last_saved = self.global_step
             self.save()
-        except KeyboardInterrupt:
-            self.save()
+        except (KeyboardInterrupt, WorkerLost):
+            self.save()  # the learner is whole: keep every completed iteration for --resume
             raise
         finally:
             if progress is not None:
