@@ -101,16 +101,9 @@ def test_same_step_and_next_step_play_identical_episodes(task_name, overrides):
 
 def test_next_step_on_another_skeleton(tmp_path):
     """Mixamo names and other channel orders: the modes agree there too."""
-    from mmrl import synth
-    from test_import_axes_fps import other_skeleton, read_clip
+    from test_import_axes_fps import other_skeleton_database
 
-    paths = []
-    for k, (speed, turn) in enumerate([(1.4, 0.3), (1.2, -0.5), (3.0, 0.2)]):
-        synth.write_clip(tmp_path / f"c{k}.bvh", speed=speed, turn_rate=turn, seconds=6.0, seed=k)
-        path = tmp_path / f"mixamo{k}.bvh"
-        path.write_text(other_skeleton(read_clip((tmp_path / f"c{k}.bvh").read_text())).text())
-        paths.append(path)
-    db = mmrl.Database.from_bvh(paths, mirror=True)
+    db = other_skeleton_database(tmp_path)
     overrides = {"max_steps": 8, "target_half_extent": 1.5}
     same, _ = play("plane", db, AutoresetMode.SAME_STEP, 40, **overrides)
     nxt, _ = play("plane", db, AutoresetMode.NEXT_STEP, 45, **overrides)

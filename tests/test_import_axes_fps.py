@@ -141,6 +141,21 @@ def other_skeleton(clip):
                   ["Yrotation", "Zrotation", "Xrotation"], 0.01)
 
 
+
+def other_skeleton_database(tmp_path, clips=((1.4, 0.3), (1.2, -0.5), (3.0, 0.2)), seconds=6.0):
+    """A mirrored database of synthetic clips (speed m/s, turn rad/s) rewritten on the second
+    skeleton (Mixamo names, other channel orders, meters): the other skeleton features are tested on."""
+    import mmrl
+    from mmrl import synth
+
+    paths = []
+    for k, (speed, turn) in enumerate(clips):
+        synth.write_clip(tmp_path / f"c{k}.bvh", speed=speed, turn_rate=turn, seconds=seconds, seed=k)
+        path = tmp_path / f"mixamo{k}.bvh"
+        path.write_text(other_skeleton(read_clip((tmp_path / f"c{k}.bvh").read_text())).text())
+        paths.append(path)
+    return mmrl.Database.from_bvh(paths, mirror=True)
+
 def build(path, **kw):
     return mmrl.Database.from_bvh(path, **kw)
 

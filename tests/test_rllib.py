@@ -35,16 +35,9 @@ def _shared_copy(db):
 
 
 def _other_skeleton_db(tmp_path):
-    from mmrl import synth
-    from test_import_axes_fps import other_skeleton, read_clip
+    from test_import_axes_fps import other_skeleton_database
 
-    paths = []
-    for k, (speed, turn) in enumerate([(1.4, 0.3), (1.2, -0.5), (3.0, 0.2)]):
-        synth.write_clip(tmp_path / f"c{k}.bvh", speed=speed, turn_rate=turn, seconds=6.0, seed=k)
-        path = tmp_path / f"mixamo{k}.bvh"
-        path.write_text(other_skeleton(read_clip((tmp_path / f"c{k}.bvh").read_text())).text())
-        paths.append(path)
-    return mmrl.Database.from_bvh(paths, mirror=True)
+    return other_skeleton_database(tmp_path)
 
 
 @pytest.mark.parametrize("which", ["synthetic", "mixamo"])

@@ -115,6 +115,44 @@ def _apply(obj, values: Dict[str, Any]) -> None:
         setattr(obj, k, tuple(v) if isinstance(getattr(obj, k), tuple) and v is not None else v)
 
 
+def task_flag_options(task: Task, args, saved: Dict[str, Any], sets: List[str]) -> Dict[str, Any]:
+    """The callback options (a resumed run's, then the task's switches that set them); the
+    switches that set task options are appended to ``sets`` as KEY=VALUE. A switch of
+    another task is refused."""
+    options: Dict[str, Any] = dict(saved.get("callback_options", {})) if saved else {}
+    own_flags = {f.flag for f in task.flags}
+    for name in task_names():
+        for flag in get_task(name).flags:
+            if getattr(args, flag.flag.lstrip("-").replace("-", "_")) and flag.flag not in own_flags:
+                raise InputError(f"{flag.flag} applies to the {name} task only")
+    for flag in task.flags:
+        if getattr(args, flag.flag.lstrip("-").replace("-", "_")):
+            if flag.target == "callbacks":
+                options[flag.option] = flag.value
+            else:
+                sets.append(f"{flag.option}={flag.value}")
+    return options
+
+
+def resolve_run(task: Task, args, default_out: str):
+    """(saved config.json, run directory, data spec): a resumed run's, or a new directory
+    (``--out`` or ``default_out``) that must not hold a run yet."""
+    from ..runs import RunDir
+
+    if args.resume:
+        run = RunDir(args.resume)
+        saved = run.config
+        if not saved:
+            raise InputError(f"{run.path}: no config.json; not a run directory")
+        if run.task_name != task.name:
+            raise InputError(f"{run.path} holds a '{run.task_name}' run, not '{task.name}'")
+        return saved, run.path, run.data_spec
+    out = Path(args.out or default_out)
+    if (out / "latest.pt").exists():
+        raise InputError(f"{out} already holds a run; use --resume {out} or another --out")
+    return {}, out, data_spec_from_args(args)
+
+
 def _configs(task: Task, args, saved: Dict[str, Any]):
     """(task config, PPOConfig, callback options) from the task's defaults, a resumed run's
     saved values, the preset, the task's flags and --set, in that order."""
@@ -137,18 +175,7 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
         if saved and args.preset is not None:
             raise InputError("--preset: a resumed run keeps its configuration (change options with --set)")
         sets = [f"{k}={v}" for k, v in task.presets[preset].items()] + sets
-    options: Dict[str, Any] = dict(saved.get("callback_options", {})) if saved else {}
-    own_flags = {f.flag for f in task.flags}
-    for name in task_names():
-        for flag in get_task(name).flags:
-            if getattr(args, flag.flag.lstrip("-").replace("-", "_")) and flag.flag not in own_flags:
-                raise InputError(f"{flag.flag} applies to the {name} task only")
-    for flag in task.flags:
-        if getattr(args, flag.flag.lstrip("-").replace("-", "_")):
-            if flag.target == "callbacks":
-                options[flag.option] = flag.value
-            else:
-                sets.append(f"{flag.option}={flag.value}")
+    options = task_flag_options(task, args, saved, sets)
     ppo_over, task_over = split_overrides(sets, cfg, task_cfg)
     _apply(cfg, ppo_over)
     _apply(task_cfg, task_over)
@@ -160,7 +187,6 @@ def cmd_train(args: argparse.Namespace) -> int:
     from ..runs import RunDir
 
     task = get_task(args.task)
-    saved: Dict[str, Any] = {}
     if args.resume:
         saved_backend = RunDir(args.resume).config.get("backend", "ppo")
         if args.backend is not None and args.backend != saved_backend:
@@ -175,19 +201,7 @@ def cmd_train(args: argparse.Namespace) -> int:
             raise InputError(f"--{name.replace('_', '-')} applies to --backend rllib only")
     if args.preset == "paper-rllib":
         raise InputError("--preset paper-rllib is RLlib's trainer: add --backend rllib")
-    if args.resume:
-        run = RunDir(args.resume)
-        saved = run.config
-        if not saved:
-            raise InputError(f"{run.path}: no config.json; not a run directory")
-        if run.task_name != task.name:
-            raise InputError(f"{run.path} holds a '{run.task_name}' run, not '{task.name}'")
-        out, data = run.path, run.data_spec
-    else:
-        out = Path(args.out or f"runs/{task.name}-seed{args.seed}")
-        if (out / "latest.pt").exists():
-            raise InputError(f"{out} already holds a run; use --resume {out} or another --out")
-        data = data_spec_from_args(args)
+    saved, out, data = resolve_run(task, args, f"runs/{task.name}-seed{args.seed}")
     task_cfg, cfg, options = _configs(task, args, saved)
     if args.steps is not None:
         cfg.total_steps, cfg.max_seconds = args.steps, None
@@ -215,14 +229,18 @@ def cmd_train(args: argparse.Namespace) -> int:
                            callbacks=callbacks)
     finally:
         envs.close()
-    s = result.last_stats
-    print(f"trained {result.global_step:,} steps in {result.wall_s:.1f} s ({result.stopped_by}); "
-          f"success {s.get('success_rate', float('nan')):.3f}, return {s.get('episode_return', float('nan')):.1f}; "
-          f"checkpoint {result.checkpoint}")
+    report_training(result.global_step, result.wall_s, result.stopped_by, result.last_stats, result.checkpoint,
+                    callbacks)
+    return 0
+
+
+def report_training(steps: int, seconds: float, how: str, row: Dict[str, Any], checkpoint, callbacks) -> None:
+    """The lines ``mmrl train`` ends with (either backend)."""
+    print(f"trained {steps:,} steps in {seconds:.1f} s ({how}); success {row.get('success_rate', float('nan')):.3f}, "
+          f"return {row.get('episode_return', float('nan')):.1f}; checkpoint {checkpoint}")
     for cb in callbacks:
         if hasattr(cb, "describe"):
             print(cb.describe())
-    return 0
 
 
 def cmd_plot(args: argparse.Namespace) -> int:

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 from typing import Any, Dict
 
 from ..errors import InputError
-from ..tasks import Task, task_names, get_task
-from .common import data_spec_from_args
+from ..tasks import Task
 
 # Our trainer's option names for the knobs RLlib also has (a task preset may set them).
 PPO_TO_RLLIB = {"gamma": "gamma", "learning_rate": "lr", "anneal_lr": "anneal_lr", "gae_lambda": "lambda_",
@@ -27,7 +25,7 @@ def _configs(task: Task, args: argparse.Namespace, saved: Dict[str, Any]):
     """(task config, RLlibConfig, callback options) from the defaults, a resumed run's saved
     values, the preset (a task preset, or paper-rllib), the task's flags and --set."""
     from ..integrations.rllib import RLLIB_PRESETS, RLlibConfig
-    from .train import _apply, split_overrides
+    from .train import _apply, split_overrides, task_flag_options
 
     task_cfg = task.default_config()
     cfg = RLlibConfig(seed=args.seed)
@@ -52,18 +50,7 @@ def _configs(task: Task, args: argparse.Namespace, saved: Dict[str, Any]):
             elif k in PPO_TO_RLLIB:
                 sets.append(f"{PPO_TO_RLLIB[k]}={v}")
             # Other trainer options of the preset have no RLlib knob here.
-    options: Dict[str, Any] = dict(saved.get("callback_options", {})) if saved else {}
-    own_flags = {f.flag for f in task.flags}
-    for name in task_names():
-        for flag in get_task(name).flags:
-            if getattr(args, flag.flag.lstrip("-").replace("-", "_")) and flag.flag not in own_flags:
-                raise InputError(f"{flag.flag} applies to the {name} task only")
-    for flag in task.flags:
-        if getattr(args, flag.flag.lstrip("-").replace("-", "_")):
-            if flag.target == "callbacks":
-                options[flag.option] = flag.value
-            else:
-                sets.append(f"{flag.option}={flag.value}")
+    options = task_flag_options(task, args, saved, sets)
     rllib_over, task_over = split_overrides(sets + list(args.set), cfg, task_cfg)
     _apply(cfg, rllib_over)
     _apply(task_cfg, task_over)
@@ -77,19 +64,9 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
         raise InputError(f"--backend rllib: {e}") from None
     from ..runs import RunDir
     from ..sources import database_from_spec
+    from .train import report_training, resolve_run
 
-    saved: Dict[str, Any] = {}
-    if args.resume:
-        run_dir = RunDir(args.resume)
-        saved = run_dir.config
-        if run_dir.task_name != task.name:
-            raise InputError(f"{run_dir.path} holds a '{run_dir.task_name}' run, not '{task.name}'")
-        out, data = run_dir.path, run_dir.data_spec
-    else:
-        out = Path(args.out or f"runs/{task.name}-rllib-seed{args.seed}")
-        if (out / "latest.pt").exists():
-            raise InputError(f"{out} already holds a run; use --resume {out} or another --out")
-        data = data_spec_from_args(args)
+    saved, out, data = resolve_run(task, args, f"runs/{task.name}-rllib-seed{args.seed}")
     task_cfg, cfg, options = _configs(task, args, saved)
     if args.steps is not None:
         cfg.total_steps, cfg.max_seconds = args.steps, None
@@ -128,10 +105,6 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
             run.stop()
         if started_here:
             ray.shutdown()
-    print(f"trained {run.global_step:,} steps in {run.wall_s:.1f} s with RLlib ({cfg.workers} workers x "
-          f"{cfg.envs()} envs); success {row.get('success_rate', float('nan')):.3f}, return "
-          f"{row.get('episode_return', float('nan')):.1f}; checkpoint {out / 'latest.pt'}")
-    for cb in callbacks:
-        if hasattr(cb, "describe"):
-            print(cb.describe())
+    report_training(run.global_step, run.wall_s, f"RLlib, {cfg.workers} workers x {cfg.envs()} envs", row,
+                    out / "latest.pt", callbacks)
     return 0
