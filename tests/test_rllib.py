@@ -111,6 +111,8 @@ def test_rllib_trains_the_plane_and_the_run_loads_like_any_other(local_ray, tmp_
     capsys.readouterr()
     assert main(["eval", str(run), "--episodes", "3"]) == 0
     assert "success_rate" in capsys.readouterr().out
+    assert main(["export", str(run), "-o", str(tmp_path / "plane.mmrl")]) == 0  # into the C++ runtime
+    assert (tmp_path / "plane.mmrl").stat().st_size > 0
 
 
 def _obstacles_run(tmp_path, workers=2, resume=False, steps=2000):
