@@ -276,6 +276,8 @@ namespace {
 
 // HIERARCHY and the MOTION header (Frames, Frame Time); leaves the lexer at the end of the
 // Frame Time line's number. Returns the line of 'Frames:' (for messages).
+constexpr float kMaxFrameTime = 10.0f;  // seconds
+
 int parse_header(Lexer& lx, Motion& m) {
   Skeleton& sk = m.skeleton;
   std::unordered_set<std::string> seen;
@@ -314,6 +316,11 @@ int parse_header(Lexer& lx, Motion& m) {
   const int ft_line = lx.token_line();
   const float frame_time = lx.number("Frame Time");
   if (!(frame_time > 0)) lx.fail("Frame Time must be positive", ft_line);
+  // At most 10 s per frame (0.1 fps): mocap is never slower, and resampling a slower clip to
+  // a normal rate multiplies its frames without bound (a 2-frame file with a Frame Time of
+  // 3e8 s asked for 8.5e9 frames at 30 fps; found by cpp/fuzz/fuzz_bvh.cpp).
+  if (frame_time > kMaxFrameTime)
+    lx.fail("Frame Time " + std::to_string(frame_time) + " s is implausible (at most 10 s per frame)", ft_line);
   m.frame_time = frame_time;
   m.num_frames = frames;
   return frames_line;
@@ -346,13 +353,27 @@ void parse_frames(Lexer& lx, const std::string& source, int frames_line, Motion&
   const int frames = m.num_frames;
   const int J = sk.num_joints();
   const int C = sk.num_channels();
+  const std::string& s = lx.text();
+  size_t p = lx.pos();
+  int line = lx.line();
+  // The header's frame count sizes the arrays below, so it is checked against the text first:
+  // a frame line holds C values of at least one character and C - 1 separators, and lines are
+  // separated by a newline, so F frames need at least 2 C F - 1 bytes (C = 0: no frame line can
+  // exist). Without this a 300-byte file saying "Frames: 999999999" allocated 56 GB (found
+  // by cpp/fuzz/fuzz_bvh.cpp; tests/fuzz/regressions/bvh/). The error is the same as a
+  // truncation found while reading: at the last line of the file.
+  const uint64_t left = s.size() - p;
+  if (C == 0 || 2 * static_cast<uint64_t>(C) * static_cast<uint64_t>(frames) > left + 1) {
+    const int last_line = line + static_cast<int>(std::count(s.begin() + p, s.end(), '\n'));
+    throw BVHError(source, last_line,
+                   "truncated MOTION data: 'Frames: " + std::to_string(frames) + "' (line " +
+                       std::to_string(frames_line) + ") but the " + std::to_string(left) + " bytes after it cannot hold " +
+                       (C == 0 ? std::string("frame lines of no channels") : "that many frame lines of " + std::to_string(C) + " values"));
+  }
   m.translations.resize(static_cast<size_t>(frames) * J * 3);
   m.rotations.resize(static_cast<size_t>(frames) * J * 4);
   std::vector<float> values(static_cast<size_t>(C));
 
-  const std::string& s = lx.text();
-  size_t p = lx.pos();
-  int line = lx.line();
   // Skip the rest of the Frame Time line.
   while (p < s.size() && s[p] != '\n') {
     if (!Lexer::is_space(s[p])) throw BVHError(source, line, "unexpected text after Frame Time");

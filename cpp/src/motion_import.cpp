@@ -103,13 +103,22 @@ bool motion_needs_resample(const Motion& m, float fps) {
   return std::fabs(motion_nominal_fps(m) - fps) > 1e-4f * fps;
 }
 
+// 2^28 frames: 103 days at 30 fps, well inside the int frame count.
+constexpr double kMaxResampledFrames = 268435456.0;
+
 Motion motion_resample(const Motion& m, float fps) {
   if (!(fps > 0) || !std::isfinite(fps)) throw std::invalid_argument("resample: fps must be positive, got " + std::to_string(fps));
   if (m.num_frames <= 0) throw std::invalid_argument("resample: '" + m.source + "' has no frames");
   const int J = m.skeleton.num_joints();
   // Input frames per output frame, from the nominal rates so that 60 -> 30 is exactly 2.
   const double step = static_cast<double>(motion_nominal_fps(m)) / fps;
-  const int frames = static_cast<int>(std::floor((m.num_frames - 1) / step + 1e-6)) + 1;
+  // In double first: a slow clip resampled to a fast rate can ask for more frames than an int
+  // holds (UB in the cast); more than kMaxResampledFrames is refused.
+  const double frames_d = std::floor((m.num_frames - 1) / step + 1e-6) + 1;
+  if (!(frames_d <= kMaxResampledFrames))
+    throw std::invalid_argument("resample: '" + m.source + "' at " + std::to_string(fps) + " fps would have " +
+                                std::to_string(frames_d) + " frames (at most " + std::to_string(kMaxResampledFrames) + ")");
+  const int frames = static_cast<int>(frames_d);
   Motion out;
   out.skeleton = m.skeleton;
   out.source = m.source;

@@ -8,7 +8,6 @@ borrow its rows; :meth:`Database.with_weights` returns a new one.
 from __future__ import annotations
 
 import os
-import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
@@ -321,7 +320,8 @@ class Database:
             source_up = state.pop("clip_source_up", None)
         except DatabaseFileError:
             raise
-        except (zipfile.BadZipFile, OSError, ValueError, KeyError, EOFError) as e:
+        except Exception as e:  # zipfile, zlib and numpy's header parser raise many types
+            # (tokenize.TokenError from a mangled .npy header: tests/fuzz/fuzz_python.py found it)
             raise DatabaseFileError(f"{path}: corrupt or unreadable database file ({e})") from e
         try:
             state["joint_names"] = [str(x) for x in state["joint_names"]]
@@ -332,7 +332,7 @@ class Database:
             state["source_scale"] = float(state["source_scale"])
             state = {k: (np.ascontiguousarray(v) if isinstance(v, np.ndarray) else v) for k, v in state.items()}
             return cls(_core.Database.from_state(state), source_fps, source_up)
-        except (KeyError, TypeError, ValueError) as e:
+        except Exception as e:  # any malformed entry (OverflowError from a huge role index, ...)
             raise DatabaseFileError(f"{path}: corrupt database file ({e})") from e
 
     # ----------------------------------------------------------------- sharing between processes

@@ -147,10 +147,15 @@ def load_policy(path: str | os.PathLike, device: str = "cpu") -> Policy:
         model.load_state_dict(state["model"])
     except Exception as error:
         raise CheckpointError(f"{path}: cannot rebuild the network: {error}") from error
-    obs_dim = state["obs_normalizer"]["rms"]["mean"].shape[0]
-    normalizer = ObsNormalizer(obs_dim, True, None, 10.0, device_t)
-    normalizer.load_state_dict(state["obs_normalizer"])
-    center, half = state.get("action_center"), state.get("action_half")
-    return Policy(model, normalizer, device_t,
-                  None if center is None else np.asarray(center, np.float32),
-                  None if half is None else np.asarray(half, np.float32))
+    # Any shape of these entries can come out of a weights-only load: a malformed one is a
+    # corrupt checkpoint, not a KeyError (found by tests/fuzz/fuzz_python.py checkpoint).
+    try:
+        obs_dim = state["obs_normalizer"]["rms"]["mean"].shape[0]
+        normalizer = ObsNormalizer(obs_dim, True, None, 10.0, device_t)
+        normalizer.load_state_dict(state["obs_normalizer"])
+        center, half = state.get("action_center"), state.get("action_half")
+        return Policy(model, normalizer, device_t,
+                      None if center is None else np.asarray(center, np.float32),
+                      None if half is None else np.asarray(half, np.float32))
+    except Exception as error:
+        raise CheckpointError(f"{path}: corrupt observation normalizer or action scaling: {error!r}") from error

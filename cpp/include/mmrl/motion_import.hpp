@@ -36,7 +36,7 @@ bool motion_needs_resample(const Motion& motion, float fps);
 // translations are interpolated linearly and local rotations by slerp (shortest arc);
 // an output time on an input frame copies that frame exactly. The new Frame Time is 1 / fps
 // to 7 significant digits, as BVH files store it. Throws std::invalid_argument for fps <= 0
-// or not finite.
+// or not finite, and when the result would have more than 2^28 frames.
 Motion motion_resample(const Motion& motion, float fps);
 
 // What a person moving over a floor looks like, measured on an imported (meters, Y up)
