@@ -192,7 +192,9 @@ def save_due_checkpoints(learner: TrainingState, rng: dict, out_dir: Path, last_
         return last_saved_step
     learner.snapshots.update(due)
     state = learner.checkpoint(rng)
-    save_checkpoint(state, out_dir / "latest.pt")
+    # Snapshots first: latest.pt lists them as saved, so a kill between the two writes must
+    # leave a latest.pt that does not yet list them (the resumed run then writes them again).
     for s in due:
         save_checkpoint(state, out_dir / f"snapshot_{s}.pt")
+    save_checkpoint(state, out_dir / "latest.pt")
     return learner.global_step

@@ -43,14 +43,17 @@ class DatabaseFileError(ValueError):
 
 
 def find_bvh_files(paths: Union[PathLike, Iterable[PathLike]]) -> List[Path]:
-    """Expand a file, a directory (searched recursively, sorted) or a list of them."""
+    """Expand a file, a directory (searched recursively, sorted, hidden files skipped) or a list of them."""
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     out: List[Path] = []
     for p in paths:
         p = Path(p)
         if p.is_dir():
-            found = sorted(q for q in p.rglob("*") if q.suffix.lower() == ".bvh" and q.is_file())
+            # Hidden files are skipped: a torn temp file of an interrupted download
+            # (mmrl.io's ".<name>.<random>.tmp") or a macOS "._" resource fork is no clip.
+            found = sorted(q for q in p.rglob("*") if q.suffix.lower() == ".bvh" and not q.name.startswith(".")
+                           and q.is_file())
             if not found:
                 raise FileNotFoundError(f"{p}: no .bvh files in this directory")
             out.extend(found)
