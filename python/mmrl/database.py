@@ -17,6 +17,7 @@ import numpy as np
 
 from . import _core
 from .bvh import _options as _bvh_options, check_motion, warn_if_implausible
+from .arrays import MAX_ENTRIES, index_array, real_array
 from .io import atomic_write_npz
 
 PathLike = Union[str, os.PathLike]
@@ -268,12 +269,15 @@ class Database:
         return self._clip_source_up
 
     def normalize(self, features: np.ndarray) -> np.ndarray:
-        """Map raw features (..., 27) into the normalized, weighted search space."""
-        return ((np.asarray(features, np.float32) - self.feature_mean) / self.feature_scale).astype(np.float32)
+        """Map raw features (..., 27) into the normalized, weighted search space (float32;
+        NaN stays NaN)."""
+        f = real_array(features, "features", (..., FEATURE_DIM))
+        return ((f - self.feature_mean) / self.feature_scale).astype(np.float32)
 
     def denormalize(self, normalized: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`normalize`."""
-        return (np.asarray(normalized, np.float32) * self.feature_scale + self.feature_mean).astype(np.float32)
+        n = real_array(normalized, "normalized", (..., FEATURE_DIM))
+        return (n * self.feature_scale + self.feature_mean).astype(np.float32)
 
     @property
     def minutes(self) -> float:
@@ -324,7 +328,12 @@ class Database:
             source_up = state.pop("clip_source_up", None)
         except DatabaseFileError:
             raise
-        except (zipfile.BadZipFile, OSError, ValueError, KeyError, EOFError) as e:
+        except ValueError as e:
+            if "allow_pickle" in str(e):
+                raise DatabaseFileError(f"{path}: refused: it holds pickled Python objects (an object array); "
+                                        f"mmrl never unpickles them, since loading them could run code") from None
+            raise DatabaseFileError(f"{path}: corrupt or unreadable database file ({e})") from e
+        except (zipfile.BadZipFile, OSError, KeyError, EOFError) as e:
             raise DatabaseFileError(f"{path}: corrupt or unreadable database file ({e})") from e
         try:
             state["joint_names"] = [str(x) for x in state["joint_names"]]
@@ -362,6 +371,8 @@ class Database:
             raise TypeError(f"queries: expected dtype float32, got {q.dtype}")
         if q.ndim != 2 or q.shape[1] != FEATURE_DIM:
             raise ValueError(f"queries: expected shape (M, {FEATURE_DIM}), got {q.shape}")
+        if q.size > MAX_ENTRIES:  # e.g. a broadcast view of 2**31 rows: refused before any copy
+            raise ValueError(f"queries: {q.size} entries (shape {q.shape}) is over the limit of {MAX_ENTRIES}")
         if not np.isfinite(q).all():
             raise ValueError("queries: contains NaN or inf")
         if not normalized:
@@ -371,7 +382,9 @@ class Database:
     def controller_windows(self, frames: np.ndarray, radius: int = 20) -> np.ndarray:
         """The rows a controller at ``frames`` skips: ``radius`` frames either side, within
         each frame's clip ((M, 2) int64 [lo, hi)), as in the runtime's match rule."""
-        frames = np.asarray(frames, np.int64)
+        frames = index_array(frames, "frames", (None,), high=self.num_frames, what="the database's frames")
+        if isinstance(radius, bool) or not isinstance(radius, (int, np.integer)) or radius < 0:
+            raise ValueError(f"radius: expected an int >= 0, got {radius!r}")
         ranges = self.clip_ranges[self.frame_clip[frames]]
         lo = np.maximum(ranges[:, 0], frames - radius)
         hi = np.minimum(ranges[:, 1], frames + radius + 1)

@@ -58,6 +58,7 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from . import _core
+from .arrays import index_array
 
 #: Percentiles of the summaries.
 SLIDING_PERCENTILE = 95.0
@@ -66,8 +67,11 @@ JUMP_PERCENTILE = 99.0
 
 # ----------------------------------------------------------------------------- checks
 def _points(name: str, value, frames: Optional[int] = None) -> np.ndarray:
-    """``value`` as a finite float64 (T, K, 3) array, else ValueError naming ``name``."""
-    p = np.asarray(value, np.float64)
+    """``value`` as a finite float64 (T, K, 3) array, else TypeError/ValueError naming ``name``."""
+    p = np.asarray(value)
+    if p.dtype.kind not in "fiu":
+        raise TypeError(f"{name}: expected real numbers, got dtype {p.dtype}")
+    p = p.astype(np.float64)
     if p.ndim != 3 or p.shape[2] != 3:
         raise ValueError(f"{name}: expected shape (T, J, 3), got {p.shape}")
     if frames is not None and p.shape[0] != frames:
@@ -209,7 +213,7 @@ def pose_jumps(positions: np.ndarray, roots: np.ndarray, frames: np.ndarray, db,
     f = f.astype(np.int64)
     if T and (f.min() < 0 or f.max() >= db.num_frames):
         raise ValueError(f"frames: indices must be in [0, {db.num_frames})")
-    joints = body_joints(db) if joints is None else np.asarray(joints, np.int64)
+    joints = body_joints(db) if joints is None else index_array(joints, "joints", (None,), high=db.num_joints)
     if T < 2:
         return np.zeros(0)
     return _jump_excess(p[1:], p[:-1], r[1:], f[1:], db, joints)
