@@ -9,13 +9,14 @@ from typing import Any, Optional, Tuple
 
 import numpy as np
 
-__all__ = ["MAX_ENTRIES", "real_array", "index_array"]
+__all__ = ["MAX_ENTRIES", "as_array", "real_array", "index_array"]
 
 #: The most entries an array argument may have (the C++ core indexes rows with 32-bit ints).
 MAX_ENTRIES = 2**31 - 1
 
 
-def _as_array(value: Any, name: str) -> np.ndarray:
+def as_array(value: Any, name: str) -> np.ndarray:
+    """``np.asarray(value)``; ragged nested lists raise a TypeError naming ``name``."""
     try:
         return np.asarray(value)
     except (ValueError, TypeError) as e:  # ragged nested lists
@@ -47,7 +48,7 @@ def _contiguous(a: np.ndarray, name: str, dtype) -> np.ndarray:
 def real_array(value: Any, name: str, shape: Tuple, *, dtype=np.float32, finite: bool = False) -> np.ndarray:
     """``value`` (an array or nested lists of real numbers, float or integer) as a C-contiguous
     ``dtype`` array of ``shape``; NaN and inf refused when ``finite``."""
-    a = _as_array(value, name)
+    a = as_array(value, name)
     if a.dtype.kind not in "fiu":
         raise TypeError(f"{name}: expected real numbers, got dtype {a.dtype}")
     _check_shape(a, name, shape)
@@ -61,7 +62,7 @@ def index_array(value: Any, name: str, shape: Tuple, *, high: int, low: int = 0,
                 what: Optional[str] = None) -> np.ndarray:
     """``value`` (integers) as a C-contiguous int64 array of ``shape`` with every entry in
     [low, high); ``what`` names the range in the error (e.g. "the database's frames")."""
-    a = _as_array(value, name)
+    a = as_array(value, name)
     if a.dtype.kind not in "iu":
         raise TypeError(f"{name}: expected integers, got dtype {a.dtype}")
     _check_shape(a, name, shape)
