@@ -64,6 +64,8 @@ class RssSampler:
                     row = (time.monotonic() - start, self.rss_mb(), self.progress())
                 except (FileNotFoundError, ProcessLookupError):
                     return  # the process ended
+                if not row[1] == row[1]:
+                    return  # a zombie: its status has no VmRSS any more
                 self.samples.append(row)
                 out.writerow([f"{row[0]:.2f}", f"{row[1]:.2f}", row[2]])
                 file.flush()
