@@ -101,7 +101,7 @@ def soak_env(args, out: Path) -> list:
 
     db = mmrl.Database.load(args.db) if args.db else mmrl.default_database()
     lines = []
-    for name in ("plane", "obstacles"):
+    for name in args.env_tasks:
         env = mmrl.get_task(name).make_vector_env(args.envs, db=db)
         env.reset(seed=0)
         rng = np.random.default_rng(0)
@@ -223,6 +223,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=None, help="directory for the CSVs and logs (default: a new temp dir)")
     p.add_argument("--envs", type=int, default=256, help="batched envs of the env part (default 256)")
     p.add_argument("--task", default="plane", help="task of the train part (default plane)")
+    p.add_argument("--env-tasks", nargs="+", default=["plane", "obstacles"], help="tasks of the env part (default both)")
     p.add_argument("--db", default=None, help="a database .npz (default: the synthetic data)")
     p.add_argument("--run", default=None, help="the run the play part plays (default: a small plane run)")
     p.add_argument("--port", type=int, default=8091, help="the play part's viser port (default 8091)")
