@@ -111,3 +111,16 @@ def test_a_database_of_another_skeleton_given_to_a_run_is_refused(run, tmp_path,
     assert "is not the one the run" in capsys.readouterr().err
     with pytest.raises(mmrl.InputError, match="is not the one the run"):
         mmrl.RunDir(copy).database()
+
+
+def test_a_policy_with_nan_weights_is_not_exported(tmp_path):
+    from mmrl.runtime_export import write_controller
+    from mmrl.tasks.plane import PlaneConfig
+    from test_runtime import random_plane_policy
+
+    policy = random_plane_policy(1)
+    with torch.no_grad():
+        policy.model.actor[-1].weight[0, 0] = float("nan")
+    with pytest.raises(ValueError, match=r"policy: policy\.dense\d\.weight holds NaN or inf"):
+        write_controller(tmp_path / "nan.mmrl", mmrl.default_database(), policy, "plane", PlaneConfig())
+    assert not list(tmp_path.iterdir())
