@@ -4,6 +4,7 @@ The "remote" is a local http.server on 127.0.0.1 (random free port, in a thread)
 ../shared/data/bandai-namco-2 in its <style>/<file> layout. No internet is used.
 """
 import argparse
+import contextlib
 import functools
 import hashlib
 import http.server
@@ -42,9 +43,9 @@ class _Handler(http.server.SimpleHTTPRequestHandler):
         super().do_GET()
 
 
-@pytest.fixture()
-def server():
-    root = _shared_dataset_dir()
+@contextlib.contextmanager
+def serving_httpd(root):
+    """(server, base URL) of a local http.server serving ``root`` (also used by test_kill_resume)."""
     httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(_Handler, directory=str(root)))
     httpd.requests, httpd.corrupt = [], set()
     thread = threading.Thread(target=httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
@@ -56,6 +57,12 @@ def server():
         httpd.server_close()
         thread.join(timeout=10)
         assert not thread.is_alive()
+
+
+@pytest.fixture()
+def server():
+    with serving_httpd(_shared_dataset_dir()) as served:
+        yield served
 
 
 def _smallest_style(manifest):

@@ -334,7 +334,12 @@ const RuntimePose& RuntimeCharacter::advance_frame() {
 }
 
 const RuntimePose& RuntimeCharacter::update(float dt) {
-  if (!(dt >= 0) || !std::isfinite(dt)) throw std::invalid_argument("update: dt must be finite and >= 0");
+  // An upper bound: the loop below shows one frame per 1/fps of dt, so a dt of days would hold
+  // the caller for hours, and from 2^24 s on `clock_ -= frame_time` no longer changes the float
+  // clock (an endless loop).
+  if (!(dt >= 0) || !std::isfinite(dt) || dt > kMaxUpdateSeconds)
+    throw std::invalid_argument("update: dt must be finite, >= 0 and at most " +
+                                std::to_string(static_cast<int>(kMaxUpdateSeconds)) + " s, got " + std::to_string(dt));
   const float frame_time = 1.0f / controller_->fps();
   clock_ += dt;
   // A microsecond of slack: dt = 1 / fps summed in floats shows exactly one frame per call.

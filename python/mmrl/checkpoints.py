@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import pickle
 import random
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Optional
@@ -59,6 +61,13 @@ def load_checkpoint(path: str | os.PathLike, map_location: Any = "cpu") -> dict:
         raise CheckpointError(f"{path}: no such checkpoint file")
     try:
         state = torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as error:
+        if "Weights only load failed" not in str(error):
+            raise CheckpointError(f"{path}: not a readable checkpoint (corrupt or truncated?): {error}") from error
+        found = re.search(r"Unsupported global: GLOBAL (\S+)", str(error))
+        what = f" ({found.group(1)})" if found else ""
+        raise CheckpointError(f"{path}: refused: it holds pickled Python objects{what}, not only tensors and plain "
+                              f"values; mmrl never unpickles them, since loading them could run code") from None
     except Exception as error:  # torch raises several types for truncated or foreign files
         raise CheckpointError(f"{path}: not a readable checkpoint (corrupt or truncated?): {error}") from error
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
@@ -192,7 +201,9 @@ def save_due_checkpoints(learner: TrainingState, rng: dict, out_dir: Path, last_
         return last_saved_step
     learner.snapshots.update(due)
     state = learner.checkpoint(rng)
-    save_checkpoint(state, out_dir / "latest.pt")
+    # Snapshots first: latest.pt lists them as saved, so a kill between the two writes must
+    # leave a latest.pt that does not yet list them (the resumed run then writes them again).
     for s in due:
         save_checkpoint(state, out_dir / f"snapshot_{s}.pt")
+    save_checkpoint(state, out_dir / "latest.pt")
     return learner.global_step

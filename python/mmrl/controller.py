@@ -21,6 +21,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from . import _core
+from .arrays import real_array
 from .database import POSE_DIM, TRAJECTORY_DIM, Database
 
 
@@ -131,8 +132,8 @@ class Controller:
             raise TypeError(f"start_frame: expected an int, got {type(start_frame).__name__}")
         if not 0 <= start_frame < self.db.num_frames:
             raise ValueError(f"start_frame {start_frame} is out of range [0, {self.db.num_frames})")
-        pos = np.asarray(position, dtype=np.float64)
-        if pos.shape != (2,) or not np.isfinite(pos).all():
+        pos = real_array(position, "position", (2,), dtype=np.float64)
+        if not np.isfinite(pos).all():
             raise ValueError(f"position: expected finite (x, z), got {position!r}")
         if not np.isfinite(float(yaw)):
             raise ValueError(f"yaw must be finite, got {yaw!r}")
@@ -172,6 +173,7 @@ class Controller:
 
     def observation(self, target: Sequence[float]) -> np.ndarray:
         """The plane task's observation (17,) for a world target (x, z): pose features + target in the character frame."""
+        target = real_array(target, "target", (2,), dtype=np.float64, finite=True)
         x, z, yaw = self.root
         dx, dz = float(target[0]) - x, float(target[1]) - z
         c, s = np.cos(yaw), np.sin(yaw)

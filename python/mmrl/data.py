@@ -41,7 +41,7 @@ from pathlib import Path
 from typing import Iterable, List, Optional, Sequence
 
 from .errors import InputError
-from .io import atomic_open
+from .io import atomic_open, atomic_write_text, remove_stale_temps
 
 __all__ = [
     "DATASETS",
@@ -124,6 +124,9 @@ def _is_valid(path: Path, entry: dict) -> bool:
 def _download(url: str, dest: Path, entry: dict, timeout: float, progress) -> None:
     """Stream `url` into a temporary file next to `dest`, verify size and hash, rename into place."""
     dest.parent.mkdir(parents=True, exist_ok=True)
+    # The temp file of a download killed earlier (SIGKILL, power loss) stays behind, hidden; an
+    # active download writes a block at least every `timeout` seconds, so older ones are stale.
+    remove_stale_temps(dest, min_age_s=max(60.0, 2 * timeout))
     # atomic_open keeps nothing when the block raises: a failed or mismatched download never
     # replaces (or creates) dest.
     with atomic_open(dest, "wb") as out:
@@ -192,7 +195,7 @@ def fetch(name: str = "bandai-namco-2", *, styles: Optional[Sequence[str]] = Non
     notice = root / "NOTICE.txt"
     if not notice.exists():
         notice.parent.mkdir(parents=True, exist_ok=True)
-        notice.write_text(
+        atomic_write_text(notice,
             f"{manifest['title']}\nUpstream: https://github.com/{manifest['upstream']['repository']} "
             f"(commit {manifest['upstream']['commit']}, {manifest['upstream']['folder']})\n"
             f"License: {manifest['license']}, attribution: {manifest['attribution']}. Non-commercial use only.\n"

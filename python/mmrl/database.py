@@ -16,6 +16,7 @@ import numpy as np
 
 from . import _core
 from .bvh import _options as _bvh_options, check_motion, warn_if_implausible
+from .arrays import MAX_ENTRIES, index_array, real_array
 from .io import atomic_write_npz
 
 PathLike = Union[str, os.PathLike]
@@ -42,14 +43,17 @@ class DatabaseFileError(ValueError):
 
 
 def find_bvh_files(paths: Union[PathLike, Iterable[PathLike]]) -> List[Path]:
-    """Expand a file, a directory (searched recursively, sorted) or a list of them."""
+    """Expand a file, a directory (searched recursively, sorted, hidden files skipped) or a list of them."""
     if isinstance(paths, (str, os.PathLike)):
         paths = [paths]
     out: List[Path] = []
     for p in paths:
         p = Path(p)
         if p.is_dir():
-            found = sorted(q for q in p.rglob("*") if q.suffix.lower() == ".bvh" and q.is_file())
+            # Hidden files are skipped: a torn temp file of an interrupted download
+            # (mmrl.io's ".<name>.<random>.tmp") or a macOS "._" resource fork is no clip.
+            found = sorted(q for q in p.rglob("*") if q.suffix.lower() == ".bvh" and not q.name.startswith(".")
+                           and q.is_file())
             if not found:
                 raise FileNotFoundError(f"{p}: no .bvh files in this directory")
             out.extend(found)
@@ -264,12 +268,15 @@ class Database:
         return self._clip_source_up
 
     def normalize(self, features: np.ndarray) -> np.ndarray:
-        """Map raw features (..., 27) into the normalized, weighted search space."""
-        return ((np.asarray(features, np.float32) - self.feature_mean) / self.feature_scale).astype(np.float32)
+        """Map raw features (..., 27) into the normalized, weighted search space (float32;
+        NaN stays NaN)."""
+        f = real_array(features, "features", (..., FEATURE_DIM))
+        return ((f - self.feature_mean) / self.feature_scale).astype(np.float32)
 
     def denormalize(self, normalized: np.ndarray) -> np.ndarray:
         """Inverse of :meth:`normalize`."""
-        return (np.asarray(normalized, np.float32) * self.feature_scale + self.feature_mean).astype(np.float32)
+        n = real_array(normalized, "normalized", (..., FEATURE_DIM))
+        return (n * self.feature_scale + self.feature_mean).astype(np.float32)
 
     @property
     def minutes(self) -> float:
@@ -322,6 +329,9 @@ class Database:
             raise
         except Exception as e:  # zipfile, zlib and numpy's header parser raise many types
             # (tokenize.TokenError from a mangled .npy header: tests/fuzz/fuzz_python.py found it)
+            if isinstance(e, ValueError) and "allow_pickle" in str(e):
+                raise DatabaseFileError(f"{path}: refused: it holds pickled Python objects (an object array); "
+                                        f"mmrl never unpickles them, since loading them could run code") from None
             raise DatabaseFileError(f"{path}: corrupt or unreadable database file ({e})") from e
         try:
             state["joint_names"] = [str(x) for x in state["joint_names"]]
@@ -386,6 +396,8 @@ class Database:
             raise TypeError(f"queries: expected dtype float32, got {q.dtype}")
         if q.ndim != 2 or q.shape[1] != FEATURE_DIM:
             raise ValueError(f"queries: expected shape (M, {FEATURE_DIM}), got {q.shape}")
+        if q.size > MAX_ENTRIES:  # e.g. a broadcast view of 2**31 rows: refused before any copy
+            raise ValueError(f"queries: {q.size} entries (shape {q.shape}) is over the limit of {MAX_ENTRIES}")
         if not np.isfinite(q).all():
             raise ValueError("queries: contains NaN or inf")
         if not normalized:
@@ -395,7 +407,9 @@ class Database:
     def controller_windows(self, frames: np.ndarray, radius: int = 20) -> np.ndarray:
         """The rows a controller at ``frames`` skips: ``radius`` frames either side, within
         each frame's clip ((M, 2) int64 [lo, hi)), as in the runtime's match rule."""
-        frames = np.asarray(frames, np.int64)
+        frames = index_array(frames, "frames", (None,), high=self.num_frames, what="the database's frames")
+        if isinstance(radius, bool) or not isinstance(radius, (int, np.integer)) or radius < 0:
+            raise ValueError(f"radius: expected an int >= 0, got {radius!r}")
         ranges = self.clip_ranges[self.frame_clip[frames]]
         lo = np.maximum(ranges[:, 0], frames - radius)
         hi = np.minimum(ranges[:, 1], frames + radius + 1)

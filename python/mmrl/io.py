@@ -9,16 +9,24 @@ KeyboardInterrupt, the temp file is removed and the old file is left untouched.
 
 The new file gets the permissions a plain ``open(path, "w")`` would give (0666 minus the
 umask), not the 0600 of ``tempfile.mkstemp``.
+
+Temp files are hidden and named ``.<name>.<random>.tmp`` (``atomic_path`` keeps the target's
+suffix after ``.tmp``, for writers that pick a format from it). A process killed with SIGKILL
+(or a power loss) cannot remove its temp file: it stays, hidden, beside the target; directory
+scans skip hidden files, and ``remove_stale_temps`` deletes such leftovers.
 """
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
 import tempfile
+import time
 from pathlib import Path
-from typing import IO, Any, Iterator, Optional, Union
+from typing import IO, Any, Iterator, List, Optional, Union
 
-__all__ = ["atomic_open", "atomic_path", "atomic_write_bytes", "atomic_write_text", "atomic_write_npz"]
+__all__ = ["atomic_open", "atomic_path", "atomic_write_bytes", "atomic_write_text", "atomic_write_npz",
+           "remove_stale_temps"]
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -58,7 +66,7 @@ def atomic_open(path: PathLike, mode: str = "w", *, encoding: Optional[str] = No
     if binary and (encoding is not None or newline is not None):
         raise ValueError("atomic_open: encoding and newline apply to text mode only")
     text_args = {} if binary else {"encoding": encoding or "utf-8", "newline": newline}
-    with atomic_path(path) as tmp, open(tmp, mode, **text_args) as file:
+    with _atomic_temp(path, ".tmp") as tmp, open(tmp, mode, **text_args) as file:
         yield file
         file.flush()
         os.fsync(file.fileno())
@@ -89,10 +97,20 @@ def atomic_write_npz(path: "str | os.PathLike[str]", **arrays) -> Path:
 
 @contextlib.contextmanager
 def atomic_path(path: PathLike) -> Iterator[Path]:
-    """A temp path beside ``path`` with the same suffix, for writers that need a file name
-    (video encoders, matplotlib); on a clean exit it replaces ``path``, on an error it is removed."""
+    """A temp path beside ``path`` ending in ``.tmp`` plus ``path``'s suffix, for writers that
+    need a file name (video encoders, matplotlib); on a clean exit it replaces ``path``, on an
+    error it is removed."""
     path = Path(path)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    with _atomic_temp(path, f".tmp{path.suffix}") as tmp:
+        yield tmp
+
+
+@contextlib.contextmanager
+def _atomic_temp(path: Path, suffix: str) -> Iterator[Path]:
+    # The temp name never ends in the target's own suffix for atomic_open (".tmp"), so a scan
+    # for "*.bvh" or "*.npz" cannot pick up a torn leftover even if it does not skip hidden files.
+    path = Path(path)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
     os.close(fd)
     try:
         yield Path(tmp_name)
@@ -103,3 +121,23 @@ def atomic_path(path: PathLike) -> Iterator[Path]:
             os.unlink(tmp_name)
         raise
     _fsync_dir(path.parent)
+
+
+def remove_stale_temps(path: PathLike, min_age_s: float = 0.0) -> List[Path]:
+    """Delete the temp files that atomic writes of ``path`` left behind when their process was
+    killed (see the module docstring); only those not modified for ``min_age_s`` seconds, so a
+    concurrent writer's live temp file survives when ``min_age_s`` exceeds its write time.
+    Returns the removed paths."""
+    path = Path(path)
+    removed = []
+    if not path.parent.is_dir():
+        return removed
+    now = time.time()
+    for tmp in path.parent.glob(glob.escape(f".{path.name}.") + "*.tmp*"):
+        try:
+            if now - tmp.stat().st_mtime >= min_age_s:
+                tmp.unlink()
+                removed.append(tmp)
+        except FileNotFoundError:
+            pass  # removed meanwhile (its writer finished)
+    return removed

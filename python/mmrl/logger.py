@@ -2,7 +2,8 @@
 
 CSV columns are ``MetricsLogger.BASE_COLUMNS`` followed by any extra columns the first
 logged row carries (e.g. a curriculum's). On resume the file is appended to, after dropping
-rows logged past the checkpoint resumed from. TensorBoard is optional: without the
+rows logged past the checkpoint resumed from (and a torn last line); a fresh run starts a new
+file. TensorBoard is optional: without the
 ``tensorboard`` package, only the CSV is written (with one warning per process).
 """
 from __future__ import annotations
@@ -36,6 +37,16 @@ def _summary_writer(out_dir: Path) -> Any:
     return SummaryWriter(str(out_dir))
 
 
+def _row_step(row: list, num_columns: int) -> float:
+    """The step of a metrics row; +inf (dropped) for a row that is not whole."""
+    if len(row) != num_columns:
+        return float("inf")
+    try:
+        return float(row[0])
+    except ValueError:
+        return float("inf")
+
+
 class MetricsLogger:
     """metrics.csv (appended on resume) plus an optional TensorBoard writer."""
 
@@ -48,8 +59,9 @@ class MetricsLogger:
         out_dir = Path(out_dir)
         self.path = out_dir / "metrics.csv"
         self.columns: Optional[list[str]] = None
-        if resume_step is not None and self.path.exists():
-            self._drop_rows_after(resume_step)
+        # A fresh run (resume_step None) starts a new file: rows left by an earlier run that was
+        # killed before its first checkpoint must not stay in front of this run's rows.
+        self._drop_rows_after(0 if resume_step is None else resume_step)
         self.file = open(self.path, "a", newline="")
         self.writer: Optional[csv.DictWriter] = None
         if self.columns is not None:
@@ -57,17 +69,29 @@ class MetricsLogger:
         self.tb = _summary_writer(out_dir) if tensorboard else None
 
     def _drop_rows_after(self, resume_step: int) -> None:
-        """Drop rows logged after the checkpoint we resume from; keep the header's columns."""
-        with open(self.path, newline="") as file:
-            rows = list(csv.reader(file))
-        if not rows:
+        """Drop rows logged after the checkpoint we resume from, and a last line without its
+        newline (torn by a kill or a power loss while it was written); keep the header's columns.
+        With no data row left the file is removed, so the next row writes the header again."""
+        if not self.path.exists():
             return
-        self.columns = rows[0]
-        kept = [rows[0]] + [r for r in rows[1:] if r and int(float(r[0])) <= resume_step]
-        if len(kept) != len(rows):
+        with open(self.path, newline="") as file:
+            text = file.read()
+        lines = text.splitlines(keepends=True)
+        torn = bool(lines) and not lines[-1].endswith("\n")
+        rows = list(csv.reader(lines[:-1] if torn else lines))
+        if not rows:
+            self.path.unlink()
+            return
+        header = rows[0]
+        kept = [header] + [r for r in rows[1:] if _row_step(r, len(header)) <= resume_step]
+        if len(kept) == 1:
+            self.path.unlink()
+        elif len(kept) != len(rows) or torn:
+            self.columns = header
             with atomic_open(self.path, "w", newline="") as file:
                 csv.writer(file).writerows(kept)
-
+        else:
+            self.columns = header
     def write(self, row: dict) -> None:
         if self.writer is None:
             extra = [k for k in row if k not in self.BASE_COLUMNS]

@@ -58,6 +58,7 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from . import _core
+from .arrays import as_array, index_array, real_array
 
 #: Percentiles of the summaries.
 SLIDING_PERCENTILE = 95.0
@@ -66,14 +67,10 @@ JUMP_PERCENTILE = 99.0
 
 # ----------------------------------------------------------------------------- checks
 def _points(name: str, value, frames: Optional[int] = None) -> np.ndarray:
-    """``value`` as a finite float64 (T, K, 3) array, else ValueError naming ``name``."""
-    p = np.asarray(value, np.float64)
-    if p.ndim != 3 or p.shape[2] != 3:
-        raise ValueError(f"{name}: expected shape (T, J, 3), got {p.shape}")
+    """``value`` as a finite float64 (T, K, 3) array, else TypeError/ValueError naming ``name``."""
+    p = real_array(value, name, (None, None, 3), dtype=np.float64, finite=True)
     if frames is not None and p.shape[0] != frames:
         raise ValueError(f"{name}: expected {frames} frames, got {p.shape[0]}")
-    if not np.isfinite(p).all():
-        raise ValueError(f"{name}: contains NaN or inf")
     return p
 
 
@@ -108,7 +105,7 @@ def foot_contact_speeds(positions: np.ndarray, contacts: np.ndarray, foot_joints
     contact on both t - 1 and t: the left foot's samples, then the right foot's.
     """
     p = _points("positions", positions)
-    c = np.asarray(contacts)
+    c = as_array(contacts, "contacts")
     if c.shape != (p.shape[0], 2):
         raise ValueError(f"contacts: expected shape ({p.shape[0]}, 2) to match the {p.shape[0]} frames of "
                          f"positions, got {c.shape}")
@@ -198,18 +195,14 @@ def pose_jumps(positions: np.ndarray, roots: np.ndarray, frames: np.ndarray, db,
     """
     p = _points("positions", positions)
     T = p.shape[0]
-    r = np.asarray(roots, np.float64)
-    if r.shape != (T, 3):
-        raise ValueError(f"roots: expected shape ({T}, 3) to match positions, got {r.shape}")
-    if not np.isfinite(r).all():
-        raise ValueError("roots: contains NaN or inf")
-    f = np.asarray(frames)
+    if p.shape[1] != db.num_joints:
+        raise ValueError(f"positions: expected the database's {db.num_joints} joints, got {p.shape[1]}")
+    r = real_array(roots, "roots", (T, 3), dtype=np.float64, finite=True)
+    f = as_array(frames, "frames")
     if f.shape != (T,) or not np.issubdtype(f.dtype, np.integer):
         raise ValueError(f"frames: expected {T} integer frame indices to match positions, got {f.dtype} {f.shape}")
-    f = f.astype(np.int64)
-    if T and (f.min() < 0 or f.max() >= db.num_frames):
-        raise ValueError(f"frames: indices must be in [0, {db.num_frames})")
-    joints = body_joints(db) if joints is None else np.asarray(joints, np.int64)
+    f = index_array(f, "frames", (T,), high=db.num_frames, what="the database's frames")
+    joints = body_joints(db) if joints is None else index_array(joints, "joints", (None,), high=db.num_joints)
     if T < 2:
         return np.zeros(0)
     return _jump_excess(p[1:], p[:-1], r[1:], f[1:], db, joints)
@@ -223,7 +216,7 @@ def max_pose_jump(positions: np.ndarray, roots: np.ndarray, frames: np.ndarray, 
 
 def transitions_per_second(transitions: np.ndarray, frames_per_step: int, fps: float) -> float:
     """Transitions (one flag per step, every step played in full) per second of played motion."""
-    t = np.asarray(transitions)
+    t = as_array(transitions, "transitions")
     if t.ndim != 1:
         raise ValueError(f"transitions: expected one flag per step (S,), got shape {t.shape}")
     if int(frames_per_step) < 1:

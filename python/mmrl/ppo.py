@@ -58,6 +58,7 @@ from torch import nn
 
 from .checkpoints import (CheckpointError, TrainingState, capture_rng_state, load_checkpoint, save_checkpoint,
                           save_due_checkpoints)
+from .io import remove_stale_temps
 from .logger import MetricsLogger, ProgressBar
 from .trained_policy import NonFiniteError, ObsNormalizer, Policy, RunningMeanStd, load_policy, resolve_device
 
@@ -687,6 +688,9 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
     latest_path = out_dir / "latest.pt"
     if not resume and latest_path.exists():
         raise FileExistsError(f"{out_dir} already holds a run ({latest_path}); pass resume=True or use a new directory")
+    # A run killed while writing leaves hidden temp files (mmrl.io); a run directory has one writer.
+    for name in ("latest.pt", "metrics.csv", "config.json", *(f"snapshot_{s}.pt" for s in cfg.snapshot_steps)):
+        remove_stale_temps(out_dir / name)
     learner = _make_learner(envs, cfg, policy_factory, list(callbacks or []))
     if resume:
         learner.load(latest_path)

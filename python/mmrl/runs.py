@@ -3,7 +3,8 @@
 A run directory written by ``mmrl train`` holds::
 
     config.json          {"task": NAME, "data": DATA SPEC, "num_envs": N,
-                          "task_config": {...}, "ppo": {...}}
+                          "task_config": {...}, "ppo": {...},
+                          "skeleton": {"joint_names": [...], "parents": [...]}}
     latest.pt            the newest checkpoint (atomic), snapshot_<step>.pt
     metrics.csv          one row per PPO iteration (and TensorBoard event files)
 
@@ -52,10 +53,12 @@ class RunDir:
     @classmethod
     def create(cls, path: "str | os.PathLike[str]", *, task: Task, data: Dict[str, Any], num_envs: int,
                task_config, ppo_config, callback_options: Optional[Dict[str, Any]] = None,
-               backend: str = "ppo") -> "RunDir":
+               database=None, backend: str = "ppo") -> "RunDir":
         """Make ``path`` (if needed) and write its config.json atomically (``callback_options``:
-        the task switches its callbacks read, e.g. ``{"curriculum": False}``). ``backend``
-        "rllib": ``ppo_config`` is an ``RLlibConfig``, recorded under "rllib"."""
+        the task switches its callbacks read, e.g. ``{"curriculum": False}``). ``database``: the
+        run's Database, whose skeleton config.json records; when ``path`` already records
+        another skeleton (a resumed run whose data changed), InputError and nothing is written.
+        ``backend`` "rllib": ``ppo_config`` is an ``RLlibConfig``, recorded under "rllib"."""
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)
         config = {"task": task.name, "data": data, "num_envs": int(num_envs), "task_config": asdict(task_config)}
@@ -65,8 +68,23 @@ class RunDir:
             config["ppo"] = asdict(ppo_config)
         if callback_options:
             config["callback_options"] = dict(callback_options)
+        if database is not None:
+            if (path / CONFIG_NAME).is_file():
+                cls(path).check_database(database, f"the data of {path}")
+            config["skeleton"] = skeleton_of(database)
         write_config(path, config)
         return cls(path)
+
+    def check_database(self, db, source: str) -> None:
+        """InputError unless ``db`` has the skeleton the run was trained on (runs written before
+        config.json recorded it pass): a policy drives only the skeleton of its own database."""
+        saved = self.config.get("skeleton")
+        if saved is None or skeleton_of(db) == saved:
+            return
+        names = saved.get("joint_names", [])
+        raise InputError(f"{source}: its skeleton ({db.num_joints} joints: {_first(db.joint_names)}) is not the one "
+                         f"the run {self.path} was trained on ({len(names)} joints: {_first(names)}); a run's policy "
+                         f"only drives the skeleton of its own database")
 
     # -- what the run holds --------------------------------------------------------------------
     @property
@@ -101,7 +119,9 @@ class RunDir:
     def database(self):
         """The run's database (built or loaded once)."""
         if self._db is None:
-            self._db = database_from_spec(self.data_spec)
+            db = database_from_spec(self.data_spec)
+            self.check_database(db, f"the data of {self.path} ({self.data_spec})")
+            self._db = db
         return self._db
 
     @property
@@ -120,3 +140,12 @@ class RunDir:
 
 def write_config(path: Path, config: Dict[str, Any]) -> None:
     atomic_write_text(Path(path) / CONFIG_NAME, json.dumps(config, indent=2, default=list) + "\n")
+
+
+def skeleton_of(db) -> Dict[str, Any]:
+    """What config.json records of a run database's skeleton: joint names and parents."""
+    return {"joint_names": list(db.joint_names), "parents": [int(p) for p in db.parents]}
+
+
+def _first(names, count: int = 4) -> str:
+    return ", ".join(list(names)[:count]) + (", ..." if len(names) > count else "")

@@ -106,6 +106,9 @@ def policy_sections(policy) -> Dict[str, Section]:
     half = np.ones(act_dim, np.float32) if policy.action_half is None else policy.action_half
     out["policy.action_center"] = np.asarray(center, np.float32).reshape(act_dim)
     out["policy.action_half"] = np.asarray(half, np.float32).reshape(act_dim)
+    for name, values in out.items():  # a diverged policy would export and act NaN in the engine
+        if name != "policy.obs_clip" and values.dtype.kind == "f" and not np.isfinite(values).all():
+            raise ValueError(f"policy: {name} holds NaN or inf (a diverged training?); not exported")
     return out
 
 

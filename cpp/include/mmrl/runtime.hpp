@@ -123,7 +123,10 @@ class RuntimeCharacter {
   void set_obstacles(int n, const float* centres, const float* half_sizes, const float* angles);
 
   // Advances dt seconds: shows floor(accumulated / frame time) new frames, deciding whenever
-  // the last decision's frames are used up. Returns the pose shown now.
+  // the last decision's frames are used up. Returns the pose shown now. Throws
+  // std::invalid_argument unless 0 <= dt <= kMaxUpdateSeconds (an engine back from a long
+  // pause clamps its dt, or resets the character).
+  static constexpr float kMaxUpdateSeconds = 60.0f;
   const RuntimePose& update(float dt);
   // Shows exactly one more frame (the unit update() repeats).
   const RuntimePose& advance_frame();

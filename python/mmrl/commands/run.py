@@ -81,6 +81,8 @@ class Setup:
         self.config = run.task_config(self.task) if saved is not None else self.task.default_config()
         if args.db or args.data or run is None:
             self.db = database_from_args(args)
+            if run is not None and args.policy is None:  # the run's policy on other data
+                run.check_database(self.db, "--db" if args.db else "--data")
         else:
             self.db = run.database()
         self.policy, self.policy_name = self._policy(args, run)

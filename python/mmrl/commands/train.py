@@ -223,9 +223,14 @@ def cmd_train(args: argparse.Namespace) -> int:
     policy_factory = task.policy_factory(envs) if task.policy_factory else None
     # config.json always holds the options the run trains with now, so eval and render read them.
     RunDir.create(out, task=task, data=data, num_envs=num_envs, task_config=task_cfg, ppo_config=cfg,
-                  callback_options=options)
+                  callback_options=options, database=db)
+    # A run stopped (killed) before its first checkpoint has config.json but no latest.pt: it
+    # starts again from step 0 (ppo.train drops the rows it had logged).
+    resume = bool(args.resume) and (out / "latest.pt").exists()
+    if args.resume and not resume:
+        print(f"{out}: no checkpoint yet (the run stopped before its first save); training starts at step 0")
     try:
-        result = ppo.train(envs, cfg, out, policy_factory=policy_factory, resume=bool(args.resume),
+        result = ppo.train(envs, cfg, out, policy_factory=policy_factory, resume=resume,
                            callbacks=callbacks)
     finally:
         envs.close()

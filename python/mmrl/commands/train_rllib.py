@@ -89,7 +89,7 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
     db = database_from_spec(data)
     callbacks = list(task.callbacks(None, options)) if task.callbacks else []
     RunDir.create(out, task=task, data=data, num_envs=max(cfg.workers, 1) * cfg.envs(),
-                  task_config=task_cfg, ppo_config=cfg, callback_options=options, backend="rllib")
+                  task_config=task_cfg, ppo_config=cfg, callback_options=options, database=db, backend="rllib")
     import ray
 
     started_here = not ray.is_initialized()

@@ -98,7 +98,10 @@ def make_config(config_type, config=None, overrides: Optional[Mapping[str, Any]]
 
 def check_actions(actions, shape) -> np.ndarray:
     """``actions`` as a C-contiguous float32 array of ``shape``; refuses other shapes, ints and NaN."""
-    a = np.asarray(actions)
+    try:
+        a = np.asarray(actions)
+    except ValueError as e:  # ragged nested lists
+        raise ValueError(f"actions: expected an array of shape {tuple(shape)} ({e})") from None
     if a.shape != tuple(shape):
         raise ValueError(f"actions: expected shape {tuple(shape)}, got {a.shape}")
     if not np.issubdtype(a.dtype, np.floating):

@@ -36,6 +36,7 @@ target.
 """
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 from typing import Any, Dict, Mapping, Optional
 
@@ -162,6 +163,8 @@ class ObstaclesVectorEnv(TargetVectorEnv):
     config_type = ObstaclesConfig
     layout = OBSTACLE_LAYOUT
     map_shape = OBSTACLE_MAP_SHAPE
+    #: Finished episodes kept for pop_finished_episodes (a curriculum drains them every iteration).
+    MAX_FINISHED_EPISODES = 100_000
 
     def __init__(self, num_envs: int = 64, *, render_mode: Optional[str] = None, **kwargs):
         if render_mode is not None:
@@ -172,10 +175,12 @@ class ObstaclesVectorEnv(TargetVectorEnv):
         self._hits = np.zeros(n, np.int32)
         # Curriculum bookkeeping: the stage label each env's episode runs with, the label of
         # the next resets, and (label, success) of episodes finished since the last drain.
+        # Bounded: an env stepped without a curriculum draining it (evaluation, a viewer, an
+        # RLlib rollout) grew these lists by every episode (bench/soak.py env: +177 MB/hour).
         self._stage_label = 0
         self._env_stage = np.zeros(n, np.int32)
-        self._finished_stage: list = []
-        self._finished_success: list = []
+        self._finished_stage: deque = deque(maxlen=self.MAX_FINISHED_EPISODES)
+        self._finished_success: deque = deque(maxlen=self.MAX_FINISHED_EPISODES)
 
     def _observation_space(self) -> gym.spaces.Box:
         n_map = OBSTACLE_MAP_RANGE[1]
@@ -216,10 +221,12 @@ class ObstaclesVectorEnv(TargetVectorEnv):
         return tuple(self._core.stage)
 
     def pop_finished_episodes(self) -> tuple:
-        """(stage labels, successes) of the episodes finished since the last call, as arrays."""
+        """(stage labels, successes) of the episodes finished since the last call (at most the
+        last MAX_FINISHED_EPISODES of them), as arrays."""
         stages = np.asarray(self._finished_stage, np.int32)
         success = np.asarray(self._finished_success, bool)
-        self._finished_stage, self._finished_success = [], []
+        self._finished_stage.clear()
+        self._finished_success.clear()
         return stages, success
 
     # -- inspection (rendering, tests, evaluation) ---------------------------------------------

@@ -32,6 +32,10 @@ from ..policies import JoystickPolicy
 from ..rollout import FullPath, _world_query, policy_actions
 
 
+#: Timing samples kept per part: 10 minutes of frames at 30 fps.
+TIMING_SAMPLES = 18_000
+
+
 class LiveSession:
     """One character, its task's env and the policies it can switch between."""
 
@@ -55,7 +59,10 @@ class LiveSession:
         self.k = self.F  # frames of the last decision shown
         self.shown: Dict[str, Any] = {}
         self.window: deque = deque(maxlen=int(window_steps) + 1)  # + the step whose last frame leads
-        self.timing = {"policy": [], "env_and_controller": [], "controller": [], "click_to_decision": []}
+        # The last TIMING_SAMPLES of each: a list grew by ~150 bytes per frame for as long as
+        # `mmrl play` ran (bench/soak.py play: +23 MB/hour).
+        self.timing = {k: deque(maxlen=TIMING_SAMPLES)
+                       for k in ("policy", "env_and_controller", "controller", "click_to_decision")}
         self._wrap_controller_timing()
         self._trace = open(trace, "a", encoding="utf-8") if trace else None
         pos, _ = self.run.ctrl.pose()
@@ -261,7 +268,7 @@ class LiveSession:
         self._trace.flush()
 
     def timing_ms(self) -> Dict[str, float]:
-        """Mean milliseconds per decision of each part."""
+        """Mean milliseconds per decision of each part (over the last TIMING_SAMPLES decisions)."""
         return {k: 1000.0 * float(np.mean(v)) for k, v in self.timing.items() if v and k != "click_to_decision"}
 
     def close(self) -> None:

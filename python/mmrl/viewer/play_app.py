@@ -10,12 +10,13 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Dict, List, Optional
+from collections import deque
+from typing import Deque, Dict, Optional
 
 import numpy as np
 
 from .draw import CAMERA_OFFSET, CAMERA_OFFSET_OBSTACLES, Painter
-from .live import LiveSession
+from .live import TIMING_SAMPLES, LiveSession
 from .scene import Scene
 
 QUALITY_EVERY = 30  # frames between quality panel updates (1 s)
@@ -29,7 +30,9 @@ class PlayApp:
 
         self.painter = Painter(scene, db.parents, db.joint_names, body_joints=body_joints(db), feet=feet(db),
                                success_radius=float(session.config.success_radius))
-        self.frame_ms: Dict[str, List[float]] = {"session": [], "scene": [], "quality": [], "frame": []}
+        # The last 10 minutes of frames (live.TIMING_SAMPLES): unbounded lists grew for as long as play ran.
+        self.frame_ms: Dict[str, Deque[float]] = {k: deque(maxlen=TIMING_SAMPLES)
+                                                  for k in ("session", "scene", "quality", "frame")}
         self.picked: Optional[int] = None
         self.started = self.frames = 0
         scene.ground()
@@ -117,7 +120,7 @@ class PlayApp:
             stop.wait(max(0.0, next_due - time.perf_counter()))
 
     def timing_report(self) -> str:
-        """The measured per-frame cost (ms) by part, and the frame rate held."""
+        """The measured per-frame cost (ms) by part over the last 10 minutes, and the frame rate held."""
         if not self.frames:
             return "no frames played"
         sess = self.session
