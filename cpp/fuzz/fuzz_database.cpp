@@ -66,8 +66,9 @@ struct Reader {
       if (count * sizeof(T) > left) ok = false;  // never allocate more than the input holds
     }
     if (!ok) return a;
-    a.values.resize(count);
-    take(a.values.data(), count * sizeof(T));
+    std::vector<T> values(count);
+    take(values.data(), count * sizeof(T));
+    a.values = std::move(values);
     return a;
   }
 };
