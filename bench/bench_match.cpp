@@ -56,7 +56,7 @@ const Rows& shared_rows(bool mirror) {
   opts.mirror = mirror;
   const mmrl::Database db = mmrl::database_build(clips, opts);
   Rows r;
-  r.x = db.normalized;
+  r.x.assign(db.normalized.begin(), db.normalized.end());
   r.valid = db.valid;
   r.n = db.num_frames;
   return cache[mirror] = std::move(r);
