@@ -28,27 +28,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))  # the unit tests' modules, for their malformed cases
 
-GOOD_BVH = """HIERARCHY
-ROOT Hips
-{
-\tOFFSET 0 95 0
-\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
-\tJOINT Spine
-\t{
-\t\tOFFSET 0 10 0
-\t\tCHANNELS 3 Zrotation Xrotation Yrotation
-\t\tEnd Site
-\t\t{
-\t\t\tOFFSET 0 70 0
-\t\t}
-\t}
-}
-MOTION
-Frames: 2
-Frame Time: 0.0333333
-0 95 0 0 0 0 0 0 0
-10 95 0 0 90 0 0 0 0
-"""
+from test_bvh import GOOD as GOOD_BVH  # noqa: E402  (the unit tests' valid file)
 
 # The malformed cases of tests/test_bvh.py, as edits of GOOD_BVH.
 BAD_BVH = {
