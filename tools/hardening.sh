@@ -10,7 +10,7 @@
 #   tools/hardening.sh STEP   one step: asan, asan-python, tsan or fuzz (ci settings)
 #
 # Needs gcc (the sanitizer builds) and, for the fuzz step, clang with libFuzzer (Debian:
-# clang libclang-rt-14-dev) and atheris (PyPI); the Python steps need mmrl's Python
+# clang libclang-rt-14-dev) and atheris (PyPI), the ASan step pybind11 (PyPI); the Python steps need mmrl's Python
 # dependencies (the fuzz step's Python targets import the installed mmrl, or PYTHONPATH).
 # Builds go to build/hardening-*; each step prints its time.
 set -euo pipefail
@@ -39,11 +39,16 @@ timed() {
 }
 
 step_asan() {
+  local pybind11_dir
+  pybind11_dir=$(python -m pybind11 --cmakedir 2>/dev/null) || {
+    echo "hardening: the ASan step builds mmrl._core and needs pybind11 in this Python: pip install 'pybind11>=2.12'" >&2
+    exit 2
+  }
   # -O1 -g1: a third less compile time than -O2 -g (the build is most of this step's time),
   # and line numbers in the reports.
   cmake -S . -B "$asan_build" -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g1 -DNDEBUG" \
     -DMMRL_SANITIZE=ON -DMMRL_PYTHON=ON \
-    -DMMRL_BUILD_TESTS=ON -DMMRL_BUILD_EXAMPLES=OFF -Dpybind11_DIR="$(python -m pybind11 --cmakedir)" >/dev/null
+    -DMMRL_BUILD_TESTS=ON -DMMRL_BUILD_EXAMPLES=OFF -Dpybind11_DIR="$pybind11_dir" >/dev/null
   cmake --build "$asan_build" -j"$jobs" >/dev/null
   ASAN_OPTIONS=$CPP_ASAN_OPTIONS ctest --test-dir "$asan_build" --output-on-failure -j1
 }
