@@ -39,7 +39,8 @@ void bind_character(py::module_& m) {
       .def_readwrite("lock_release_distance", &CharacterOptions::lock_release_distance)
       .def_readwrite("lock_blend_time", &CharacterOptions::lock_blend_time)
       .def_readwrite("action_limit_std", &CharacterOptions::action_limit_std)
-      .def_readwrite("transition_cost", &CharacterOptions::transition_cost);
+      .def_readwrite("transition_cost", &CharacterOptions::transition_cost)
+      .def_readwrite("clip_costs", &CharacterOptions::clip_costs);
 
   py::class_<Character>(m, "Character", "A motion-matching character (C++ core of mmrl.Controller).")
       .def(py::init([](const Database& db, PyMatcher& matcher, const CharacterOptions& options) {
@@ -67,6 +68,14 @@ void bind_character(py::module_& m) {
             c.step(t.data());
           },
           py::arg("trajectory_query"))
+      .def(
+          "play",
+          [](Character& c, int64_t match, float cost) {
+            py::gil_scoped_release release;
+            c.play(match, cost);
+          },
+          py::arg("match"), py::arg("cost"),
+          "Plays a decision made elsewhere (the env's last_step_match): frames match+1 .. match+F, as step does.")
       .def_property_readonly("num_joints", &Character::num_joints)
       .def_property(
           "transition_cost", [](const Character& c) { return c.options().transition_cost; },

@@ -29,6 +29,7 @@ void bind_env(py::module_& m) {
       .def_readwrite("action_limit_std", &TargetTaskConfig::action_limit_std)
       .def_readwrite("random_heading", &TargetTaskConfig::random_heading)
       .def_readwrite("transition_cost", &TargetTaskConfig::transition_cost)
+      .def_readwrite("clip_costs", &TargetTaskConfig::clip_costs)
       .def_readwrite("transition_pose_weight", &TargetTaskConfig::transition_pose_weight);
 
   py::class_<PyPlaneVecEnv> plane(m, "PlaneVecEnv", "Batched plane-task environments (C++ core of mmrl.tasks.plane).");

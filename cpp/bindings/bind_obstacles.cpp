@@ -62,6 +62,7 @@ void bind_obstacles(py::module_& m) {
       .def_readwrite("action_limit_std", &ObstacleTaskConfig::action_limit_std)
       .def_readwrite("random_heading", &ObstacleTaskConfig::random_heading)
       .def_readwrite("transition_cost", &ObstacleTaskConfig::transition_cost)
+      .def_readwrite("clip_costs", &ObstacleTaskConfig::clip_costs)
       .def_readwrite("transition_pose_weight", &ObstacleTaskConfig::transition_pose_weight)
       .def_readwrite("bias_yields", &ObstacleTaskConfig::bias_yields)
       .def_readwrite("num_obstacles", &ObstacleTaskConfig::num_obstacles)

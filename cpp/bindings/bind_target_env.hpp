@@ -34,6 +34,7 @@ inline py::dict target_state_dict(const TargetEnvState& st) {
   d["last_pose_jump"] = st.last_pose_jump;
   d["last_step_frames"] = st.last_step_frames;
   d["last_step_transition_cost"] = st.last_step_transition_cost;
+  d["last_step_match"] = st.last_step_match;
   return d;
 }
 
@@ -71,6 +72,15 @@ void bind_target_env_methods(py::class_<Wrapper>& c, const char* last_step_frame
           py::arg("index"),
           "The continuation bias env i's last step matched with (the config's transition_cost, or what the task "
           "made of it for that decision). Kept through the autoreset; 0 after reset.")
+      .def(
+          "last_step_decision",
+          [](const Wrapper& s, int i) {
+            const TargetEnvState& st = s.env.state(checked_env_index(s, i));
+            return py::make_tuple(st.last_step_match, st.last_step_cost);
+          },
+          py::arg("index"),
+          "(match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path "
+          "plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.")
       .def_property(
           "autoreset_next_step", [](const Wrapper& s) { return s.env.autoreset_next_step(); },
           [](Wrapper& s, bool on) { s.env.set_autoreset_next_step(on); },

@@ -141,6 +141,14 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   c->options_.ik = number(file, ch, "character", "ik") != 0.0;
   c->options_.foot_locking = number(file, ch, "character", "foot_locking") != 0.0;
   if (!(c->options_.transition_cost >= 0)) file.fail("task.transition_cost must be >= 0");
+  if (file.has("task.clip_costs")) {  // the decision's clip-cost filter (controller.hpp), optional
+    c->options_.clip_costs = file.floats("task.clip_costs", {c->db_.num_clips()});
+    try {
+      ClipCostFilter check(c->db_, c->options_.clip_costs, "task.clip_costs");
+    } catch (const std::invalid_argument& e) {
+      file.fail(e.what());
+    }
+  }
   c->times_.policy = seconds_since(t0);
   file.release();
   t0 = std::chrono::steady_clock::now();

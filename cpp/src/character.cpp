@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 namespace mmrl {
 
@@ -33,6 +34,7 @@ Character::Character(const Database& db, const Matcher& matcher, const Character
   if (!(options.ik_margin >= 0) || !(options.lock_release_distance > 0) || !(options.lock_blend_time >= 0))
     throw std::invalid_argument("ik_margin must be >= 0, lock_release_distance > 0 and lock_blend_time >= 0");
   set_transition_cost(options.transition_cost);
+  clip_filter_ = ClipCostFilter(db, options_.clip_costs);
   if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("matcher was not built over this database");
   if (db.contacts.size() != static_cast<size_t>(db.num_frames) * 2)
     throw std::invalid_argument("database has no foot contacts (rebuild it)");
@@ -266,8 +268,21 @@ void Character::lock_feet(int64_t f, bool decay) {
   }
 }
 
+int64_t Character::decide(const float* trajectory, float* cost) const {
+  return controller_decide(db_, matcher_, frame_, trajectory, low_, high_, cost, options_.transition_cost,
+                           clip_filter_.get());
+}
+
 void Character::step(const float* trajectory) {
-  const int64_t j = controller_decide(db_, matcher_, frame_, trajectory, low_, high_, &last_cost_, options_.transition_cost);
+  float cost = 0;
+  const int64_t j = decide(trajectory, &cost);
+  play(j, cost);
+}
+
+void Character::play(int64_t j, float cost) {
+  if (j < 0 || j >= db_.num_frames || !db_.valid[j])
+    throw std::invalid_argument("play: frame " + std::to_string(j) + " is not a valid match of the database");
+  last_cost_ = cost;
   last_transition_ = (j != frame_);
   last_match_ = j;
   if (options_.poses && last_transition_ && inertializer_.enabled()) {

@@ -1,8 +1,23 @@
 #include "mmrl/controller.hpp"
 
 #include <cmath>
+#include <stdexcept>
+#include <string>
 
 namespace mmrl {
+
+ClipCostFilter::ClipCostFilter(const Database& db, std::vector<float> costs, const char* option)
+    : costs_(std::move(costs)) {
+  if (costs_.empty()) return;
+  if (static_cast<int64_t>(costs_.size()) != db.num_clips())
+    throw std::invalid_argument(std::string(option) + ": expected one cost per clip (" +
+                                std::to_string(db.num_clips()) + "), got " + std::to_string(costs_.size()));
+  for (size_t c = 0; c < costs_.size(); ++c)
+    if (!(costs_[c] >= 0.0f))
+      throw std::invalid_argument(std::string(option) + ": the cost of clip " + std::to_string(c) +
+                                  " must be >= 0 (inf: never play it), got " + std::to_string(costs_[c]));
+  frame_clip_ = db.frame_clip.data();
+}
 
 void trajectory_action_box(const Database& db, float limit_std, float* low, float* high) {
   double sum[kTrajectoryDim] = {}, sq[kTrajectoryDim] = {};

@@ -41,7 +41,8 @@ MMRL_MULTIVERSION int brute_force_knn(const float* points, int64_t num_points, i
     if (i % kLanes == 0)
       rows_sqdist(query, points + i * dim, static_cast<int>(std::min<int64_t>(kLanes, num_points - i)), dim, dist);
     if (!is_allowed(i, filter)) continue;
-    const float d = dist[i % kLanes];
+    const float d = filtered_cost(dist[i % kLanes], filter.candidates, i);
+    if (d == std::numeric_limits<float>::infinity()) continue;  // refused by the candidate filter
     // Scanning in index order, a tie never displaces an earlier (lower) index.
     if (found == k && !(d < out_sqdist[k - 1])) continue;
     int pos = found < k ? found++ : k - 1;
@@ -58,7 +59,7 @@ MMRL_MULTIVERSION int brute_force_knn(const float* points, int64_t num_points, i
 
 MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                           const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
-                          float* out_cost, float bound_margin) {
+                          float* out_cost, float bound_margin, const CandidateFilter* candidates) {
   check_points(points, num_points, dim, "brute_force_match");
   if (query == nullptr) throw std::invalid_argument("brute_force_match: null query");
   if (bound_index >= num_points) throw std::out_of_range("brute_force_match: bound_index out of range");
@@ -68,16 +69,19 @@ MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_poi
   float best_cost = std::numeric_limits<float>::infinity();
   float bound_cost = best_cost;
   if (bound_index >= 0) {
-    best = bound_index;
-    bound_cost = sqdist_row(query, points + bound_index * dim, dim);
-    best_cost = bound_cost - bound_margin;  // another row must beat the bound by the margin
+    bound_cost = filtered_cost(sqdist_row(query, points + bound_index * dim, dim), candidates, bound_index);
+    if (bound_cost < std::numeric_limits<float>::infinity()) {  // else the filter refused the bound
+      best = bound_index;
+      best_cost = bound_cost - bound_margin;  // another row must beat the bound by the margin
+    }
   }
   float dist[kLanes];
   for (int64_t i = 0; i < num_points; ++i) {
     if (i % kLanes == 0)
       rows_sqdist(query, points + i * dim, static_cast<int>(std::min<int64_t>(kLanes, num_points - i)), dim, dist);
     if ((valid && !valid[i]) || (i >= exclude_lo && i < exclude_hi)) continue;
-    const float d = dist[i % kLanes];
+    const float d = filtered_cost(dist[i % kLanes], candidates, i);
+    if (d == std::numeric_limits<float>::infinity()) continue;  // refused by the candidate filter
     if (d < best_cost || (best < 0 && d == best_cost)) {
       best_cost = d;
       best = i;
@@ -104,10 +108,11 @@ Matcher::Matcher(const float* rows, int64_t num_rows, int dim, const uint8_t* va
       }()) {}
 
 MMRL_MULTIVERSION int64_t Matcher::match(const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
-                       float* out_cost, float bound_margin) const {
+                       float* out_cost, float bound_margin, const CandidateFilter* candidates) const {
   SearchFilter filter;
   filter.exclude_lo = exclude_lo;
   filter.exclude_hi = exclude_hi;
+  filter.candidates = candidates;
   return tree_.nearest_with_bound(query, bound_index, out_cost, filter, bound_margin);
 }
 

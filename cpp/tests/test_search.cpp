@@ -1,6 +1,7 @@
 // Matcher == brute_force_match exactly: masks, exclude windows, continuation bounds, batches.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 #include <vector>
 
@@ -156,6 +157,105 @@ TEST(Matcher, BoundMarginEqualsBruteForceAndHandComputedCases) {
       EXPECT_LT(transitions, 30);  // a large margin keeps most continuations
     }
   }
+}
+
+// A candidate filter of per-row extra costs: 0, a positive cost, or refused (+inf, NaN, and
+// negative values, which count as 0).
+class RowCosts final : public mmrl::CandidateFilter {
+ public:
+  explicit RowCosts(std::vector<float> costs) : costs_(std::move(costs)) {}
+  float extra_cost(int64_t row) const override { return costs_[static_cast<size_t>(row)]; }
+
+ private:
+  std::vector<float> costs_;
+};
+
+std::vector<float> random_row_costs(int64_t n, float refused_share, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<float> costs(static_cast<size_t>(n));
+  for (auto& c : costs) {
+    const float r = u(rng);
+    c = r < refused_share ? (r < refused_share / 2 ? INFINITY : NAN)
+        : r < refused_share + 0.3f ? 0.0f
+        : r < refused_share + 0.35f ? -1.0f
+        : 2.0f * u(rng);
+  }
+  return costs;
+}
+
+TEST(Matcher, CandidateFilterEqualsBruteForceWithTheSameFilter) {
+  // The filter refuses rows or adds a cost >= 0, the continuation bound's included: the tree
+  // must return exactly what a brute-force scan with the same filter returns, index and cost.
+  for (int64_t n : {int64_t{300}, int64_t{5000}}) {
+    const int dim = 27;
+    const auto rows = walk_rows(n, dim, 7);
+    std::vector<uint8_t> valid(static_cast<size_t>(n), 1);
+    for (int64_t i = 0; i < n; i += 11) valid[i] = 0;
+    for (float refused : {0.0f, 0.2f, 0.9f}) {
+      const RowCosts filter(random_row_costs(n, refused, static_cast<uint32_t>(n) + 3));
+      mmrl::Matcher matcher(rows.data(), n, dim, valid.data());
+      for (float noise : {0.0f, 0.3f, 1.5f}) {
+        Case c = make_queries(rows, n, dim, 300, noise, 29);
+        int changed = 0;
+        for (int q = 0; q < 300; ++q) {
+          for (float margin : {0.0f, 0.5f}) {
+            const float* query = &c.queries[static_cast<size_t>(q) * dim];
+            const int64_t bound = c.bound[q] >= 0 && valid[c.bound[q]] ? c.bound[q] : -1;
+            float tree_cost = 0, brute_cost = 0, plain_cost = 0;
+            const int64_t t = matcher.match(query, c.lo[q], c.hi[q], bound, &tree_cost, margin, &filter);
+            const int64_t b = mmrl::brute_force_match(rows.data(), n, dim, valid.data(), query, c.lo[q], c.hi[q],
+                                                      bound, &brute_cost, margin, &filter);
+            ASSERT_EQ(t, b) << "n " << n << " refused " << refused << " query " << q;
+            ASSERT_EQ(tree_cost, brute_cost);
+            if (t >= 0) {  // never a refused row
+              const float extra = filter.extra_cost(t);
+              ASSERT_TRUE(extra < INFINITY) << t;
+            }
+            changed += t != matcher.match(query, c.lo[q], c.hi[q], bound, &plain_cost, margin);
+          }
+          if (refused < 0.5f) {  // k nearest by filtered cost, as a brute-force scan ranks them
+            mmrl::SearchFilter f;
+            f.allowed = valid.data();
+            f.candidates = &filter;
+            int64_t ti[5], bi[5];
+            float td[5], bd[5];
+            const float* query = &c.queries[static_cast<size_t>(q) * dim];
+            ASSERT_EQ(matcher.tree().knn(query, 5, ti, td, f),
+                      mmrl::brute_force_knn(rows.data(), n, dim, query, 5, bi, bd, f));
+            for (int k = 0; k < 5; ++k) ASSERT_EQ(ti[k], bi[k]) << k;
+            for (int k = 0; k < 5; ++k) ASSERT_EQ(td[k], bd[k]) << k;
+          }
+        }
+        if (refused > 0) {
+          EXPECT_GT(changed, 0) << "the filter never changed a match: the test tests nothing";
+        }
+      }
+    }
+  }
+}
+
+TEST(Matcher, CandidateFilterHandComputedCases) {
+  // Rows on a line: 0, 1, 2, 3; the query at 1.1. Distances 1.21, 0.01, 0.81, 3.61.
+  const std::vector<float> rows = {0.0f, 1.0f, 2.0f, 3.0f};
+  mmrl::Matcher matcher(rows.data(), 4, 1, nullptr);
+  const float q = 1.1f;
+  float cost = 0;
+  const RowCosts none({0, 0, 0, 0});
+  EXPECT_EQ(matcher.match(&q, 0, 0, -1, &cost, 0.0f, &none), 1);
+  const RowCosts ban1({0, INFINITY, 0, 0});
+  EXPECT_EQ(matcher.match(&q, 0, 0, -1, &cost, 0.0f, &ban1), 2);  // 0.81 < 1.21
+  const RowCosts dear2({0, INFINITY, 0.5f, 0});
+  EXPECT_EQ(matcher.match(&q, 0, 0, -1, &cost, 0.0f, &dear2), 0);  // 1.31 > 1.21
+  EXPECT_FLOAT_EQ(cost, 1.21f);
+  // The bound is filtered too: a refused bound is no bound; a dearer bound loses.
+  EXPECT_EQ(matcher.match(&q, 0, 0, 1, &cost, 0.0f, &ban1), 2);
+  const RowCosts dear_bound({0, 1.0f, 0, 0});
+  EXPECT_EQ(matcher.match(&q, 0, 0, 1, &cost, 0.0f, &dear_bound), 2);  // 1.01 > 0.81
+  EXPECT_EQ(matcher.match(&q, 0, 0, 1, &cost, 0.3f, &dear_bound), 1);  // 0.81 is not below 1.01 - 0.3
+  EXPECT_FLOAT_EQ(cost, 1.01f);
+  const RowCosts all({INFINITY, INFINITY, INFINITY, INFINITY});
+  EXPECT_EQ(matcher.match(&q, 0, 0, 1, &cost, 0.0f, &all), -1);
 }
 
 TEST(Matcher, RefusesBadInput) {

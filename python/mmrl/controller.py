@@ -15,6 +15,7 @@ only (what training uses); both paths take the same decisions and root trajector
 """
 from __future__ import annotations
 
+import fnmatch
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -23,6 +24,36 @@ import numpy as np
 from . import _core
 from .arrays import real_array
 from .database import POSE_DIM, TRAJECTORY_DIM, Database
+
+
+def clip_cost_array(spec: str, db: Database, option: str = "clip_costs") -> np.ndarray:
+    """The per-clip costs (float32, one per clip of ``db``) of a clip-cost spec
+    ``"PATTERN=COST;PATTERN=COST"``: each PATTERN a shell-style pattern of clip names
+    (``fnmatch``), each COST >= 0 in squared normalized feature distance, or ``inf`` (never
+    play those clips). Costs of patterns that match the same clip add up. A malformed item, or
+    a pattern that matches no clip, raises ValueError naming ``option``. The C++ rule that
+    applies them is ``ClipCostFilter`` (cpp/include/mmrl/controller.hpp)."""
+    if not isinstance(db, Database):
+        raise ValueError(f"{option}: needs the database to resolve clip names")
+    names = list(db.clip_names)
+    costs = np.zeros(len(names), np.float64)
+    for item in (part.strip() for part in str(spec).split(";")):
+        if not item:
+            continue
+        pattern, sep, value = item.rpartition("=")
+        pattern = pattern.strip()
+        try:
+            cost = float(value)
+        except ValueError:
+            cost = float("nan")
+        if not sep or not pattern or not cost >= 0:
+            raise ValueError(f"{option}: expected PATTERN=COST with COST >= 0 or inf, got {item!r}")
+        hits = [k for k, n in enumerate(names) if fnmatch.fnmatchcase(n, pattern)]
+        if not hits:
+            raise ValueError(f"{option}: pattern {pattern!r} matches no clip of the database (clips look like "
+                             f"{names[0]!r})")
+        costs[hits] += cost
+    return costs.astype(np.float32)
 
 
 @dataclass
@@ -71,13 +102,16 @@ class Controller:
             like the env's action box (0 or None: no clipping).
         transition_cost: continuation bias of the match (squared normalized distance; 0 is
             the paper's rule), like the task option of the same name.
+        clip_costs: the decision's clip-cost filter, like the task option of the same name
+            (``"PATTERN=COST;..."``, see :func:`clip_cost_array`).
         record: keep every shown frame for :meth:`recording` (metrics, video, export).
     """
 
     def __init__(self, db: Database, *, frames_per_step: int = 6, inertialization_halflife: Optional[float] = 0.1,
                  ik: bool = True, foot_locking: bool = True, start_frame: Optional[int] = None,
                  position: Sequence[float] = (0.0, 0.0), yaw: float = 0.0, fast: bool = False,
-                 action_limit_std: Optional[float] = 3.0, record: bool = False, transition_cost: float = 0.0):
+                 action_limit_std: Optional[float] = 3.0, record: bool = False, transition_cost: float = 0.0,
+                 clip_costs: str = ""):
         if not isinstance(db, Database):
             raise TypeError(f"db: expected an mmrl.Database, got {type(db).__name__}")
         if not isinstance(frames_per_step, (int, np.integer)) or not 1 <= frames_per_step <= 30:
@@ -98,6 +132,8 @@ class Controller:
         if not np.isfinite(float(transition_cost)) or float(transition_cost) < 0:
             raise ValueError(f"transition_cost must be finite and >= 0, got {transition_cost!r}")
         opt.transition_cost = float(transition_cost)
+        if clip_costs:
+            opt.clip_costs = clip_cost_array(clip_costs, db).tolist()
         self.db = db
         self.fast = bool(fast)
         self.frames_per_step = int(frames_per_step)
@@ -196,8 +232,25 @@ class Controller:
         q = np.ascontiguousarray(q, dtype=np.float32)
         if not np.isfinite(q).all():
             raise ValueError("trajectory_query: contains NaN or inf")
+        self._core.step(q)
+        return self._played(q)
+
+    def play(self, match: int, cost: float, trajectory_query: Optional[np.ndarray] = None) -> StepResult:
+        """Play a decision made elsewhere: frames ``match + 1 .. match + frames_per_step``, with
+        the transition, root motion and poses of :meth:`step`. The full path plays the vector
+        env's decision this way (``env.last_step_match``), so it never decides a second time.
+        ``trajectory_query`` (12,) is only recorded (``recording()["queries"]``)."""
+        if not isinstance(match, (int, np.integer)) or isinstance(match, bool):
+            raise TypeError(f"match: expected an int frame, got {type(match).__name__}")
+        if not (0 <= int(match) < self.db.num_frames and self.db.valid_mask[int(match)]):
+            raise ValueError(f"match: frame {match} is not a valid match frame of the database")
+        q = np.zeros(TRAJECTORY_DIM, np.float32) if trajectory_query is None else \
+            np.asarray(trajectory_query, np.float32).reshape(TRAJECTORY_DIM)
+        self._core.play(int(match), float(cost))
+        return self._played(q)
+
+    def _played(self, q: np.ndarray) -> StepResult:
         c = self._core
-        c.step(q)
         self.steps += 1
         self.transitions += int(c.last_transition)
         poses = (None,) * 4 if self.fast else tuple(np.array(a) for a in c.poses())

@@ -197,9 +197,9 @@ class FullPath:
         if self.scene is not None:
             out.update(self.scene.before_step(a[0]))
         obs, reward, term, trunc, info = self.env.step(a)
-        # The bias the env's match used (a task may vary it per decision): the same match here.
-        self.ctrl.transition_cost = self.env.last_step_transition_cost(0)
-        res = self.ctrl.step(a[0])
+        # The controller plays the env's decision; it never decides again, so it cannot drift.
+        match, cost = self.env.last_step_decision(0)
+        res = self.ctrl.play(match, cost, a[0])
         self.episode_steps += 1
         done = bool(term[0] or trunc[0])
         shown = int(self.env.step_frames[0])

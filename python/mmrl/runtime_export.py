@@ -129,6 +129,11 @@ def controller_sections(db, policy, task_name: str, task_config,
     out["task.name"] = [task_name]
     numbers = {k: float(v) for k, v in asdict(task_config).items() if isinstance(v, (bool, int, float))}
     out.update(_numbers("task", numbers))
+    clip_costs = getattr(task_config, "clip_costs", "")
+    if clip_costs:  # the decision's clip-cost filter, one cost per clip (docs/runtime.md)
+        from .controller import clip_cost_array
+
+        out["task.clip_costs"] = clip_cost_array(clip_costs, db)
     out.update(_numbers("character", dict(CHARACTER_DEFAULTS, **(character or {}))))
     return out
 

@@ -48,6 +48,7 @@ struct CharacterOptions {
   float lock_blend_time = 0.2f;          // seconds to blend a lock out (locking is immediate)
   float action_limit_std = 3.0f;         // trajectory clipped like PlaneVecEnv; <= 0: not clipped
   float transition_cost = 0.0f;          // continuation bias (controller.hpp); 0: the paper's rule
+  std::vector<float> clip_costs;         // per clip, added to its frames' match cost (controller.hpp's ClipCostFilter)
 };
 
 // Global positions (J x 3, meters) of database frame f in the database's world.
@@ -69,8 +70,15 @@ class Character {
   // offsets and locks, and computes the shown pose.
   void reset(int64_t frame, const RootState& root);
 
-  // One step with a 12-d normalized trajectory (finite; checked by the caller).
+  // One step with a 12-d normalized trajectory (finite; checked by the caller): decide, then play.
   void step(const float* trajectory);
+  // The decision alone (controller.hpp's controller_decide with this character's options):
+  // the frame to play from, and its cost. Changes nothing.
+  int64_t decide(const float* trajectory, float* cost = nullptr) const;
+  // Plays a decision made elsewhere (the batched env's, so the full path never decides again):
+  // frames j+1 .. j+F with the transition, root motion and poses of step. j must be a valid
+  // match frame (std::invalid_argument otherwise); cost is what last_cost reports.
+  void play(int64_t j, float cost);
 
   const RootState& root() const { return root_; }
   int64_t frame() const { return frame_; }
@@ -117,6 +125,7 @@ class Character {
   int J_ = 0;
   float dt_ = 1.0f / 30.0f;
   float low_[kTrajectoryDim], high_[kTrajectoryDim];
+  ClipCostFilter clip_filter_;
   std::vector<int> hips_chain_;   // root .. hips
   std::vector<bool> above_hips_;  // ancestors of the hips
 

@@ -11,6 +11,10 @@
 //      playing unless a jump buys a clearly better match. The window stops the search from
 //      jumping a few frames back or ahead in the same clip, which can trap a character in
 //      a loop of one step's frames;
+//      A candidate filter (kdtree.hpp's CandidateFilter: the decision's one extension
+//      point) may refuse candidates or add to their cost, the continuation's included; the
+//      match is the least filtered cost. When a filter refuses every candidate the match is
+//      made without it, so a character always has a frame to play;
 //   3. playback: frames j+1 .. j+n are shown; the root advances by the database root
 //      deltas of frames j .. j+n-1 (each expressed in its own character frame), and the
 //      current frame becomes j+n.
@@ -20,6 +24,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <vector>
 
 #include "mmrl/database.hpp"
 #include "mmrl/search.hpp"
@@ -50,7 +55,8 @@ constexpr int kMatchExcludeWindow = 20;
 
 // The match with the continuation rule (see above). Returns the frame to play from.
 inline int64_t controller_match(const Database& db, const Matcher& matcher, int64_t frame, const float* query,
-                                float* cost = nullptr, float transition_cost = 0.0f) {
+                                float* cost = nullptr, float transition_cost = 0.0f,
+                                const CandidateFilter* filter = nullptr) {
   const int64_t bound = (frame >= 0 && db.valid[frame]) ? frame : -1;
   int64_t lo = 0, hi = 0;
   if (frame >= 0) {
@@ -58,20 +64,42 @@ inline int64_t controller_match(const Database& db, const Matcher& matcher, int6
     lo = std::max<int64_t>(db.clip_ranges[c * 2], frame - kMatchExcludeWindow);
     hi = std::min<int64_t>(db.clip_ranges[c * 2 + 1], frame + kMatchExcludeWindow + 1);
   }
-  return matcher.match(query, lo, hi, bound, cost, transition_cost);
+  const int64_t j = matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
+  if (j >= 0 || filter == nullptr) return j;
+  return matcher.match(query, lo, hi, bound, cost, transition_cost);  // the filter refused everything
 }
 
 // One decision: clips the trajectory action to the box [low, high] (12 each), forms the
 // query for the current frame and matches it. Returns the frame to play from.
 inline int64_t controller_decide(const Database& db, const Matcher& matcher, int64_t frame, const float* action,
                                  const float* low, const float* high, float* cost = nullptr,
-                                 float transition_cost = 0.0f) {
+                                 float transition_cost = 0.0f, const CandidateFilter* filter = nullptr) {
   float query[kFeatureDim];
   float traj[kTrajectoryDim];
   for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high[k], std::max(low[k], action[k]));
   controller_query(db, frame, traj, query);
-  return controller_match(db, matcher, frame, query, cost, transition_cost);
+  return controller_match(db, matcher, frame, query, cost, transition_cost, filter);
 }
+
+// The clip-cost rule, a candidate filter that every decision path (the batched envs, the
+// full path, the engine runtime) builds from one option: costs[c] is added to the match cost
+// of every frame of clip c (squared normalized feature distance; +inf: clip c never plays,
+// unless the filter refuses every frame). No costs: the filter is off (active() is false).
+class ClipCostFilter final : public CandidateFilter {
+ public:
+  ClipCostFilter() = default;
+  // Throws std::invalid_argument unless costs is empty or has one entry per clip of db, each
+  // >= 0 (+inf allowed); the message names `option`.
+  ClipCostFilter(const Database& db, std::vector<float> costs, const char* option = "clip_costs");
+  bool active() const { return !costs_.empty(); }
+  // The filter to hand to controller_decide: this one, or null when off.
+  const CandidateFilter* get() const { return active() ? this : nullptr; }
+  float extra_cost(int64_t row) const override { return costs_[static_cast<size_t>(frame_clip_[row])]; }
+
+ private:
+  const int32_t* frame_clip_ = nullptr;
+  std::vector<float> costs_;
+};
 
 // Normalized trajectory features <-> raw (meters, unit directions) in the character frame.
 inline void trajectory_denormalize(const Database& db, const float* normalized, float* raw) {

@@ -7,8 +7,9 @@
 //   - For speed the leaves hold a permuted copy of their rows in a blocked layout
 //     ("SoA blocks"): kLanes rows per block, dimension-major inside a block, so a leaf
 //     scan is a tight loop that the compiler vectorizes across rows. This copy is
-//     n * dim floats (plus padding to kLanes); the borrowed array must still outlive
-//     the tree only if you call points().
+//     n * dim floats (plus padding to kLanes). The borrowed array must still outlive the
+//     tree: nearest_with_bound reads the bound row from it on every query, and the
+//     brute-force paths (search.hpp) scan it.
 //   - Every node stores its tight axis-aligned bounding box, so the pruning bound is the
 //     true squared distance from the query to the box, not a split-plane distance.
 //     Splits: the dimension of widest spread, at the median (O(N log N) build with
@@ -20,7 +21,10 @@
 //     distance the lowest index wins, so results equal a brute-force scan exactly (both
 //     go through lanes_sqdist, the one distance kernel).
 //   - Filters: an optional build mask (rows left out of the tree entirely), an optional
-//     query mask of allowed rows, and an optional excluded index window [lo, hi).
+//     query mask of allowed rows, an optional excluded index window [lo, hi), and an
+//     optional CandidateFilter that refuses rows or adds a cost >= 0 to them (the
+//     decision's extension point). Extra costs are never negative, so a box bound is still
+//     a lower bound of every filtered cost below it and the search stays exact.
 //   - No heap allocation during a query: the traversal stack is a fixed array and the
 //     k results live in the caller's output arrays.
 #pragma once
@@ -85,11 +89,35 @@ inline float sqdist_row(const float* a, const float* b, int dim) {
   return out;
 }
 
+// The extension point of a match: a rule that refuses candidate rows or makes them dearer
+// (a clip the user banned, obstacles on a clip's path, a style to keep). A search returns
+// the row of least filtered cost, squared distance + extra_cost(row), exactly as a
+// brute-force scan with the same filter does.
+class CandidateFilter {
+ public:
+  virtual ~CandidateFilter() = default;
+  // Extra cost of returning row `row` (an original row index), in squared normalized feature
+  // distance: 0 leaves the row as it is, +inf (or NaN) refuses it; a negative value counts as
+  // 0 (a filter can only make rows dearer, which keeps the tree's pruning exact). Called only
+  // for rows whose distance alone could still win, so a costly rule runs on few rows.
+  virtual float extra_cost(int64_t row) const = 0;
+};
+
+// Squared distance d of row i plus the filter's extra cost (+inf when refused). Tree and
+// brute force both go through this, so filtered costs are bit-identical too.
+inline float filtered_cost(float d, const CandidateFilter* filter, int64_t i) {
+  if (filter == nullptr) return d;
+  const float extra = filter->extra_cost(i);
+  if (!(extra < std::numeric_limits<float>::infinity())) return std::numeric_limits<float>::infinity();
+  return extra > 0.0f ? d + extra : d;
+}
+
 // What a query may return. Default: every row of the tree.
 struct SearchFilter {
   const uint8_t* allowed = nullptr;  // optional, n entries (original row order); 0 = never return
   int64_t exclude_lo = 0;            // rows in [exclude_lo, exclude_hi) are never returned
   int64_t exclude_hi = 0;            // (empty window when hi <= lo)
+  const CandidateFilter* candidates = nullptr;  // optional: refuses rows or adds to their cost
 };
 
 class KDTree {
@@ -179,10 +207,14 @@ class KDTree {
     float bound_cost = cost;
     bool bound_set = false;
     if (bound_index >= 0) {
-      idx = bound_index;
-      bound_cost = sqdist_row(query, points_ + bound_index * dim_, dim_);
-      cost = bound_cost - bound_margin;
-      bound_set = true;
+      // The bound is a candidate like any other: a filter may make it dearer or refuse it
+      // (then the search starts without one).
+      bound_cost = filtered_cost(sqdist_row(query, points_ + bound_index * dim_, dim_), filter.candidates, bound_index);
+      if (bound_cost < std::numeric_limits<float>::infinity()) {
+        idx = bound_index;
+        cost = bound_cost - bound_margin;
+        bound_set = true;
+      }
     }
     search<true>(query, 1, &idx, &cost, filter, bound_set);
     if (idx == bound_index) cost = bound_cost;
@@ -384,14 +416,18 @@ class KDTree {
       }
       if (pruned) continue;
       for (int l = 0; l < kLanes; ++l) {
-        const float d = acc[l];
+        float d = acc[l];
         if (d > w) continue;
         const int64_t i = block_index_[static_cast<size_t>(b) * kLanes + l];
         if (i < 0) continue;  // padding lane
-        // Tie with the k-th entry: a lower index wins, but nothing beats the bound on a tie.
-        if (d == w && out_idx[k - 1] >= 0 && (best_is_bound || i > out_idx[k - 1])) continue;
         if (i >= filter.exclude_lo && i < filter.exclude_hi) continue;
         if (filter.allowed && !filter.allowed[i]) continue;
+        if (filter.candidates) {
+          d = filtered_cost(d, filter.candidates, i);
+          if (d == std::numeric_limits<float>::infinity() || d > w) continue;  // refused, or dearer now
+        }
+        // Tie with the k-th entry: a lower index wins, but nothing beats the bound on a tie.
+        if (d == w && out_idx[k - 1] >= 0 && (best_is_bound || i > out_idx[k - 1])) continue;
         if (kOne) {
           out_d[0] = d;
           out_idx[0] = i;

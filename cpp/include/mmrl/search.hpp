@@ -36,11 +36,13 @@ int brute_force_knn(const float* points, int64_t num_points, int dim, const floa
 
 // Motion-matching semantics: the nearest row with valid[i] != 0 outside
 // [exclude_lo, exclude_hi), unless bound_index >= 0 is at least as close (the current
-// frame's continuation: its cost is the starting best and wins ties). Returns the row
-// (-1 when nothing is allowed and there is no bound) and writes its squared cost.
+// frame's continuation: its cost is the starting best and wins ties). With a candidate
+// filter (kdtree.hpp) every cost, the bound's included, is the filtered cost, and refused
+// rows (the bound too) are never returned. Returns the row (-1 when nothing is allowed and
+// there is no bound) and writes its cost.
 int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                           const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
-                          float* out_cost, float bound_margin = 0.0f);
+                          float* out_cost, float bound_margin = 0.0f, const CandidateFilter* candidates = nullptr);
 
 struct MatcherOptions {
   int leaf_size = 16;                // rows per KD-tree leaf (a sweep in bench/ picks this)
@@ -61,7 +63,8 @@ class Matcher {
   // One query (dim floats). See brute_force_match for the semantics; exclude window and
   // bound_index are in original row numbers. out_cost may be null.
   int64_t match(const float* query, int64_t exclude_lo = 0, int64_t exclude_hi = 0, int64_t bound_index = -1,
-                float* out_cost = nullptr, float bound_margin = 0.0f) const;
+                float* out_cost = nullptr, float bound_margin = 0.0f,
+                const CandidateFilter* candidates = nullptr) const;
 
   // M queries (M x dim row-major) across the pool. Per-query exclude windows and bound
   // indices are optional arrays of M entries (null = none). Allocates nothing.

@@ -24,7 +24,8 @@
 //   void begin_episode(int i);                         // draws env i's episode (its RNG only)
 //   TaskStep advance(int i, const float* action);     // one RL step of env i, no autoreset
 // and nothing else of the loop. Config needs frames_per_step, max_steps, action_limit_std,
-// random_heading and min_target_distance; State derives from TargetEnvState.
+// random_heading, min_target_distance, transition_cost, transition_pose_weight and clip_costs;
+// State derives from TargetEnvState.
 #pragma once
 
 #include <algorithm>
@@ -62,6 +63,7 @@ struct TargetEnvState {
   // like last_step_frames (last_transition and last_cost are cleared by it); 0 after reset(seed).
   bool last_step_transition = false;
   float last_step_cost = 0;
+  int64_t last_step_match = -1;  // the frame the last step's match chose, kept like last_step_frames
   // The continuation bias the last step's match used (the config's transition_cost, or what
   // the task's decision_transition_cost made of it); kept like last_step_frames.
   float last_step_transition_cost = 0;
@@ -132,6 +134,7 @@ class TargetVecEnv {
       envs_[i].last_step_frames = 0;
       envs_[i].last_step_transition = false;
       envs_[i].last_step_cost = 0;
+      envs_[i].last_step_match = -1;
       envs_[i].last_step_transition_cost = 0;
     }
     pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
@@ -210,6 +213,7 @@ class TargetVecEnv {
     if (!(config.transition_pose_weight >= 0.0f) || !std::isfinite(config.transition_pose_weight))
       throw std::invalid_argument("transition_pose_weight must be finite and >= 0");
     trajectory_action_box(db, config.action_limit_std, low_, high_);
+    clip_filter_ = ClipCostFilter(db, config.clip_costs);
     for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
   }
 
@@ -228,6 +232,7 @@ class TargetVecEnv {
           s.last_step_frames = 0;
           s.last_step_transition = false;
           s.last_step_cost = 0;
+          s.last_step_match = -1;
           s.last_step_transition_cost = 0;
           out.rewards[i] = 0;
           out.terminated[i] = out.truncated[i] = out.success[i] = 0;
@@ -241,6 +246,7 @@ class TargetVecEnv {
         s.last_step_frames = r.frames_played;
         s.last_step_transition = s.last_transition;
         s.last_step_cost = s.last_cost;
+        s.last_step_match = s.last_match;
         s.last_step_transition_cost = s.last_transition_cost;
         const bool truncated = !r.terminated && s.steps >= config_.max_steps;
         out.rewards[i] = r.reward;
@@ -278,7 +284,8 @@ class TargetVecEnv {
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
     s.last_transition_cost = task().decision_transition_cost(i);
-    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost);
+    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost,
+                                        task().candidate_filter(i));
     s.last_transition = (j != s.frame);
     s.last_match = j;
     s.last_pose_jump = 0;
@@ -296,6 +303,10 @@ class TargetVecEnv {
   // The continuation bias of env i's next match (a task hides it to make the bias depend on
   // its state): the config's transition_cost.
   float decision_transition_cost(int) const { return config_.transition_cost; }
+
+  // The candidate filter of env i's next match (a task hides it to add its own rules): the
+  // config's clip costs (controller.hpp's ClipCostFilter), or none.
+  const CandidateFilter* candidate_filter(int) const { return clip_filter_.get(); }
 
   // Distance (meters) from env i's root to its target.
   float target_distance(const State& s) const { return std::hypot(s.target_x - s.root.x, s.target_z - s.root.z); }
@@ -319,6 +330,7 @@ class TargetVecEnv {
   std::vector<int64_t> valid_frames_;
   std::vector<State> envs_;
   float low_[kTrajectoryDim], high_[kTrajectoryDim];
+  ClipCostFilter clip_filter_;
   bool next_step_autoreset_ = false;
   ThreadPool pool_;
 

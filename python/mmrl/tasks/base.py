@@ -33,6 +33,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ..controller import clip_cost_array
 from ..database import Database
 from ..sources import resolve_database
 
@@ -72,6 +73,14 @@ class TaskConfig:
     the pose features of the clip's continuation and of the matched frame (what a transition
     asks the blend to hide; 0 when the clip continues). 0 is the paper's reward."""
 
+    clip_costs: str = ""
+    """Costs added to the match cost of chosen clips, the decision's candidate filter (one C++
+    rule, ClipCostFilter, honoured by the training env, the full path, ``mmrl play`` and the
+    engine runtime): ``"PATTERN=COST;PATTERN=COST"``, each PATTERN a shell-style pattern of clip
+    names (``fnmatch``), each COST >= 0 in squared normalized feature distance or ``inf`` (never
+    play those clips). Costs of patterns matching the same clip add up; a pattern that matches
+    no clip is an error. Empty: no filter."""
+
     def replace(self, **overrides) -> "TaskConfig":
         """A copy with ``overrides`` applied; an unknown name raises TypeError listing the options."""
         names = [f.name for f in fields(self)]
@@ -82,11 +91,15 @@ class TaskConfig:
         values.update(overrides)
         return type(self)(**values)
 
-    def to_core(self, core_config_type):
-        """The matching C++ config struct (every field copied by name)."""
+    def to_core(self, core_config_type, db: Optional[Database] = None):
+        """The matching C++ config struct (every field copied by name; ``clip_costs`` resolved
+        against ``db``'s clips, which it then needs)."""
         c = core_config_type()
         for f in fields(self):
-            setattr(c, f.name, getattr(self, f.name))
+            value = getattr(self, f.name)
+            if f.name == "clip_costs":
+                value = clip_cost_array(value, db).tolist() if value else []
+            setattr(c, f.name, value)
         return c
 
 
@@ -154,7 +167,7 @@ class TargetVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.render_mode = render_mode
         self._core = self.core_type(self.db._db, self.db.matcher, self.num_envs,
-                                    self.config.to_core(self.core_config_type), num_threads)
+                                    self.config.to_core(self.core_config_type, self.db), num_threads)
         self.autoreset_mode = autoreset_mode
         self.metadata = {**type(self).metadata, "autoreset_mode": autoreset_mode}
         self._core.autoreset_next_step = autoreset_mode == AutoresetMode.NEXT_STEP
@@ -279,6 +292,12 @@ class TargetVectorEnv(VectorEnv):
         self._sum_frames[:] = 0
         self._sum_decisions = 0
         return out
+
+    def last_step_decision(self, i: int) -> Tuple[int, float]:
+        """(match, cost) of env ``i``'s last step: the frame its match chose (what the full path
+        plays) and the match's cost; kept through the autoreset, (-1, 0) after a reset."""
+        match, cost = self._core.last_step_decision(int(i))
+        return int(match), float(cost)
 
     def last_step_transition_cost(self, i: int) -> float:
         """The continuation bias env i's last step matched with (a task may vary it per decision)."""

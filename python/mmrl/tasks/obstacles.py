@@ -137,8 +137,8 @@ class ObstaclesConfig(TaskConfig):
     grid_cell_size: float = 1.5
     """Cell side (meters) of the uniform grid used for sensors, hits and collisions."""
 
-    def to_core(self, core_config_type=_core.ObstacleTaskConfig):
-        return super().to_core(core_config_type)
+    def to_core(self, core_config_type=_core.ObstacleTaskConfig, db=None):
+        return super().to_core(core_config_type, db)
 
 
 #: ``mmrl train obstacles --preset NAME``: option overrides (task options and PPOConfig fields).

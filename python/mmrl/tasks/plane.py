@@ -32,8 +32,8 @@ class PlaneConfig(TaskConfig):
 
     task_label = "plane-task"
 
-    def to_core(self, core_config_type=_core.TargetTaskConfig):
-        return super().to_core(core_config_type)
+    def to_core(self, core_config_type=_core.TargetTaskConfig, db=None):
+        return super().to_core(core_config_type, db)
 
 
 class PlaneVectorEnv(TargetVectorEnv):

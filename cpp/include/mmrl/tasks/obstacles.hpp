@@ -70,6 +70,9 @@ struct ObstacleTaskConfig {
   float action_limit_std = 3.0f;     // action box half-width, in standard deviations
   bool random_heading = true;        // start heading uniform in [-pi, pi)
   float transition_cost = 0.0f;      // continuation bias of the match (controller.hpp); 0: the paper's rule
+  // Per clip, added to the match cost of its frames (+inf: never played); empty: none. The
+  // candidate filter of controller.hpp's ClipCostFilter.
+  std::vector<float> clip_costs;
   // Reward - transition_pose_weight * (the squared normalized, weighted distance between the pose
   // features of the continuation and of the matched frame: what a transition asks the blend
   // to hide; 0 without a transition). 0: the paper's reward.
