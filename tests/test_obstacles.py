@@ -160,7 +160,7 @@ def test_sensor_map_orientation_on_a_hand_built_scene(db):
     pos = env.sensor_positions(0)
     assert np.hypot(*(pos[row, col] - [2.0, -1.0])) < 0.12 * math.sqrt(2)
     # The observation shows it after the refresh.
-    np.testing.assert_array_equal(env._core.observe(0)[:N_MAP].reshape(MAP, MAP), m)
+    np.testing.assert_array_equal(env.observe(0)[:N_MAP].reshape(MAP, MAP), m)
 
 
 # -- hits, reward, collision --------------------------------------------------------------

@@ -22,6 +22,8 @@ def _stub_names():
             top.add(node.name)
         elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
             top.add(node.target.id)
+        elif isinstance(node, ast.Assign):  # an alias such as the deprecated TargetTaskConfig = PlaneTaskConfig
+            top.update(t.id for t in node.targets if isinstance(t, ast.Name))
     return top, members
 
 

@@ -1,9 +1,8 @@
 // Bindings of the moving-obstacles task core (tasks/obstacles.hpp, grid.hpp): checks, GIL
 // release, writes into caller-owned numpy buffers. No logic.
-#include "bind_target_env.hpp"
+#include "bind_task_env.hpp"
 #include "bindings.hpp"
 #include "mmrl/tasks/obstacles.hpp"
-#include "py_matcher.hpp"
 
 namespace mmrl {
 
@@ -38,71 +37,39 @@ py::dict obstacle_dict(const ObstacleVecEnv& env, int i, int frames_after) {
   return d;
 }
 
+// The state() dict: the shared keys, the stage and the last action's hit points.
+py::dict obstacle_state_dict(const ObstacleVecEnv& env, int i) {
+  const ObstacleEnvState& st = env.state(i);
+  py::dict d = target_state_dict(st);
+  d["max_speed"] = st.max_speed;
+  d["target_half_extent"] = st.target_half_extent;
+  d["last_hits"] = st.last_hits;
+  py::array_t<float> pts({3, 2});
+  std::copy(st.hit_points, st.hit_points + 6, pts.mutable_data());
+  d["hit_points"] = pts;
+  d["hit_inside"] = py::make_tuple(bool(st.hit_inside[0]), bool(st.hit_inside[1]), bool(st.hit_inside[2]));
+  d["collided"] = st.collided;
+  return d;
+}
+
 }  // namespace
 
 // long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 void bind_obstacles(py::module_& m) {
   m.attr("OBSTACLE_MAP_SIDE") = kMapSide;
-  py::class_<ObstacleTaskConfig>(m, "ObstacleTaskConfig", "Numbers of the moving-obstacles task (tasks/obstacles.hpp).")
-      .def(py::init<>())
-      .def_readwrite("frames_per_step", &ObstacleTaskConfig::frames_per_step)
-      .def_readwrite("target_half_extent", &ObstacleTaskConfig::target_half_extent)
-      .def_readwrite("obstacle_max_speed", &ObstacleTaskConfig::obstacle_max_speed)
-      .def_readwrite("speed_cap", &ObstacleTaskConfig::speed_cap)
-      .def_readwrite("min_target_distance", &ObstacleTaskConfig::min_target_distance)
-      .def_readwrite("success_radius", &ObstacleTaskConfig::success_radius)
-      .def_readwrite("success_bonus", &ObstacleTaskConfig::success_bonus)
-      .def_readwrite("hit_reward", &ObstacleTaskConfig::hit_reward)
-      .def_readwrite("hit_weight", &ObstacleTaskConfig::hit_weight)
-      .def_readwrite("hit_penalty", &ObstacleTaskConfig::hit_penalty)
-      .def_readwrite("hit_radius", &ObstacleTaskConfig::hit_radius)
-      .def_readwrite("hit_lookahead", &ObstacleTaskConfig::hit_lookahead)
-      .def_readwrite("hit_played", &ObstacleTaskConfig::hit_played)
-      .def_readwrite("max_steps", &ObstacleTaskConfig::max_steps)
-      .def_readwrite("action_limit_std", &ObstacleTaskConfig::action_limit_std)
-      .def_readwrite("random_heading", &ObstacleTaskConfig::random_heading)
-      .def_readwrite("transition_cost", &ObstacleTaskConfig::transition_cost)
-      .def_readwrite("clip_costs", &ObstacleTaskConfig::clip_costs)
-      .def_readwrite("transition_pose_weight", &ObstacleTaskConfig::transition_pose_weight)
-      .def_readwrite("bias_yields", &ObstacleTaskConfig::bias_yields)
-      .def_readwrite("num_obstacles", &ObstacleTaskConfig::num_obstacles)
-      .def_readwrite("obstacle_square_half", &ObstacleTaskConfig::obstacle_square_half)
-      .def_readwrite("obstacle_min_side", &ObstacleTaskConfig::obstacle_min_side)
-      .def_readwrite("obstacle_max_side", &ObstacleTaskConfig::obstacle_max_side)
-      .def_readwrite("body_radius", &ObstacleTaskConfig::body_radius)
-      .def_readwrite("start_clearance", &ObstacleTaskConfig::start_clearance)
-      .def_readwrite("target_clearance", &ObstacleTaskConfig::target_clearance)
-      .def_readwrite("sensor_size", &ObstacleTaskConfig::sensor_size)
-      .def_readwrite("sensor_forward", &ObstacleTaskConfig::sensor_forward)
-      .def_readwrite("previous_map_lag", &ObstacleTaskConfig::previous_map_lag)
-      .def_readwrite("grid_cell_size", &ObstacleTaskConfig::grid_cell_size);
+  bind_task_config<ObstacleTaskConfig>(m, "ObstacleTaskConfig", "Numbers of the moving-obstacles task (tasks/obstacles.hpp).");
 
   using E = ObstacleVecEnv;
   py::class_<PyObstacleVecEnv> obstacles(m, "ObstacleVecEnv",
                                           "Batched moving-obstacles environments (C++ core of mmrl.tasks.obstacles).");
-  obstacles.def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const ObstacleTaskConfig& config,
-                       int num_threads) {
-             if (num_threads < 0) throw py::value_error("num_threads: must be >= 0 (0 = all cores)");
-             if (num_envs < 1) throw py::value_error("num_envs: must be >= 1");
-             try {
-               return new PyObstacleVecEnv{ObstacleVecEnv(db, matcher.matcher, num_envs, config, num_threads)};
-             } catch (const std::invalid_argument& e) {
-               throw py::value_error(e.what());
-             }
-           }),
-           py::arg("db"), py::arg("matcher"), py::arg("num_envs"), py::arg("config"), py::arg("num_threads") = 0,
-           py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
-      .def_property_readonly("num_envs", [](const PyObstacleVecEnv& s) { return s.env.num_envs(); })
-      .def_property_readonly_static("obs_dim", [](py::object) { return E::kObsDim; })
-      .def_property_readonly_static("action_dim", [](py::object) { return E::kActionDim; })
-      .def_property_readonly_static("layout", [](py::object) {
+  bind_task_env(obstacles, obstacle_state_dict,
+                "Writes into out (int32, N) how many frames of the last step each environment played before its "
+                "episode ended: the index of the frame that succeeded or collided + 1, else frames_per_step (0 after "
+                "reset).");
+  obstacles.def_property_readonly_static("layout", [](py::object) {
         return py::make_tuple(py::make_tuple("maps", 2 * kMapCells), py::make_tuple("pose", kPoseDim),
                               py::make_tuple("goal", 2));
       })
-      .def_property_readonly("action_low",
-                             [](const PyObstacleVecEnv& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_low()); })
-      .def_property_readonly("action_high",
-                             [](const PyObstacleVecEnv& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_high()); })
       .def(
           "set_stage",
           [](PyObstacleVecEnv& s, float max_speed, float target_half_extent) {
@@ -118,71 +85,28 @@ void bind_obstacles(py::module_& m) {
         return py::make_tuple(s.env.stage_max_speed(), s.env.stage_target_half_extent());
       })
       .def(
-          "reset",
-          [](PyObstacleVecEnv& s, uint64_t seed, const py::handle& obs) {
-            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), E::kObsDim});
-            py::gil_scoped_release release;
-            s.env.reset(seed, o);
-          },
-          py::arg("seed"), py::arg("obs"))
-      .def(
-          "reset_env",
-          [](PyObstacleVecEnv& s, int i, const py::handle& obs) {
-            checked_index(s, i);
-            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), E::kObsDim});
-            s.env.reset_env(i, o + static_cast<size_t>(i) * E::kObsDim);
-          },
-          py::arg("index"), py::arg("obs"))
-      .def(
           "step",
           [](PyObstacleVecEnv& s, const py::handle& actions, const py::handle& obs, const py::handle& rewards,
              const py::handle& terminated, const py::handle& truncated, const py::handle& success,
              const py::handle& collision, const py::handle& hits, const py::handle& final_obs,
-             const py::handle& episode_return, const py::handle& episode_length) {
+             const py::handle& episode_return, const py::handle& episode_length, const py::handle& step_frames,
+             const py::handle& transitions, const py::handle& costs) {
             const py::ssize_t n = s.env.num_envs();
-            auto a = check_array<float>(actions, "actions", {n, E::kActionDim});
-            check_finite(a.data(), a.size(), "actions");
-            float* o = writable_buffer<float>(obs, "obs", {n, E::kObsDim});
-            float* r = writable_buffer<float>(rewards, "rewards", {n});
-            uint8_t* te = writable_buffer<uint8_t>(terminated, "terminated", {n});
-            uint8_t* tr = writable_buffer<uint8_t>(truncated, "truncated", {n});
-            uint8_t* su = writable_buffer<uint8_t>(success, "success", {n});
+            auto a = step_actions(s.env, actions);
+            const TargetStepBuffers out = step_buffers(s.env, obs, rewards, terminated, truncated, success, final_obs,
+                                                       episode_return, episode_length, step_frames, transitions, costs);
             uint8_t* co = writable_buffer<uint8_t>(collision, "collision", {n});
             int32_t* hi = writable_buffer<int32_t>(hits, "hits", {n});
-            float* fo = writable_buffer<float>(final_obs, "final_obs", {n, E::kObsDim});
-            float* er = writable_buffer<float>(episode_return, "episode_return", {n});
-            int32_t* el = writable_buffer<int32_t>(episode_length, "episode_length", {n});
             py::gil_scoped_release release;
-            s.env.step(a.data(), o, r, te, tr, su, co, hi, fo, er, el);
+            s.env.step(a.data(), out, co, hi);
           },
           py::arg("actions"), py::arg("obs"), py::arg("rewards"), py::arg("terminated"), py::arg("truncated"),
           py::arg("success"), py::arg("collision"), py::arg("hits"), py::arg("final_obs"), py::arg("episode_return"),
-          py::arg("episode_length"))
-      .def(
-          "observe",
-          [](const PyObstacleVecEnv& s, int i) {
-            checked_index(s, i);
-            py::array_t<float> out(E::kObsDim);
-            s.env.observe(i, out.mutable_data());
-            return out;
-          },
-          py::arg("index"), "A fresh observation row of env i.")
-      .def(
-          "state",
-          [](const PyObstacleVecEnv& s, int i) {
-            const ObstacleEnvState& st = s.env.state(checked_index(s, i));
-            py::dict d = target_state_dict(st);
-            d["max_speed"] = st.max_speed;
-            d["target_half_extent"] = st.target_half_extent;
-            d["last_hits"] = st.last_hits;
-            py::array_t<float> pts({3, 2});
-            std::copy(st.hit_points, st.hit_points + 6, pts.mutable_data());
-            d["hit_points"] = pts;
-            d["hit_inside"] = py::make_tuple(bool(st.hit_inside[0]), bool(st.hit_inside[1]), bool(st.hit_inside[2]));
-            d["collided"] = st.collided;
-            return d;
-          },
-          py::arg("index"), "World-space state of env i: root, frame, target, stage, last action's hit points.")
+          py::arg("episode_length"), py::arg("step_frames") = py::none(), py::arg("transitions") = py::none(),
+          py::arg("costs") = py::none(),
+          "One step of every env (actions float32 N x 12, finite), writing every buffer; collision (uint8, N) and "
+          "hits (int32, N) are the task's. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if "
+          "given, get every env's last_step_frames and last_step_matches, so one call returns all a step produced.")
       .def(
           "obstacles", [](const PyObstacleVecEnv& s, int i) { return obstacle_dict(s.env, checked_index(s, i), kNow); },
           py::arg("index"),
@@ -262,10 +186,6 @@ void bind_obstacles(py::module_& m) {
             s.env.set_root(checked_index(s, i), x, z, yaw);
           },
           py::arg("index"), py::arg("x"), py::arg("z"), py::arg("yaw"));
-  bind_target_env_methods(obstacles,
-                          "Writes into out (int32, N) how many frames of the last step each environment played "
-                          "before its episode ended: the index of the frame that succeeded or collided + 1, else "
-                          "frames_per_step (0 after reset).");
 }
 
 }  // namespace mmrl

@@ -66,14 +66,22 @@ void bind_runtime(py::module_& m) {
       .def("set_target", &RuntimeCharacter::set_target, py::arg("x"), py::arg("z"))
       .def(
           "set_obstacles",
-          [](RuntimeCharacter& ch, const py::handle& centres, const py::handle& half_sizes, const py::handle& angles) {
+          [](RuntimeCharacter& ch, const py::handle& centres, const py::handle& half_sizes, const py::handle& angles,
+             const py::handle& velocities) {
             auto c = check_array<float>(centres, "centres", {-1, 2});
             const py::ssize_t n = c.shape(0);
             auto h = check_array<float>(half_sizes, "half_sizes", {n, 2});
             auto a = check_array<float>(angles, "angles", {n});
-            ch.set_obstacles(static_cast<int>(n), c.data(), h.data(), a.data());
+            if (velocities.is_none()) {
+              ch.set_obstacles(static_cast<int>(n), c.data(), h.data(), a.data());
+            } else {
+              auto v = check_array<float>(velocities, "velocities", {n, 2});
+              ch.set_obstacles(static_cast<int>(n), c.data(), h.data(), a.data(), v.data());
+            }
           },
-          py::arg("centres"), py::arg("half_sizes"), py::arg("angles"))
+          py::arg("centres"), py::arg("half_sizes"), py::arg("angles"), py::arg("velocities") = py::none(),
+          "The obstacles now (world meters, radians; float32) and, optionally, their velocities (m/s; None: "
+          "standing still), read at the next decision.")
       .def("advance_frame", [](RuntimeCharacter& ch) { ch.advance_frame(); })
       .def("update", [](RuntimeCharacter& ch, float dt) { ch.update(dt); }, py::arg("dt"))
       .def_property_readonly("frame", [](const RuntimeCharacter& ch) { return ch.pose().frame; })

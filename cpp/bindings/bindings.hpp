@@ -17,7 +17,7 @@ namespace mmrl {
 void bind_bvh(py::module_& m);
 void bind_database(py::module_& m);
 void bind_search(py::module_& m);
-void bind_env(py::module_& m);
+void bind_plane(py::module_& m);
 void bind_character(py::module_& m);
 void bind_obstacles(py::module_& m);
 void bind_runtime(py::module_& m);

@@ -7,7 +7,7 @@ PYBIND11_MODULE(_core, m) {
   mmrl::bind_bvh(m);
   mmrl::bind_database(m);
   mmrl::bind_search(m);
-  mmrl::bind_env(m);
+  mmrl::bind_plane(m);
   mmrl::bind_character(m);
   mmrl::bind_obstacles(m);
   mmrl::bind_runtime(m);

@@ -71,37 +71,64 @@ double number(const ControllerFile& f, const std::map<std::string, double>& m, c
   return it->second;
 }
 
-RuntimeTask read_task(const ControllerFile& f, int obs_dim) {
+// The config of a task core from the file's task numbers (by Config::visit's field names;
+// a field the file lacks keeps its default) and its optional clip costs.
+template <class Config>
+Config task_config(const ControllerFile& f, const RuntimeTask& t, int64_t num_clips) {
+  Config c;
+  Config::visit([&](const char* name, auto member) {
+    using T = typename std::decay<decltype(c.*member)>::type;
+    if constexpr (std::is_same<T, std::vector<float>>::value) {
+      const std::string section = std::string("task.") + name;
+      if (f.has(section)) c.*member = f.floats(section, {num_clips});
+    } else {
+      const auto it = t.values.find(name);
+      if (it == t.values.end()) return;
+      if (std::is_integral<T>::value && !std::is_same<T, bool>::value &&
+          (it->second != std::floor(it->second) || std::abs(it->second) > 1e9))
+        f.fail(std::string("task.") + name + " must be a whole number");
+      c.*member = static_cast<T>(it->second);
+    }
+  });
+  return c;
+}
+
+RuntimeTask read_task(const ControllerFile& f, int obs_dim, int64_t num_clips) {
   RuntimeTask t;
   const auto names = f.texts("task.name");
   if (names.size() != 1) f.fail("section 'task.name' must hold one name");
   t.name = names[0];
   t.values = numbers(f, "task");
-  auto get = [&](const char* key) { return number(f, t.values, "task", key); };
-  t.frames_per_step = static_cast<int>(get("frames_per_step"));
-  t.action_limit_std = static_cast<float>(get("action_limit_std"));
-  t.transition_cost = static_cast<float>(get("transition_cost"));
-  t.success_radius = static_cast<float>(get("success_radius"));
-  if (t.frames_per_step < 1 || t.frames_per_step > 30) f.fail("task.frames_per_step must be in 1..30");
-  t.obstacles = obs_dim == 2 * kMapCells + kPoseDim + 2;
-  if (!t.obstacles && obs_dim != kPoseDim + 2)
-    f.fail("the policy reads " + std::to_string(obs_dim) + " observations: neither the plane task's (17) nor an "
-           "obstacle task's (529)");
+  for (const char* key : {"frames_per_step", "action_limit_std", "transition_cost", "success_radius"})
+    number(f, t.values, "task", key);  // required
+  // The core the task runs on: named by the file (task.core), else (older files) the task's
+  // own name when it is a core's, else told by the policy's observation size.
+  if (f.has("task.core")) {
+    const auto core = f.texts("task.core");
+    if (core.size() != 1) f.fail("section 'task.core' must hold one name");
+    t.core = core[0];
+  } else if (t.name == PlaneVecEnv::kCoreName || t.name == ObstacleVecEnv::kCoreName) {
+    t.core = t.name;
+  } else {
+    t.core = obs_dim == ObstacleVecEnv::kObsDim ? ObstacleVecEnv::kCoreName : PlaneVecEnv::kCoreName;
+  }
+  const bool plane = t.core == PlaneVecEnv::kCoreName;
+  t.obstacles = t.core == ObstacleVecEnv::kCoreName;
+  if (!plane && !t.obstacles)
+    f.fail("task.core '" + t.core + "' is not a core this runtime has (plane, obstacles)");
+  const int want = plane ? PlaneVecEnv::kObsDim : ObstacleVecEnv::kObsDim;
+  if (obs_dim != want)
+    f.fail("the policy reads " + std::to_string(obs_dim) + " observations; the " + t.core + " task's are " +
+           std::to_string(want));
+  t.plane = task_config<PlaneTaskConfig>(f, t, num_clips);
+  t.obstacle = task_config<ObstacleTaskConfig>(f, t, num_clips);
+  const TaskConfig& base = plane ? static_cast<const TaskConfig&>(t.plane) : t.obstacle;
+  t.frames_per_step = base.frames_per_step;
+  t.success_radius = base.success_radius;
   if (t.obstacles) {
-    t.previous_map_lag = static_cast<int>(get("previous_map_lag"));
-    t.bias_yields = get("bias_yields") != 0.0;
-    t.hit_radius = static_cast<float>(get("hit_radius"));
-    t.field.num_obstacles = static_cast<int>(get("num_obstacles"));
-    t.field.square_half = static_cast<float>(get("obstacle_square_half"));
-    t.field.min_side = static_cast<float>(get("obstacle_min_side"));
-    t.field.max_side = static_cast<float>(get("obstacle_max_side"));
-    t.field.cell_size = static_cast<float>(get("grid_cell_size"));
-    t.field.sensor_size = static_cast<float>(get("sensor_size"));
-    t.field.sensor_forward = static_cast<float>(get("sensor_forward"));
-    t.field.max_margin = std::max(1.0f, t.hit_radius);
-    if (t.previous_map_lag < 1 || t.previous_map_lag > 64 || t.field.num_obstacles < 0 ||
-        t.field.num_obstacles > 100000)
-      f.fail("task.previous_map_lag or task.num_obstacles out of range");
+    t.num_obstacles = t.obstacle.num_obstacles;
+    if (t.obstacle.num_obstacles < 0 || t.obstacle.num_obstacles > 100000)
+      f.fail("task.num_obstacles out of range");
   }
   return t;
 }
@@ -131,24 +158,14 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   c->times_.database = seconds_since(t0);
   t0 = std::chrono::steady_clock::now();
   c->policy_ = PolicyNet::from_file(file);
-  c->task_ = read_task(file, c->policy_.obs_dim());
+  c->task_ = read_task(file, c->policy_.obs_dim(), c->db_.num_clips());
   if (c->policy_.act_dim() != kTrajectoryDim) file.fail("the policy must write 12 trajectory values");
   const auto ch = numbers(file, "character");
+  // The Character only plays: the decisions are the task env's (RuntimeCharacter::decide).
   c->options_.frames_per_step = c->task_.frames_per_step;
-  c->options_.action_limit_std = c->task_.action_limit_std;
-  c->options_.transition_cost = c->task_.transition_cost;
   c->options_.inertialization_halflife = static_cast<float>(number(file, ch, "character", "inertialization_halflife"));
   c->options_.ik = number(file, ch, "character", "ik") != 0.0;
   c->options_.foot_locking = number(file, ch, "character", "foot_locking") != 0.0;
-  if (!(c->options_.transition_cost >= 0)) file.fail("task.transition_cost must be >= 0");
-  if (file.has("task.clip_costs")) {  // the decision's clip-cost filter (controller.hpp), optional
-    c->options_.clip_costs = file.floats("task.clip_costs", {c->db_.num_clips()});
-    try {
-      ClipCostFilter check(c->db_, c->options_.clip_costs, "task.clip_costs");
-    } catch (const std::invalid_argument& e) {
-      file.fail(e.what());
-    }
-  }
   c->times_.policy = seconds_since(t0);
   file.release();
   t0 = std::chrono::steady_clock::now();
@@ -157,6 +174,15 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   c->matcher_ = std::make_unique<Matcher>(c->db_.normalized.data(), c->db_.num_frames, kFeatureDim,
                                           c->db_.valid.data());
   c->times_.search_tree = seconds_since(t0);
+  try {  // the task env's own checks of its config (and of the clip costs), once, at load
+    if (c->task_.obstacles)
+      ObstacleVecEnv(c->db_, *c->matcher_, 1, c->task_.obstacle, 1);
+    else
+      PlaneVecEnv(c->db_, *c->matcher_, 1, c->task_.plane, 1);
+    Character(c->db_, *c->matcher_, c->options_);
+  } catch (const std::invalid_argument& e) {
+    file.fail(std::string("the task's numbers are refused: ") + e.what());
+  }
   return c;
 }
 
@@ -187,20 +213,18 @@ RuntimeCharacter::RuntimeCharacter(std::shared_ptr<const RuntimeController> cont
   action_.assign(kTrajectoryDim, 0.0f);
   target_x_ = x;
   target_z_ = z;
-  k_ = controller_->task().frames_per_step;  // the first frame decides
   const RuntimeTask& task = controller_->task();
+  k_ = task.frames_per_step;  // the first frame decides
   if (task.obstacles) {
-    ObstacleFieldConfig fc = task.field;
-    field_ = std::make_unique<ObstacleField>(1, fc);
-    const size_t cap = static_cast<size_t>(fc.num_obstacles);
-    obstacle_centres_.assign(cap * 2, 0);
-    obstacle_half_sizes_.assign(cap * 2, 0);
-    obstacle_angles_.assign(cap, 0);
-    zero_velocities_.assign(cap * 2, 0);
-    local_centres_.assign(cap * 2, 0);
-    local_half_sizes_.assign(cap * 2, 0);
-    local_angles_.assign(cap, 0);
-    maps_.assign(static_cast<size_t>(task.previous_map_lag + 1) * kMapCells, 0);
+    obstacles_ = std::make_unique<ObstacleVecEnv>(db, controller_->matcher(), 1, task.obstacle, 1);
+    const size_t cap = static_cast<size_t>(task.num_obstacles);
+    for (auto* v : {&world_centres_, &world_half_sizes_, &world_velocities_, &local_centres_, &local_half_sizes_,
+                    &local_velocities_})
+      v->assign(cap * 2, 0.0f);
+    world_angles_.assign(cap, 0.0f);
+    local_angles_.assign(cap, 0.0f);
+  } else {
+    plane_ = std::make_unique<PlaneVecEnv>(db, controller_->matcher(), 1, task.plane, 1);
   }
   pose_.num_joints = controller_->num_joints();
   fill_pose(-1);
@@ -212,76 +236,70 @@ void RuntimeCharacter::set_target(float x, float z) {
   target_z_ = z;
 }
 
-void RuntimeCharacter::set_obstacles(int n, const float* centres, const float* half_sizes, const float* angles) {
-  if (!field_) throw std::invalid_argument("this controller's task has no obstacles");
-  const ObstacleFieldConfig& fc = controller_->task().field;
-  if (n < 0 || n > fc.num_obstacles)
-    throw std::invalid_argument("obstacles: at most " + std::to_string(fc.num_obstacles) + " (the task's num_obstacles)");
+void RuntimeCharacter::set_obstacles(int n, const float* centres, const float* half_sizes, const float* angles,
+                                     const float* velocities) {
+  if (!obstacles_) throw std::invalid_argument("this controller's task has no obstacles");
+  const ObstacleTaskConfig& tc = controller_->task().obstacle;
+  if (n < 0 || n > tc.num_obstacles)
+    throw std::invalid_argument("obstacles: at most " + std::to_string(tc.num_obstacles) + " (the task's num_obstacles)");
   for (int k = 0; k < n; ++k) {
     const float hx = half_sizes[2 * k], hz = half_sizes[2 * k + 1];
     if (!std::isfinite(centres[2 * k]) || !std::isfinite(centres[2 * k + 1]) || !std::isfinite(angles[k]) ||
-        !(hx >= 0 && hx <= fc.max_side / 2) || !(hz >= 0 && hz <= fc.max_side / 2))
+        !(hx >= 0 && hx <= tc.obstacle_max_side / 2) || !(hz >= 0 && hz <= tc.obstacle_max_side / 2))
       throw std::invalid_argument("obstacles: obstacle " + std::to_string(k) +
                                   " is not finite or has a half size outside [0, obstacle_max_side / 2]");
+    if (velocities && !(std::hypot(velocities[2 * k], velocities[2 * k + 1]) <= tc.speed_cap))
+      throw std::invalid_argument("obstacles: obstacle " + std::to_string(k) +
+                                  "'s velocity is not finite or faster than the task's speed_cap");
   }
-  std::copy(centres, centres + 2 * n, obstacle_centres_.begin());
-  std::copy(half_sizes, half_sizes + 2 * n, obstacle_half_sizes_.begin());
-  std::copy(angles, angles + n, obstacle_angles_.begin());
+  std::copy(centres, centres + 2 * n, world_centres_.begin());
+  std::copy(half_sizes, half_sizes + 2 * n, world_half_sizes_.begin());
+  std::copy(angles, angles + n, world_angles_.begin());
+  if (velocities)
+    std::copy(velocities, velocities + 2 * n, world_velocities_.begin());
+  else
+    std::fill(world_velocities_.begin(), world_velocities_.begin() + 2 * n, 0.0f);
   num_obstacles_ = n;
 }
 
-}  // namespace mmrl
-
-namespace mmrl {
-
-void RuntimeCharacter::refresh_maps(bool keep_previous) {
-  // The obstacles relative to the character: the field's square is centred on it.
+void RuntimeCharacter::sync_env() {
   const RootState& r = character_.root();
-  const ObstacleFieldConfig& fc = controller_->task().field;
+  const float tx = target_x_ - r.x, tz = target_z_ - r.z;  // the env's character stands at its origin
+  if (plane_) {
+    plane_->set_state(0, character_.frame(), 0.0f, 0.0f, r.yaw);
+    plane_->set_target(0, tx, tz);
+    return;
+  }
+  // The obstacles relative to the character: the env's obstacle square is centred on it.
+  const float square_half = controller_->task().obstacle.obstacle_square_half;
   int n = 0;
   for (int k = 0; k < num_obstacles_; ++k) {
-    const float dx = obstacle_centres_[2 * k] - r.x, dz = obstacle_centres_[2 * k + 1] - r.z;
-    if (std::abs(dx) > fc.square_half || std::abs(dz) > fc.square_half) continue;  // beyond every sensor
+    const float dx = world_centres_[2 * k] - r.x, dz = world_centres_[2 * k + 1] - r.z;
+    if (std::abs(dx) > square_half || std::abs(dz) > square_half) continue;  // beyond every sensor
     local_centres_[2 * n] = dx;
     local_centres_[2 * n + 1] = dz;
-    local_half_sizes_[2 * n] = obstacle_half_sizes_[2 * k];
-    local_half_sizes_[2 * n + 1] = obstacle_half_sizes_[2 * k + 1];
-    local_angles_[n] = obstacle_angles_[k];
+    for (int a = 0; a < 2; ++a) {
+      local_half_sizes_[2 * n + a] = world_half_sizes_[2 * k + a];
+      local_velocities_[2 * n + a] = world_velocities_[2 * k + a];
+    }
+    local_angles_[n] = world_angles_[k];
     ++n;
   }
-  field_->set(0, n, local_centres_.data(), local_half_sizes_.data(), local_angles_.data(), zero_velocities_.data());
-  field_->rebuild(0, controller_->task().hit_radius);
-  const int slots = controller_->task().previous_map_lag + 1;
-  // One new map per decision: observing again before the decision recomputes it in place.
-  const bool new_map = keep_previous && maps_decision_ != decision_.count;
-  if (new_map) map_head_ = (map_head_ + 1) % slots;
+  // One new sensor map per decision: observing again before it recomputes the map in place;
+  // the first decision's previous map is a copy of its current one, as at a training reset.
+  using Maps = ObstacleVecEnv::MapUpdate;
+  const Maps maps = decision_.count == 0 ? Maps::kReset : maps_decision_ == decision_.count ? Maps::kReplace : Maps::kPush;
   maps_decision_ = decision_.count;
-  uint8_t* cur = &maps_[static_cast<size_t>(map_head_) * kMapCells];
-  field_->sensor_map(0, 0.0f, 0.0f, r.yaw, cur);
-  if (!keep_previous)
-    for (int k = 0; k < slots; ++k)
-      if (k != map_head_) std::copy(cur, cur + kMapCells, &maps_[static_cast<size_t>(k) * kMapCells]);
+  obstacles_->set_scene(0, character_.frame(), r.yaw, tx, tz, n, local_centres_.data(), local_half_sizes_.data(),
+                        local_angles_.data(), local_velocities_.data(), maps);
 }
 
 const float* RuntimeCharacter::observe() {
-  const Database& db = controller_->database();
-  const RootState& r = character_.root();
-  float* o = obs_.data();
-  if (field_) {
-    refresh_maps(decision_.count > 0);
-    const int slots = controller_->task().previous_map_lag + 1;
-    const uint8_t* cur = &maps_[static_cast<size_t>(map_head_) * kMapCells];
-    const uint8_t* prev = &maps_[static_cast<size_t>((map_head_ + 1) % slots) * kMapCells];
-    for (int k = 0; k < kMapCells; ++k) o[k] = cur[k];
-    for (int k = 0; k < kMapCells; ++k) o[kMapCells + k] = prev[k];
-    o += 2 * kMapCells;
-  }
-  // c_t and g_t exactly as the task envs write them (vecenv.hpp: observe_pose, observe_goal).
-  const float* pose = &db.normalized[static_cast<size_t>(character_.frame()) * kFeatureDim];
-  std::copy(pose, pose + kPoseDim, o);
-  const Vec2 g = world_to_local_xz(target_x_ - r.x, target_z_ - r.z, r.yaw);
-  o[kPoseDim] = g.x();
-  o[kPoseDim + 1] = g.y();
+  sync_env();
+  if (plane_)
+    plane_->observe(0, obs_.data());
+  else
+    obstacles_->observe(0, obs_.data());
   return obs_.data();
 }
 
@@ -293,18 +311,11 @@ void RuntimeCharacter::decide() {
   decision_.target_z = target_z_;
   observe();
   c.policy().act(obs_.data(), action_.data(), scratch_);
-  if (field_ && c.task().bias_yields && c.task().transition_cost > 0) {
-    // The obstacles task's bias_yields: no continuation bias when the current frame's own
-    // future trajectory runs into an obstacle (tested where the obstacles are now).
-    const float* cont = &c.database().features[static_cast<size_t>(character_.frame()) * kFeatureDim + kPoseDim];
-    bool hit = false;
-    for (int k = 0; k < 3 && !hit; ++k) {
-      const Vec2 p = local_to_world_xz(cont[4 * k], cont[4 * k + 1], character_.root().yaw);  // the field is centred on the root
-      hit = field_->disc_overlaps_any(0, p.x(), p.y(), c.task().hit_radius);
-    }
-    character_.set_transition_cost(hit ? 0.0f : c.task().transition_cost);
-  }
-  character_.step(action_.data());
+  // The training env's own decision (continuation bias, bias_yields, candidate filters); the
+  // character plays it.
+  const int64_t j = plane_ ? plane_->decide(0, action_.data()) : obstacles_->decide(0, action_.data());
+  const float cost = plane_ ? plane_->state(0).last_cost : obstacles_->state(0).last_cost;
+  character_.play(j, cost);
   decision_.count += 1;
   decision_.match = character_.last_match();
   decision_.transition = character_.last_transition();

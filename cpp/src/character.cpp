@@ -27,8 +27,7 @@ void database_pose_global(const Database& db, int64_t frame, float* positions, f
 
 Character::Character(const Database& db, const Matcher& matcher, const CharacterOptions& options)
     : db_(db), matcher_(matcher), options_(options), J_(db.num_joints) {
-  if (options.frames_per_step < 1 || options.frames_per_step > kTrajectoryOffsets[2])
-    throw std::invalid_argument("frames_per_step must be between 1 and 30");
+  check_frames_per_step(options.frames_per_step);
   if (!std::isfinite(options.inertialization_halflife))
     throw std::invalid_argument("inertialization_halflife must be finite (<= 0 turns it off)");
   if (!(options.ik_margin >= 0) || !(options.lock_release_distance > 0) || !(options.lock_blend_time >= 0))

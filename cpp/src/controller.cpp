@@ -6,6 +6,12 @@
 
 namespace mmrl {
 
+void check_frames_per_step(int frames_per_step) {
+  if (frames_per_step < 1 || frames_per_step > kMaxFramesPerStep)
+    throw std::invalid_argument("frames_per_step must be between 1 and " + std::to_string(kMaxFramesPerStep) +
+                                ", got " + std::to_string(frames_per_step));
+}
+
 ClipCostFilter::ClipCostFilter(const Database& db, std::vector<float> costs, const char* option)
     : costs_(std::move(costs)) {
   if (costs_.empty()) return;

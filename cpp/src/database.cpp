@@ -54,6 +54,9 @@ void Database::index_clips() {
       valid[i] = (i + kTrajectoryOffsets[2] < e) ? 1 : 0;
     }
   }
+  valid_frames.clear();
+  for (int64_t i = 0; i < num_frames; ++i)
+    if (valid[i]) valid_frames.push_back(i);
 }
 
 void Database::check_weights(const std::array<float, kNumBlocks>& w) {

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'POSE_DIM', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose']
+__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -212,10 +212,11 @@ class Matcher:
     @property
     def num_valid(self) -> int:
         ...
-class TargetTaskConfig:
+class PlaneTaskConfig:
     """
     Numbers of the plane task (see tasks/plane.hpp).
     """
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs')
     random_heading: bool
     def __init__(self) -> None:
         ...
@@ -224,6 +225,12 @@ class TargetTaskConfig:
         ...
     @action_limit_std.setter
     def action_limit_std(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def clip_costs(self) -> list[float]:
+        ...
+    @clip_costs.setter
+    def clip_costs(self, arg0: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> None:
         ...
     @property
     def frames_per_step(self) -> int:
@@ -278,12 +285,17 @@ class PlaneVecEnv:
     Batched plane-task environments (C++ core of mmrl.tasks.plane).
     """
     action_dim: typing.ClassVar[int] = 12
+    core_name: typing.ClassVar[str] = 'plane'
     obs_dim: typing.ClassVar[int] = 17
-    def __init__(self, db: Database, matcher: Matcher, num_envs: typing.SupportsInt | typing.SupportsIndex, config: TargetTaskConfig, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
+    def __init__(self, db: Database, matcher: Matcher, num_envs: typing.SupportsInt | typing.SupportsIndex, config: PlaneTaskConfig, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
     def current_frames(self, out: typing.Any) -> None:
         """
         Writes each environment's current database frame into out (int64, N).
+        """
+    def last_step_decision(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[int, float]:
+        """
+        (match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.
         """
     def last_step_frames(self, out: typing.Any) -> None:
         """
@@ -299,7 +311,7 @@ class PlaneVecEnv:
         """
     def observe(self, index: typing.SupportsInt | typing.SupportsIndex, out: typing.Any) -> None:
         """
-        Writes environment i's current observation into out (float32, 17).
+        Writes environment i's current observation into out (float32, obs_dim).
         """
     def reset(self, seed: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
         ...
@@ -315,10 +327,12 @@ class PlaneVecEnv:
         """
     def state(self, index: typing.SupportsInt | typing.SupportsIndex) -> dict:
         """
-        The world-space state of environment i (root, frame, target).
+        The world-space state of environment i (root, frame, target and the task's own).
         """
-    def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any) -> None:
-        ...
+    def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None) -> None:
+        """
+        One step of every env (actions float32 N x 12, finite), writing every buffer. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's last_step_frames and last_step_matches, so one call returns all a step produced.
+        """
     @property
     def action_high(self) -> numpy.typing.NDArray[numpy.float32]:
         ...
@@ -350,6 +364,12 @@ class CharacterOptions:
         ...
     @action_limit_std.setter
     def action_limit_std(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def clip_costs(self) -> list[float]:
+        ...
+    @clip_costs.setter
+    def clip_costs(self, arg0: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> None:
         ...
     @property
     def frames_per_step(self) -> int:
@@ -409,6 +429,10 @@ class Character:
         """
         Views of the pose shown now.
         """
+    def play(self, match: typing.SupportsInt | typing.SupportsIndex, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        Plays a decision made elsewhere (the env's last_step_match): frames match+1 .. match+F, as step does.
+        """
     def poses(self) -> tuple[numpy.ndarray, numpy.ndarray, numpy.ndarray, numpy.ndarray]:
         """
         Views (overwritten by the next step): global positions, global rotations, local translations, local rotations of the frames played by the last step.
@@ -462,6 +486,7 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
     bias_yields: bool
     hit_lookahead: bool
     hit_penalty: bool
@@ -481,6 +506,12 @@ class ObstacleTaskConfig:
         ...
     @body_radius.setter
     def body_radius(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def clip_costs(self) -> list[float]:
+        ...
+    @clip_costs.setter
+    def clip_costs(self, arg0: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> None:
         ...
     @property
     def frames_per_step(self) -> int:
@@ -619,6 +650,7 @@ class ObstacleVecEnv:
     Batched moving-obstacles environments (C++ core of mmrl.tasks.obstacles).
     """
     action_dim: typing.ClassVar[int] = 12
+    core_name: typing.ClassVar[str] = 'obstacles'
     layout: typing.ClassVar[tuple] = (('maps', 512), ('pose', 15), ('goal', 2))
     obs_dim: typing.ClassVar[int] = 529
     def __init__(self, db: Database, matcher: Matcher, num_envs: typing.SupportsInt | typing.SupportsIndex, config: ObstacleTaskConfig, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
@@ -635,6 +667,10 @@ class ObstacleVecEnv:
         """
         Writes each environment's current database frame into out (int64, N).
         """
+    def last_step_decision(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[int, float]:
+        """
+        (match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.
+        """
     def last_step_frames(self, out: typing.Any) -> None:
         """
         Writes into out (int32, N) how many frames of the last step each environment played before its episode ended: the index of the frame that succeeded or collided + 1, else frames_per_step (0 after reset).
@@ -647,9 +683,9 @@ class ObstacleVecEnv:
         """
         The continuation bias env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
         """
-    def observe(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+    def observe(self, index: typing.SupportsInt | typing.SupportsIndex, out: typing.Any) -> None:
         """
-        A fresh observation row of env i.
+        Writes environment i's current observation into out (float32, obs_dim).
         """
     def obstacles(self, index: typing.SupportsInt | typing.SupportsIndex) -> dict:
         """
@@ -695,10 +731,12 @@ class ObstacleVecEnv:
         """
     def state(self, index: typing.SupportsInt | typing.SupportsIndex) -> dict:
         """
-        World-space state of env i: root, frame, target, stage, last action's hit points.
+        The world-space state of environment i (root, frame, target and the task's own).
         """
-    def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, collision: typing.Any, hits: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any) -> None:
-        ...
+    def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, collision: typing.Any, hits: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None) -> None:
+        """
+        One step of every env (actions float32 N x 12, finite), writing every buffer; collision (uint8, N) and hits (int32, N) are the task's. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's last_step_frames and last_step_matches, so one call returns all a step produced.
+        """
     @property
     def action_high(self) -> numpy.typing.NDArray[numpy.float32]:
         ...
@@ -771,8 +809,10 @@ class RuntimeCharacter:
         ...
     def observe(self) -> numpy.ndarray:
         ...
-    def set_obstacles(self, centres: typing.Any, half_sizes: typing.Any, angles: typing.Any) -> None:
-        ...
+    def set_obstacles(self, centres: typing.Any, half_sizes: typing.Any, angles: typing.Any, velocities: typing.Any = None) -> None:
+        """
+        The obstacles now (world meters, radians; float32) and, optionally, their velocities (m/s; None: standing still), read at the next decision.
+        """
     def set_target(self, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     def update(self, dt: typing.SupportsFloat | typing.SupportsIndex) -> None:
@@ -813,3 +853,4 @@ FEATURE_DIM: int = 27
 OBSTACLE_MAP_SIDE: int = 16
 POSE_DIM: int = 15
 TRAJECTORY_DIM: int = 12
+TargetTaskConfig = PlaneTaskConfig

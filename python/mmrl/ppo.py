@@ -418,6 +418,9 @@ def collect_rollout(envs: gym.vector.VectorEnv, learner: TrainingState, storage:
     final_obs: list = []
     ended: tuple[list, list, list] = ([], [], [])
     env_seconds = 0.0
+    # mmrl's vector envs write observations straight into the rollout (step_into) and refuse
+    # non-finite actions in C++: one check, no copy. Other envs: step() and the check here.
+    step_into = callable(getattr(envs, "step_into", None))
     with torch.inference_mode():
         std = model.log_std.exp().to(device)
         noise_dev = noise.to(device)
@@ -426,16 +429,24 @@ def collect_rollout(envs: gym.vector.VectorEnv, learner: TrainingState, storage:
             action = torch.addcmul(mean, std, noise_dev[t])
             action_np = action.numpy() if device.type == "cpu" else action.cpu().numpy()
             storage.actions[t] = torch.from_numpy(action_np) if device.type != "cpu" else action
-            if not np.isfinite(action_np).all():
+            if not step_into and not np.isfinite(action_np).all():  # (mmrl's envs check in C++)
                 raise NonFiniteError(f"train: the policy produced NaN/inf actions at step {step}")
             env_start = time.perf_counter()
             if learner.action_center is not None:
                 action_np = learner.action_center + learner.action_half * action_np
-            obs, reward, terminated, truncated, infos = envs.step(action_np)
+            if step_into:  # the observations go straight into the rollout's row
+                try:
+                    obs, reward, terminated, truncated, infos = envs.step_into(action_np, storage.obs_np[t + 1])
+                except ValueError as e:
+                    if not np.isfinite(action_np).all():
+                        raise NonFiniteError(f"train: the policy produced NaN/inf actions at step {step}") from e
+                    raise
+            else:
+                obs, reward, terminated, truncated, infos = envs.step(action_np)
+                storage.obs_np[t + 1] = obs
             env_seconds += time.perf_counter() - env_start
             if not np.isfinite(obs).all() or not np.isfinite(reward).all():
                 raise NonFiniteError(f"train: the env returned NaN/inf observations or rewards at step {step}")
-            storage.obs_np[t + 1] = obs
             storage.rewards[t] = reward
             storage.terminated[t] = terminated
             storage.truncated[t] = truncated

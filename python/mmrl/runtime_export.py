@@ -116,6 +116,17 @@ def _numbers(prefix: str, values: Dict[str, float]) -> Dict[str, Section]:
     return {f"{prefix}.keys": list(values), f"{prefix}.values": np.array([float(v) for v in values.values()], np.float64)}
 
 
+def _task_core(task_name: str) -> str:
+    """The C++ env core a registered task runs on ("plane", "obstacles"): what the runtime
+    builds to observe and decide as training did."""
+    from .tasks import get_task
+
+    try:
+        return str(get_task(task_name).vector_env.core_type.core_name)
+    except (KeyError, ValueError):
+        raise ValueError(f"task {task_name!r} is not registered: the runtime needs to know its core") from None
+
+
 def controller_sections(db, policy, task_name: str, task_config,
                         character: Optional[Dict[str, float]] = None) -> Dict[str, Section]:
     """Every section of a controller file (docs/runtime.md)."""
@@ -127,6 +138,7 @@ def controller_sections(db, policy, task_name: str, task_config,
     out["db.valid"] = np.ascontiguousarray(db.valid_mask, np.uint8)
     out.update(policy_sections(policy))
     out["task.name"] = [task_name]
+    out["task.core"] = [_task_core(task_name)]
     numbers = {k: float(v) for k, v in asdict(task_config).items() if isinstance(v, (bool, int, float))}
     out.update(_numbers("task", numbers))
     clip_costs = getattr(task_config, "clip_costs", "")

@@ -50,6 +50,14 @@ inline void controller_query(const Database& db, int64_t frame, const float* tra
   for (int k = 0; k < kTrajectoryDim; ++k) query[kPoseDim + k] = trajectory[k];
 }
 
+// The most frames one decision may play: a valid match frame j has j + 30 inside its clip
+// (the trajectory's last horizon), so playback of up to this many frames never leaves it.
+constexpr int kMaxFramesPerStep = kTrajectoryOffsets[2];
+
+// Throws std::invalid_argument unless 1 <= frames_per_step <= kMaxFramesPerStep: the one
+// check of this number, for the envs, the Character and the runtime.
+void check_frames_per_step(int frames_per_step);
+
 // Frames on either side of the current one (within its clip) that a search skips.
 constexpr int kMatchExcludeWindow = 20;
 

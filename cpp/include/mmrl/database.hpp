@@ -62,6 +62,8 @@ struct Database {
   std::vector<uint8_t> valid;
   // Per frame, the clip index.
   std::vector<int32_t> frame_clip;
+  // The frames with valid[i] set, ascending (episode starts are drawn from them).
+  std::vector<int64_t> valid_frames;
   // Foot contacts (N x 2: left, right; 1 = planted), see database_compute_contacts.
   std::vector<uint8_t> contacts;
 
@@ -73,7 +75,7 @@ struct Database {
   static void check_weights(const std::array<float, kNumBlocks>& weights);
   // Recomputes normalization (mean, block scales) from the features and current weights.
   void refit_normalization();
-  // Fills the derived per-frame arrays (valid, frame_clip) from clip_ranges. Called by
+  // Fills the derived per-frame arrays (valid, frame_clip, valid_frames) from clip_ranges. Called by
   // build and after loading.
   void index_clips();
   // Throws std::invalid_argument if array sizes disagree or values are not finite.

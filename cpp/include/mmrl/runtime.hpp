@@ -26,26 +26,26 @@
 #include <vector>
 
 #include "mmrl/character.hpp"
-#include "mmrl/grid.hpp"
 #include "mmrl/policy_net.hpp"
 #include "mmrl/runtime_file.hpp"
+#include "mmrl/tasks/obstacles.hpp"
+#include "mmrl/tasks/plane.hpp"
 
 namespace mmrl {
 
-// The task's numbers the runtime uses (the rest of the file's task.* pairs are kept in values).
+// The controller file's task. The decision itself (observation, continuation bias, candidate
+// filters, match) is the training env's own: each character runs a one-env env of the task's
+// core (tasks/plane.hpp or tasks/obstacles.hpp) with this config, fed the character's state.
 struct RuntimeTask {
-  std::string name;                     // "plane", "obstacles", ...
+  std::string name;                     // the task's name ("plane", "obstacles", a plug-in's)
+  std::string core;                     // the env core it runs on: "plane" or "obstacles"
   std::map<std::string, double> values; // every task.keys / task.values pair of the file
   int frames_per_step = 6;
-  float action_limit_std = 3.0f;
-  float transition_cost = 0.0f;
   float success_radius = 0.5f;
-  // Obstacle tasks (observation: two 16 x 16 sensor maps, then pose and goal).
-  bool obstacles = false;
-  int previous_map_lag = 1;
-  bool bias_yields = false;
-  float hit_radius = 0.0f;
-  ObstacleFieldConfig field;            // sensor size and offset, obstacle limits
+  bool obstacles = false;               // core == "obstacles"
+  int num_obstacles = 0;                // obstacle tasks: at most this many (set_obstacles)
+  PlaneTaskConfig plane;                // the config of a plane core (with its clip costs)
+  ObstacleTaskConfig obstacle;          // the config of an obstacles core
 };
 
 // Seconds spent in each part of loading (bench_runtime reports them).
@@ -116,11 +116,14 @@ class RuntimeCharacter {
   // The target, world meters; used from the next decision on.
   void set_target(float x, float z);
   // Obstacle tasks: the obstacles now, world meters and radians (see grid.hpp: centres and
-  // half sizes n x 2, angles n). Read at the next decision (the sensor maps); the engine moves
-  // them. Throws std::invalid_argument for more obstacles than the task's num_obstacles or a
-  // half size over obstacle_max_side / 2. Obstacles over the task's square half (10 m) from
-  // the character cannot reach its sensors and are ignored.
-  void set_obstacles(int n, const float* centres, const float* half_sizes, const float* angles);
+  // half sizes n x 2, angles n), and optionally their velocities (n x 2, m/s; null: standing
+  // still), which the task's look-ahead tests use (hit_lookahead, the continuation test of
+  // bias_yields). Read at the next decision (the sensor maps); the engine moves them. Throws
+  // std::invalid_argument for more obstacles than the task's num_obstacles, a half size over
+  // obstacle_max_side / 2 or a speed over speed_cap. Obstacles over the task's square half
+  // (10 m) from the character cannot reach its sensors and are ignored.
+  void set_obstacles(int n, const float* centres, const float* half_sizes, const float* angles,
+                     const float* velocities = nullptr);
 
   // Advances dt seconds: shows floor(accumulated / frame time) new frames, deciding whenever
   // the last decision's frames are used up. Returns the pose shown now. Throws
@@ -142,7 +145,9 @@ class RuntimeCharacter {
  private:
   void decide();
   void fill_pose(int k);
-  void refresh_maps(bool keep_previous);
+  // Feeds the task's one-env env the character's frame, root and target (and the obstacles
+  // around it) for the next decision.
+  void sync_env();
 
   std::shared_ptr<const RuntimeController> controller_;
   Character character_;
@@ -154,15 +159,14 @@ class RuntimeCharacter {
   int64_t frames_shown_ = 0;
   RuntimePose pose_;
   RuntimeDecision decision_;
-  // Obstacle tasks: the obstacles relative to the character (one-env field) and a ring of
-  // previous_map_lag + 1 sensor maps (the newest at map_head_).
-  std::unique_ptr<ObstacleField> field_;
-  std::vector<float> obstacle_centres_, obstacle_half_sizes_, obstacle_angles_, zero_velocities_, local_centres_,
-      local_half_sizes_, local_angles_;
+  // The task's one-env env (one of the two), whose observe and decide are training's own.
+  std::unique_ptr<PlaneVecEnv> plane_;
+  std::unique_ptr<ObstacleVecEnv> obstacles_;
+  // Obstacle tasks: the engine's obstacles (world) and their copy relative to the character.
+  std::vector<float> world_centres_, world_half_sizes_, world_angles_, world_velocities_, local_centres_,
+      local_half_sizes_, local_angles_, local_velocities_;
   int num_obstacles_ = 0;
-  std::vector<uint8_t> maps_;
-  int map_head_ = 0;
-  int64_t maps_decision_ = -1;  // the decision the newest map was made for
+  int64_t maps_decision_ = -1;  // the decision the newest sensor map was made for
 };
 
 }  // namespace mmrl

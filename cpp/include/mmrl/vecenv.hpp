@@ -23,8 +23,7 @@
 //   void observe(int i, float* obs_row) const;        // env i's observation now
 //   void begin_episode(int i);                         // draws env i's episode (its RNG only)
 //   TaskStep advance(int i, const float* action);     // one RL step of env i, no autoreset
-// and nothing else of the loop. Config needs frames_per_step, max_steps, action_limit_std,
-// random_heading, min_target_distance, transition_cost, transition_pose_weight and clip_costs;
+// and nothing else of the loop. Config derives from TaskConfig (tasks/task_config.hpp);
 // State derives from TargetEnvState.
 #pragma once
 
@@ -36,6 +35,7 @@
 
 #include "mmrl/controller.hpp"
 #include "mmrl/rng.hpp"
+#include "mmrl/tasks/task_config.hpp"
 #include "mmrl/threadpool.hpp"
 
 namespace mmrl {
@@ -82,6 +82,9 @@ struct TaskStep {
 
 // The step outputs every task writes, N rows each (obs and final_obs: N x kObsDim).
 // final_obs, episode_return and episode_length rows are written only where an episode ended.
+// The last three are optional (null: not written): each env's last_step_frames and its
+// decision (a transition, the matched cost), every row on every step, so one call returns
+// everything a step produced.
 struct TargetStepBuffers {
   float* obs;
   float* rewards;
@@ -91,6 +94,9 @@ struct TargetStepBuffers {
   float* final_obs;
   float* episode_return;
   int32_t* episode_length;
+  int32_t* step_frames = nullptr;
+  uint8_t* transitions = nullptr;
+  float* costs = nullptr;
 };
 
 // Draws an episode start shared by the target tasks: a uniformly random valid frame, the
@@ -108,10 +114,10 @@ inline void draw_episode_start(Rng& rng, const std::vector<int64_t>& valid_frame
   } while (std::hypot(*target_x, *target_z) < min_target_distance);
 }
 
-// The checks every target task makes (std::invalid_argument): num_envs >= 1, frames_per_step
-// in [1, 30] (playback never leaves a valid frame's clip), the matcher built over db, and at
-// least one valid frame. Returns the valid frames (the episode starts).
-std::vector<int64_t> target_env_check(const Database& db, const Matcher& matcher, int num_envs, int frames_per_step);
+// The checks every target task makes (std::invalid_argument): num_envs >= 1, the config's
+// base numbers (check_task_config), the matcher built over db, and at least one valid frame
+// (the episode starts: db.valid_frames).
+void target_env_check(const Database& db, const Matcher& matcher, int num_envs, const TaskConfig& config);
 
 template <class Task, class Config, class State>
 class TargetVecEnv {
@@ -180,6 +186,27 @@ class TargetVecEnv {
     task().on_state_set(i);
   }
 
+  // The decision of env i now for `action` (12 normalized floats, finite): the task's
+  // continuation bias and candidate filter (decision_transition_cost, candidate_filter),
+  // controller_decide, and the frame to play from. Records last_match, last_transition,
+  // last_cost, last_transition_cost and last_pose_jump; changes nothing else. A step calls it
+  // first; the engine runtime calls it on a one-env env to decide as training did.
+  int64_t decide(int i, const float* action) {
+    State& s = envs_[i];
+    s.last_transition_cost = task().decision_transition_cost(i);
+    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost,
+                                        task().candidate_filter(i));
+    s.last_transition = (j != s.frame);
+    s.last_match = j;
+    s.last_pose_jump = 0;
+    if (s.last_transition) {
+      const float* a = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
+      const float* b = &db_.normalized[static_cast<size_t>(j) * kFeatureDim];
+      for (int k = 0; k < kPoseDim; ++k) s.last_pose_jump += (a[k] - b[k]) * (a[k] - b[k]);
+    }
+    return j;
+  }
+
   // Each environment's current database frame (N).
   void current_frames(int64_t* out) const {
     for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].frame;
@@ -205,13 +232,9 @@ class TargetVecEnv {
       : db_(db),
         matcher_(matcher),
         config_(config),
-        valid_frames_(target_env_check(db, matcher, num_envs, config.frames_per_step)),
         envs_(static_cast<size_t>(num_envs)),
         pool_(num_threads) {
-    if (!(config.transition_cost >= 0.0f) || !std::isfinite(config.transition_cost))
-      throw std::invalid_argument("transition_cost must be finite and >= 0");
-    if (!(config.transition_pose_weight >= 0.0f) || !std::isfinite(config.transition_pose_weight))
-      throw std::invalid_argument("transition_pose_weight must be finite and >= 0");
+    target_env_check(db, matcher, num_envs, config);
     trajectory_action_box(db, config.action_limit_std, low_, high_);
     clip_filter_ = ClipCostFilter(db, config.clip_costs);
     for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
@@ -236,6 +259,7 @@ class TargetVecEnv {
           s.last_step_transition_cost = 0;
           out.rewards[i] = 0;
           out.terminated[i] = out.truncated[i] = out.success[i] = 0;
+          write_decision(s, out, i);
           after_step(env);
           continue;
         }
@@ -253,6 +277,7 @@ class TargetVecEnv {
         out.terminated[i] = r.terminated;
         out.truncated[i] = truncated;
         out.success[i] = r.success;
+        write_decision(s, out, i);
         after_step(env);
         if (r.terminated || truncated) {
           float* final_row = out.final_obs + i * Task::kObsDim;
@@ -272,30 +297,20 @@ class TargetVecEnv {
     }, grain);
   }
 
+  // The optional per-step rows of TargetStepBuffers.
+  static void write_decision(const State& s, const TargetStepBuffers& out, int64_t i) {
+    if (out.step_frames) out.step_frames[i] = s.last_step_frames;
+    if (out.transitions) out.transitions[i] = s.last_step_transition;
+    if (out.costs) out.costs[i] = s.last_step_cost;
+  }
+
   // Draws env i's episode start (frame, root, target in the square of half_extent meters).
   void draw_start(int i, float half_extent) {
     State& s = envs_[i];
-    draw_episode_start(s.rng, valid_frames_, config_.random_heading, half_extent, config_.min_target_distance,
+    draw_episode_start(s.rng, db_.valid_frames, config_.random_heading, half_extent, config_.min_target_distance,
                        &s.frame, &s.root, &s.target_x, &s.target_z);
   }
 
-  // The decision of env i's step: the frame to play from; records last_match, last_transition
-  // and last_cost.
-  int64_t decide(int i, const float* action) {
-    State& s = envs_[i];
-    s.last_transition_cost = task().decision_transition_cost(i);
-    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost,
-                                        task().candidate_filter(i));
-    s.last_transition = (j != s.frame);
-    s.last_match = j;
-    s.last_pose_jump = 0;
-    if (s.last_transition) {
-      const float* a = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
-      const float* b = &db_.normalized[static_cast<size_t>(j) * kFeatureDim];
-      for (int k = 0; k < kPoseDim; ++k) s.last_pose_jump += (a[k] - b[k]) * (a[k] - b[k]);
-    }
-    return j;
-  }
 
   // Hook of set_state for tasks whose state depends on the root (a task hides it).
   void on_state_set(int) {}
@@ -327,7 +342,6 @@ class TargetVecEnv {
   const Database& db_;
   const Matcher& matcher_;
   Config config_;
-  std::vector<int64_t> valid_frames_;
   std::vector<State> envs_;
   float low_[kTrajectoryDim], high_[kTrajectoryDim];
   ClipCostFilter clip_filter_;

@@ -15,18 +15,11 @@ constexpr int kMaxRebuildInterval = 16;
 
 // Validates the task config and derives the obstacle field's config from it.
 ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c) {
+  // The base's numbers are checked by the env template (check_task_config).
   auto finite = [](float v) { return std::isfinite(v); };
-  if (c.frames_per_step < 1 || c.frames_per_step > kTrajectoryOffsets[2])
-    throw std::invalid_argument("frames_per_step must be between 1 and 30");
-  if (!(c.success_radius > 0) || c.max_steps < 1 || !(c.action_limit_std > 0) || !finite(c.action_limit_std))
-    throw std::invalid_argument("success_radius, max_steps and action_limit_std must be positive");
-  if (!(c.target_half_extent > c.min_target_distance) || !(c.min_target_distance >= 0) ||
-      !finite(c.target_half_extent))
-    throw std::invalid_argument("target_half_extent must be finite and larger than min_target_distance >= 0");
   if (!(c.speed_cap >= 0) || !finite(c.speed_cap) || !(c.obstacle_max_speed >= 0) ||
       !(c.obstacle_max_speed <= c.speed_cap))
     throw std::invalid_argument("obstacle_max_speed must be in [0, speed_cap]");
-  if (!finite(c.success_bonus)) throw std::invalid_argument("success_bonus must be finite");
   if (c.previous_map_lag < 1 || c.previous_map_lag > 30) throw std::invalid_argument("previous_map_lag must be in [1, 30]");
   if (!(c.hit_weight >= 0) || !finite(c.hit_weight)) throw std::invalid_argument("hit_weight must be finite and >= 0");
   if (!(c.hit_radius >= 0) || !finite(c.hit_radius)) throw std::invalid_argument("hit_radius must be finite and >= 0");
@@ -80,7 +73,7 @@ float ObstacleVecEnv::margin(int i) const {
   return config_.body_radius + (step_travel > 0 ? step_travel * static_cast<float>(interval) : 0.0f) + 0.005f;
 }
 
-void ObstacleVecEnv::refresh(int i, bool keep_previous, bool force_rebuild) {
+void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
   ObstacleEnvState& st = envs_[i];
   if (force_rebuild || st.grid_age >= rebuild_interval(i)) {
     field_.rebuild(i, margin(i));
@@ -88,11 +81,11 @@ void ObstacleVecEnv::refresh(int i, bool keep_previous, bool force_rebuild) {
   }
   // A ring of previous_map_lag + 1 maps: a new map overwrites the oldest slot (the one after
   // the head) and becomes the head, so the slot after the new head is previous_map_lag steps
-  // old. Without keep_previous (reset, hand-set scenes) every slot gets the new map.
-  if (keep_previous) st.map_head = (st.map_head + 1) % map_slots_;
+  // old. A reset (and hand-set scenes) gives every slot the new map.
+  if (maps == MapUpdate::kPush) st.map_head = (st.map_head + 1) % map_slots_;
   uint8_t* cur = map_slot(i, st.map_head);
   field_.sensor_map(i, st.root.x, st.root.z, st.root.yaw, cur);
-  if (!keep_previous)
+  if (maps == MapUpdate::kReset)
     for (int k = 0; k < map_slots_; ++k)
       if (k != st.map_head) std::copy(cur, cur + kMapCells, map_slot(i, k));
 }
@@ -192,7 +185,12 @@ TaskStep ObstacleVecEnv::advance(int i, const float* action) {
 void ObstacleVecEnv::step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
                           uint8_t* success, uint8_t* collision, int32_t* hits, float* final_obs,
                           float* episode_return, int32_t* episode_length) {
-  const TargetStepBuffers out{obs, rewards, terminated, truncated, success, final_obs, episode_return, episode_length};
+  step(actions, TargetStepBuffers{obs, rewards, terminated, truncated, success, final_obs, episode_return,
+                                  episode_length},
+       collision, hits);
+}
+
+void ObstacleVecEnv::step(const float* actions, const TargetStepBuffers& out, uint8_t* collision, int32_t* hits) {
   step_envs(actions, out, 2, [&](int i) {
     collision[i] = envs_[i].collided;
     hits[i] = envs_[i].last_hits;
@@ -254,6 +252,26 @@ void check_finite(const float* v, int n, const char* name) {
 
 void ObstacleVecEnv::set_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
                                    const float* velocities) {
+  envs_[i].max_speed = put_obstacles(i, n, centres, half_sizes, angles, velocities);
+  refresh(i, MapUpdate::kReset, true);
+}
+
+void ObstacleVecEnv::set_scene(int i, int64_t frame, float yaw, float target_x, float target_z, int n,
+                               const float* centres, const float* half_sizes, const float* angles,
+                               const float* velocities, MapUpdate maps) {
+  if (frame < 0 || frame >= db_.num_frames) throw std::invalid_argument("frame is outside the database");
+  if (!std::isfinite(yaw)) throw std::invalid_argument("yaw must be finite");
+  set_target(i, target_x, target_z);
+  const float fastest = put_obstacles(i, n, centres, half_sizes, angles, velocities);
+  ObstacleEnvState& s = envs_[i];
+  s.frame = frame;
+  s.root = RootState{0.0f, 0.0f, wrap_angle(yaw)};
+  s.max_speed = fastest;
+  refresh(i, maps, true);
+}
+
+float ObstacleVecEnv::put_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
+                                    const float* velocities) {
   if (n < 0 || n > config_.num_obstacles)
     throw std::invalid_argument("centres: at most num_obstacles = " + std::to_string(config_.num_obstacles) +
                                 " obstacles, got " + std::to_string(n));
@@ -268,8 +286,7 @@ void ObstacleVecEnv::set_obstacles(int i, int n, const float* centres, const flo
   for (int k = 0; k < n; ++k) fastest = std::max(fastest, std::hypot(velocities[2 * k], velocities[2 * k + 1]));
   if (fastest > config_.speed_cap) throw std::invalid_argument("velocities: obstacle speed exceeds speed_cap");
   field_.set(i, n, centres, half_sizes, angles, velocities);
-  envs_[i].max_speed = fastest;
-  refresh(i, false, true);
+  return fastest;
 }
 
 }  // namespace mmrl

@@ -5,22 +5,10 @@
 
 namespace mmrl {
 
-namespace {
 
-const TargetTaskConfig& checked(const TargetTaskConfig& config) {
-  if (!(config.target_half_extent > 0) || !(config.success_radius > 0) || config.max_steps < 1 ||
-      !(config.action_limit_std > 0))
-    throw std::invalid_argument("target_half_extent, success_radius, max_steps and action_limit_std must be positive");
-  if (config.min_target_distance >= config.target_half_extent)
-    throw std::invalid_argument("min_target_distance must be smaller than target_half_extent");
-  return config;
-}
-
-}  // namespace
-
-PlaneVecEnv::PlaneVecEnv(const Database& db, const Matcher& matcher, int num_envs, const TargetTaskConfig& config,
+PlaneVecEnv::PlaneVecEnv(const Database& db, const Matcher& matcher, int num_envs, const PlaneTaskConfig& config,
                          int num_threads)
-    : TargetVecEnv(db, matcher, num_envs, checked(config), num_threads) {}
+    : TargetVecEnv(db, matcher, num_envs, config, num_threads) {}
 
 void PlaneVecEnv::observe(int i, float* obs) const {
   const TargetEnvState& s = envs_[i];
@@ -52,8 +40,10 @@ TaskStep PlaneVecEnv::advance(int i, const float* action) {
 
 void PlaneVecEnv::step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
                        uint8_t* success, float* final_obs, float* episode_return, int32_t* episode_length) {
-  const TargetStepBuffers out{obs, rewards, terminated, truncated, success, final_obs, episode_return, episode_length};
-  step_envs(actions, out, 4, [](int) {});
+  step(actions, TargetStepBuffers{obs, rewards, terminated, truncated, success, final_obs, episode_return,
+                                  episode_length});
 }
+
+void PlaneVecEnv::step(const float* actions, const TargetStepBuffers& out) { step_envs(actions, out, 4, [](int) {}); }
 
 }  // namespace mmrl

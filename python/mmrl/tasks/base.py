@@ -109,8 +109,9 @@ def make_config(config_type, config=None, overrides: Optional[Mapping[str, Any]]
     return base.replace(**dict(overrides or {}))
 
 
-def check_actions(actions, shape) -> np.ndarray:
-    """``actions`` as a C-contiguous float32 array of ``shape``; refuses other shapes, ints and NaN."""
+def check_actions(actions, shape, finite: bool = True) -> np.ndarray:
+    """``actions`` as a C-contiguous float32 array of ``shape``; refuses other shapes, ints and
+    (unless ``finite`` is False: the C++ step checks them itself) NaN."""
     try:
         a = np.asarray(actions)
     except ValueError as e:  # ragged nested lists
@@ -120,7 +121,7 @@ def check_actions(actions, shape) -> np.ndarray:
     if not np.issubdtype(a.dtype, np.floating):
         raise TypeError(f"actions: expected a float array, got dtype {a.dtype}")
     a = np.ascontiguousarray(a, dtype=np.float32)
-    if not np.isfinite(a).all():
+    if finite and not np.isfinite(a).all():
         raise ValueError("actions: contains NaN or inf")
     return a
 
@@ -204,10 +205,17 @@ class TargetVectorEnv(VectorEnv):
     def _observation_space(self) -> gym.spaces.Box:
         return gym.spaces.Box(-np.inf, np.inf, (self.obs_dim,), np.float32)
 
-    def _step_core(self, actions: np.ndarray) -> None:
-        """One C++ step writing every output buffer (subclasses add their own buffers)."""
-        self._core.step(actions, self._obs, self._rewards, self._terminated, self._truncated, self._success,
-                        self._final_obs, self._ep_return, self._ep_length)
+    def _task_step_buffers(self) -> tuple:
+        """The task's own step outputs, in the order its core's step takes them after ``success``
+        (the obstacles task: collision, hits)."""
+        return ()
+
+    def _step_core(self, actions: np.ndarray, obs: np.ndarray) -> None:
+        """One C++ step writing every output buffer (the observations into ``obs``), this step's
+        frames and decisions included: the one call a step makes."""
+        self._core.step(actions, obs, self._rewards, self._terminated, self._truncated, self._success,
+                        *self._task_step_buffers(), self._final_obs, self._ep_return, self._ep_length,
+                        step_frames=self._step_frames, transitions=self._step_transitions, costs=self._step_costs)
 
     def _task_infos(self, done: np.ndarray) -> Dict[str, np.ndarray]:
         """Extra per-episode infos where ``done`` (each gets a ``_key`` mask)."""
@@ -234,10 +242,23 @@ class TargetVectorEnv(VectorEnv):
         return self._obs.copy(), {}
 
     def step(self, actions):
-        a = check_actions(actions, (self.num_envs, self.act_dim))
-        self._step_core(a)
-        self._core.last_step_frames(self._step_frames)
-        self._core.last_step_matches(self._step_transitions, self._step_costs)
+        obs, rewards, terminated, truncated, infos = self._step(actions, self._obs)
+        return obs.copy(), rewards, terminated, truncated, infos
+
+    def step_into(self, actions, obs_out: np.ndarray):
+        """:meth:`step` with the observations written straight into ``obs_out`` (float32, C-contiguous,
+        (num_envs, obs_dim); a trainer's rollout row, say) and returned as they are: no copy.
+        Non-finite actions raise ValueError from the C++ step, the one place they are checked.
+        A subclass that overrides :meth:`step` gets its own step called (and one copy)."""
+        if type(self).step is not TargetVectorEnv.step:
+            obs, *rest = self.step(actions)
+            obs_out[...] = obs
+            return (obs_out, *rest)
+        return self._step(actions, obs_out)
+
+    def _step(self, actions, obs_out: np.ndarray):
+        a = check_actions(actions, (self.num_envs, self.act_dim), finite=False)
+        self._step_core(a, obs_out)
         self._sum_transitions += self._step_transitions
         self._sum_costs += self._step_costs
         self._sum_frames += self._step_frames
@@ -271,7 +292,7 @@ class TargetVectorEnv(VectorEnv):
             else:
                 self._ep_frames[done] = 0
                 self._on_reset(done)
-        return self._obs.copy(), self._rewards.copy(), terminated, truncated, infos
+        return obs_out, self._rewards.copy(), terminated, truncated, infos
 
     # -- inspection --------------------------------------------------------------------------
     @property
@@ -367,7 +388,7 @@ class SingleEnv(gym.Env):
         return {}
 
     def step(self, action):
-        a = check_actions(action, self.action_space.shape)
+        a = check_actions(action, self.action_space.shape, finite=False)  # the C++ step checks finiteness
         obs, r, term, trunc, infos = self._vec.step(a[None])
         info: Dict[str, Any] = self._step_info()
         if term[0] or trunc[0]:

@@ -189,9 +189,8 @@ class ObstaclesVectorEnv(TargetVectorEnv):
         high = np.concatenate([np.ones(n_map, np.float32), np.full(rest, np.inf, np.float32)])
         return gym.spaces.Box(low, high, dtype=np.float32)
 
-    def _step_core(self, actions: np.ndarray) -> None:
-        self._core.step(actions, self._obs, self._rewards, self._terminated, self._truncated, self._success,
-                        self._collision, self._hits, self._final_obs, self._ep_return, self._ep_length)
+    def _task_step_buffers(self) -> tuple:
+        return self._collision, self._hits
 
     def _task_infos(self, done: np.ndarray) -> Dict[str, np.ndarray]:
         self._finished_stage.extend(self._env_stage[done].tolist())
@@ -261,11 +260,6 @@ class ObstaclesVectorEnv(TargetVectorEnv):
         """World (x, z) of env i's sensors, (16, 16, 2)."""
         return self._core.sensor_positions(int(i))
 
-    def observe(self, i: int) -> np.ndarray:
-        """Env i's current observation (529,), also written to the env's observation buffer."""
-        out = self._core.observe(int(i))
-        self._obs[i] = out
-        return out
 
 
 class ObstaclesEnv(SingleEnv):

@@ -32,7 +32,7 @@ class PlaneConfig(TaskConfig):
 
     task_label = "plane-task"
 
-    def to_core(self, core_config_type=_core.TargetTaskConfig, db=None):
+    def to_core(self, core_config_type=_core.PlaneTaskConfig, db=None):
         return super().to_core(core_config_type, db)
 
 
@@ -41,7 +41,7 @@ class PlaneVectorEnv(TargetVectorEnv):
 
     metadata = dict(TargetVectorEnv.metadata, render_modes=["rgb_array"])
     core_type = _core.PlaneVecEnv
-    core_config_type = _core.TargetTaskConfig
+    core_config_type = _core.PlaneTaskConfig
     config_type = PlaneConfig
 
     def render(self):

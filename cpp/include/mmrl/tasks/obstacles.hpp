@@ -52,31 +52,21 @@
 
 namespace mmrl {
 
-struct ObstacleTaskConfig {
-  int frames_per_step = 6;           // frames played per RL step (0.2 s at 30 fps)
-  float target_half_extent = 5.0f;   // initial stage: targets uniform in a (2h x 2h) m square
+// The base's numbers (tasks/task_config.hpp; target_half_extent is the initial stage's) and
+// the task's own. Defaults that differ from the base: success_bonus 10, max_steps 1500.
+struct ObstacleTaskConfig : TaskConfig {
+  ObstacleTaskConfig() {
+    success_bonus = 10.0f;
+    max_steps = 1500;  // safety cap (truncation), 300 s at 6 frames per step
+  }
   float obstacle_max_speed = 0.5f;   // initial stage: obstacle speeds uniform in [0, this] m/s
   float speed_cap = 2.0f;            // the largest max_speed set_stage accepts (sizes the grid)
-  float min_target_distance = 0.6f;  // targets closer than this to the start are redrawn
-  float success_radius = 0.5f;       // meters
-  float success_bonus = 10.0f;
   bool hit_reward = true;            // add exp(-hits(a_t)) to the reward
   float hit_weight = 1.0f;           // the hit term is hit_weight * exp(-hits) (the paper: 1)
   bool hit_penalty = false;          // ... minus hit_weight: 0 for a clear action, so no reward for surviving
   float hit_radius = 0.0f;           // a trajectory point hits when a disc this wide overlaps an obstacle (0: the point)
   bool hit_lookahead = false;        // test point k against the obstacles as they will be at its time (10/20/30 frames)
   bool hit_played = false;           // test the matched frame's own future trajectory (the path the clip plays) instead of the action's
-  int max_steps = 1500;              // safety cap (truncation), 300 s at 6 frames per step
-  float action_limit_std = 3.0f;     // action box half-width, in standard deviations
-  bool random_heading = true;        // start heading uniform in [-pi, pi)
-  float transition_cost = 0.0f;      // continuation bias of the match (controller.hpp); 0: the paper's rule
-  // Per clip, added to the match cost of its frames (+inf: never played); empty: none. The
-  // candidate filter of controller.hpp's ClipCostFilter.
-  std::vector<float> clip_costs;
-  // Reward - transition_pose_weight * (the squared normalized, weighted distance between the pose
-  // features of the continuation and of the matched frame: what a transition asks the blend
-  // to hide; 0 without a transition). 0: the paper's reward.
-  float transition_pose_weight = 0.0f;
   // The bias yields: a decision whose continuation would run into an obstacle (the current
   // frame's own future trajectory, tested as the hit reward tests a trajectory) matches with
   // the paper's rule (no bias), so a dodge is never held back by the clip being played.
@@ -92,6 +82,31 @@ struct ObstacleTaskConfig {
   float sensor_forward = 1.5f;         // sensor square centre ahead of the root (meters; 0 = centred)
   int previous_map_lag = 1;            // the "previous" map is this many RL steps old (1: the paper's)
   float grid_cell_size = 1.5f;         // broadphase cell side (meters)
+
+  template <class Visit>
+  static void visit(Visit&& v) {
+    visit_task_config_fields(v);
+    v("obstacle_max_speed", &ObstacleTaskConfig::obstacle_max_speed);
+    v("speed_cap", &ObstacleTaskConfig::speed_cap);
+    v("hit_reward", &ObstacleTaskConfig::hit_reward);
+    v("hit_weight", &ObstacleTaskConfig::hit_weight);
+    v("hit_penalty", &ObstacleTaskConfig::hit_penalty);
+    v("hit_radius", &ObstacleTaskConfig::hit_radius);
+    v("hit_lookahead", &ObstacleTaskConfig::hit_lookahead);
+    v("hit_played", &ObstacleTaskConfig::hit_played);
+    v("bias_yields", &ObstacleTaskConfig::bias_yields);
+    v("num_obstacles", &ObstacleTaskConfig::num_obstacles);
+    v("obstacle_square_half", &ObstacleTaskConfig::obstacle_square_half);
+    v("obstacle_min_side", &ObstacleTaskConfig::obstacle_min_side);
+    v("obstacle_max_side", &ObstacleTaskConfig::obstacle_max_side);
+    v("body_radius", &ObstacleTaskConfig::body_radius);
+    v("start_clearance", &ObstacleTaskConfig::start_clearance);
+    v("target_clearance", &ObstacleTaskConfig::target_clearance);
+    v("sensor_size", &ObstacleTaskConfig::sensor_size);
+    v("sensor_forward", &ObstacleTaskConfig::sensor_forward);
+    v("previous_map_lag", &ObstacleTaskConfig::previous_map_lag);
+    v("grid_cell_size", &ObstacleTaskConfig::grid_cell_size);
+  }
 };
 
 struct ObstacleEnvState : TargetEnvState {
@@ -115,6 +130,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   static constexpr int kGoalOffset = kPoseOffset + kPoseDim;
   static constexpr int kObsDim = kGoalOffset + 2;
   static constexpr int kActionDim = kTrajectoryDim;
+  static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
 
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
   // Throws std::invalid_argument on a bad config.
@@ -132,6 +148,8 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   void step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
             uint8_t* success, uint8_t* collision, int32_t* hits, float* final_obs, float* episode_return,
             int32_t* episode_length);
+  // The same with the shared outputs in one record (and its optional per-step rows, vecenv.hpp).
+  void step(const float* actions, const TargetStepBuffers& out, uint8_t* collision, int32_t* hits);
 
   void observe(int i, float* obs_row) const;
   const ObstacleField& field() const { return field_; }
@@ -173,6 +191,20 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   void set_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
                      const float* velocities);
 
+  // How a scene given from outside updates env i's sensor maps (set_scene).
+  enum class MapUpdate {
+    kReset,    // both maps become the new one (a first decision, as at a reset)
+    kPush,     // the current map becomes the previous one and the new one is current (a new decision)
+    kReplace,  // the current map is recomputed in place (observing again before the same decision)
+  };
+  // The engine runtime's input to a decision: env i's character on database `frame` facing yaw
+  // at the centre of its obstacle square (the origin: obstacles are given relative to the
+  // character, as set_obstacles takes them), its target relative to it (meters), and its
+  // obstacles. Then observe(i) and decide(i) are the training env's own. Bad values throw
+  // std::invalid_argument as set_obstacles and set_state do.
+  void set_scene(int i, int64_t frame, float yaw, float target_x, float target_z, int n, const float* centres,
+                 const float* half_sizes, const float* angles, const float* velocities, MapUpdate maps);
+
  private:
   friend class TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState>;
   // After set_state: rebuild the grid and both sensor maps around the new root.
@@ -186,7 +218,13 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   float margin(int i) const;
   // Rebuilds the grid if forced or due, then recomputes the sensor map (keep_previous: the
   // old current map becomes the previous one; else both are the new map).
-  void refresh(int i, bool keep_previous, bool force_rebuild);
+  void refresh(int i, bool keep_previous, bool force_rebuild) {
+    refresh(i, keep_previous ? MapUpdate::kPush : MapUpdate::kReset, force_rebuild);
+  }
+  void refresh(int i, MapUpdate maps, bool force_rebuild);
+  // set_obstacles' checks and the field update; returns the fastest obstacle's speed.
+  float put_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
+                      const float* velocities);
 
   ObstacleField field_;
   const uint8_t* map_slot(int i, int k) const {

@@ -1,0 +1,198 @@
+// Bindings every batched target-reaching task shares (vecenv.hpp's TargetVecEnv and
+// tasks/task_config.hpp): the config class from its field table, the env's constructor,
+// reset, observe, state and the template's own methods, and the step's shared buffers. A
+// task's binding file adds only its step signature and its own methods. Convert, check,
+// forward; nothing else.
+#pragma once
+
+#include <string>
+#include <type_traits>
+
+#include "bindings.hpp"
+#include "mmrl/vecenv.hpp"
+#include "py_matcher.hpp"
+
+namespace mmrl {
+
+// Env index i of wrapper s (an object with an `env` member), or IndexError naming the range.
+template <class Wrapper>
+int checked_env_index(const Wrapper& s, int i) {
+  if (i < 0 || i >= s.env.num_envs())
+    throw py::index_error("env index " + std::to_string(i) + " out of range [0, " + std::to_string(s.env.num_envs()) +
+                          ")");
+  return i;
+}
+
+// The state every target env keeps (world meters, radians), as a dict; tasks add their own keys.
+inline py::dict target_state_dict(const TargetEnvState& st) {
+  py::dict d;
+  d["x"] = st.root.x;
+  d["z"] = st.root.z;
+  d["yaw"] = st.root.yaw;
+  d["frame"] = st.frame;
+  d["target"] = py::make_tuple(st.target_x, st.target_z);
+  d["steps"] = st.steps;
+  d["last_match"] = st.last_match;
+  d["last_transition"] = st.last_transition;
+  d["last_cost"] = st.last_cost;
+  d["last_pose_jump"] = st.last_pose_jump;
+  d["last_step_frames"] = st.last_step_frames;
+  d["last_step_transition_cost"] = st.last_step_transition_cost;
+  d["last_step_match"] = st.last_step_match;
+  return d;
+}
+
+// A task's config class: a default constructor and every field of Config::visit, by name.
+template <class Config>
+py::class_<Config> bind_task_config(py::module_& m, const char* name, const char* doc) {
+  py::class_<Config> c(m, name, doc);
+  c.def(py::init<>());
+  py::list names;
+  Config::visit([&](const char* field, auto member) {
+    c.def_readwrite(field, member);
+    names.append(field);
+  });
+  c.attr("field_names") = py::tuple(names);
+  return c;
+}
+
+// The actions of a step (N x kActionDim float32, finite: the one finiteness check of a step).
+template <class Env>
+carray<float> step_actions(const Env& env, const py::handle& actions) {
+  auto a = check_array<float>(actions, "actions", {env.num_envs(), Env::kActionDim});
+  check_finite(a.data(), a.size(), "actions");
+  return a;
+}
+
+// The shared step buffers, checked (the last three may be None: not written).
+template <class Env>
+TargetStepBuffers step_buffers(const Env& env, const py::handle& obs, const py::handle& rewards,
+                               const py::handle& terminated, const py::handle& truncated, const py::handle& success,
+                               const py::handle& final_obs, const py::handle& episode_return,
+                               const py::handle& episode_length, const py::handle& step_frames,
+                               const py::handle& transitions, const py::handle& costs) {
+  const py::ssize_t n = env.num_envs();
+  TargetStepBuffers out{writable_buffer<float>(obs, "obs", {n, Env::kObsDim}),
+                        writable_buffer<float>(rewards, "rewards", {n}),
+                        writable_buffer<uint8_t>(terminated, "terminated", {n}),
+                        writable_buffer<uint8_t>(truncated, "truncated", {n}),
+                        writable_buffer<uint8_t>(success, "success", {n}),
+                        writable_buffer<float>(final_obs, "final_obs", {n, Env::kObsDim}),
+                        writable_buffer<float>(episode_return, "episode_return", {n}),
+                        writable_buffer<int32_t>(episode_length, "episode_length", {n})};
+  if (!step_frames.is_none()) out.step_frames = writable_buffer<int32_t>(step_frames, "step_frames", {n});
+  if (!transitions.is_none()) out.transitions = writable_buffer<uint8_t>(transitions, "transitions", {n});
+  if (!costs.is_none()) out.costs = writable_buffer<float>(costs, "costs", {n});
+  return out;
+}
+
+// The methods every task env has: construction from (db, matcher, num_envs, config,
+// num_threads), its sizes and action box, reset, reset_env, observe (into a buffer), state
+// (state_dict(env, i): the shared keys and the task's own), current_frames, last_step_frames,
+// last_step_matches, last_step_decision, last_step_transition_cost, the autoreset mode,
+// set_state and set_target. last_step_frames_doc: what ends a step early in this task.
+// long: a binding table, one .def per method; each lambda only converts, checks and forwards.
+template <class Wrapper, class StateDict>
+void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* last_step_frames_doc) {
+  using Env = decltype(std::declval<Wrapper&>().env);
+  using Config = typename std::decay<decltype(std::declval<const Env&>().config())>::type;
+  c.def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const Config& config, int num_threads) {
+         if (num_threads < 0) throw py::value_error("num_threads: must be >= 0 (0 = all cores)");
+         if (num_envs < 1) throw py::value_error("num_envs: must be >= 1");
+         return new Wrapper{Env(db, matcher.matcher, num_envs, config, num_threads)};
+       }),
+       py::arg("db"), py::arg("matcher"), py::arg("num_envs"), py::arg("config"), py::arg("num_threads") = 0,
+       py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
+      .def_property_readonly("num_envs", [](const Wrapper& s) { return s.env.num_envs(); })
+      .def_property_readonly_static("core_name", [](py::object) { return std::string(Env::kCoreName); })
+      .def_property_readonly_static("obs_dim", [](py::object) { return Env::kObsDim; })
+      .def_property_readonly_static("action_dim", [](py::object) { return Env::kActionDim; })
+      .def_property_readonly("action_low",
+                             [](const Wrapper& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_low()); })
+      .def_property_readonly("action_high",
+                             [](const Wrapper& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_high()); })
+      .def(
+          "reset",
+          [](Wrapper& s, uint64_t seed, const py::handle& obs) {
+            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), Env::kObsDim});
+            py::gil_scoped_release release;
+            s.env.reset(seed, o);
+          },
+          py::arg("seed"), py::arg("obs"))
+      .def(
+          "reset_env",
+          [](Wrapper& s, int i, const py::handle& obs) {
+            checked_env_index(s, i);
+            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), Env::kObsDim});
+            s.env.reset_env(i, o + static_cast<size_t>(i) * Env::kObsDim);
+          },
+          py::arg("index"), py::arg("obs"))
+      .def(
+          "observe",
+          [](const Wrapper& s, int i, const py::handle& out) {
+            checked_env_index(s, i);
+            s.env.observe(i, writable_buffer<float>(out, "out", {Env::kObsDim}));
+          },
+          py::arg("index"), py::arg("out"), "Writes environment i's current observation into out (float32, obs_dim).")
+      .def(
+          "state", [state_dict](const Wrapper& s, int i) { return state_dict(s.env, checked_env_index(s, i)); },
+          py::arg("index"), "The world-space state of environment i (root, frame, target and the task's own).")
+      .def(
+       "current_frames",
+       [](const Wrapper& s, const py::handle& out) {
+         s.env.current_frames(writable_buffer<int64_t>(out, "out", {s.env.num_envs()}));
+       },
+       py::arg("out"), "Writes each environment's current database frame into out (int64, N).")
+      .def(
+          "last_step_frames",
+          [](const Wrapper& s, const py::handle& out) {
+            s.env.last_step_frames(writable_buffer<int32_t>(out, "out", {s.env.num_envs()}));
+          },
+          py::arg("out"), last_step_frames_doc)
+      .def(
+          "last_step_matches",
+          [](const Wrapper& s, const py::handle& transitions, const py::handle& costs) {
+            const py::ssize_t n = s.env.num_envs();
+            uint8_t* t = writable_buffer<uint8_t>(transitions, "transitions", {n});
+            float* cost = writable_buffer<float>(costs, "costs", {n});
+            s.env.last_step_matches(t, cost);
+          },
+          py::arg("transitions"), py::arg("costs"),
+          "Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the "
+          "current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, "
+          "weighted feature space). Kept through the autoreset; 0 after reset.")
+      .def(
+          "last_step_transition_cost",
+          [](const Wrapper& s, int i) { return s.env.state(checked_env_index(s, i)).last_step_transition_cost; },
+          py::arg("index"),
+          "The continuation bias env i's last step matched with (the config's transition_cost, or what the task "
+          "made of it for that decision). Kept through the autoreset; 0 after reset.")
+      .def(
+          "last_step_decision",
+          [](const Wrapper& s, int i) {
+            const TargetEnvState& st = s.env.state(checked_env_index(s, i));
+            return py::make_tuple(st.last_step_match, st.last_step_cost);
+          },
+          py::arg("index"),
+          "(match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path "
+          "plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.")
+      .def_property(
+          "autoreset_next_step", [](const Wrapper& s) { return s.env.autoreset_next_step(); },
+          [](Wrapper& s, bool on) { s.env.set_autoreset_next_step(on); },
+          "Autoreset mode: False = SAME_STEP (an ended episode's env is reset in the same step, its last "
+          "observation in final_obs), True = NEXT_STEP (the ending step returns the last observation; the next "
+          "step ignores the env's action, resets it and returns its first observation with reward 0).")
+      .def(
+          "set_state",
+          [](Wrapper& s, int i, int64_t frame, float x, float z, float yaw) {
+            s.env.set_state(checked_env_index(s, i), frame, x, z, yaw);
+          },
+          py::arg("index"), py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"),
+          "Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.")
+      .def(
+          "set_target",
+          [](Wrapper& s, int i, float x, float z) { s.env.set_target(checked_env_index(s, i), x, z); },
+          py::arg("index"), py::arg("x"), py::arg("z"), "Moves env i's target (world meters).");
+}
+
+}  // namespace mmrl
