@@ -23,7 +23,11 @@ def _stub_names():
         elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
             top.add(node.target.id)
         elif isinstance(node, ast.Assign):  # an alias such as the deprecated TargetTaskConfig = PlaneTaskConfig
-            top.update(t.id for t in node.targets if isinstance(t, ast.Name))
+            for t in node.targets:
+                if isinstance(t, ast.Name):
+                    top.add(t.id)
+                    if isinstance(node.value, ast.Name) and node.value.id in members:
+                        members[t.id] = members[node.value.id]
     return top, members
 
 
