@@ -4,7 +4,7 @@ from __future__ import annotations
 import argparse
 from typing import Any, Dict
 
-from ..sources import data_spec, database_from_spec
+from ..motion.sources import data_spec, database_from_spec
 
 
 def add_data_options(p: argparse.ArgumentParser, *, mirror: bool = False) -> None:

@@ -1,5 +1,5 @@
 """``mmrl train TASK`` and ``mmrl plot``: argument parsing only; the work is in
-:mod:`mmrl.ppo`, :mod:`mmrl.tasks` and :mod:`mmrl.runs`."""
+:mod:`mmrl.rl.ppo`, :mod:`mmrl.tasks` and :mod:`mmrl.runs`."""
 from __future__ import annotations
 
 import argparse
@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any, Dict, List
 
 from ..errors import InputError
-from ..quality_log import MatchQualityLog
+from ..rl.quality_log import MatchQualityLog
 from ..tasks import Task, get_task, task_names
 from .common import add_data_options, data_spec_from_args
 
@@ -156,7 +156,7 @@ def resolve_run(task: Task, args, default_out: str):
 def _configs(task: Task, args, saved: Dict[str, Any]):
     """(task config, PPOConfig, callback options) from the task's defaults, a resumed run's
     saved values, the preset, the task's flags and --set, in that order."""
-    from .. import ppo
+    from ..rl import ppo
 
     task_cfg = task.default_config()
     cfg = ppo.PPOConfig(seed=args.seed)
@@ -183,7 +183,7 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from .. import ppo
+    from ..rl import ppo
     from ..runs import RunDir
 
     task = get_task(args.task)
@@ -211,7 +211,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg.progress = not args.no_progress
     num_envs = args.envs or saved.get("num_envs") or 64
 
-    from ..sources import database_from_spec
+    from ..motion.sources import database_from_spec
 
     db = database_from_spec(data)
     try:  # the options are the user's: a value the env refuses is bad input
@@ -249,7 +249,7 @@ def report_training(steps: int, seconds: float, how: str, row: Dict[str, Any], c
 
 
 def cmd_plot(args: argparse.Namespace) -> int:
-    from ..plots import plot_run
+    from ..viz.plots import plot_run
 
     for path in plot_run(Path(args.run), Path(args.output) if args.output else None, num_targets=args.targets,
                          seed=args.seed):

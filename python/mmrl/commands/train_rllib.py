@@ -63,7 +63,7 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
     except ImportError as e:
         raise InputError(f"--backend rllib: {e}") from None
     from ..runs import RunDir
-    from ..sources import database_from_spec
+    from ..motion.sources import database_from_spec
     from .train import report_training, resolve_run
 
     saved, out, data = resolve_run(task, args, f"runs/{task.name}-rllib-seed{args.seed}")

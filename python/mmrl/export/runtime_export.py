@@ -15,7 +15,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 from .runtime_file import ControllerFileError, Section, read_sections, write_sections
 
 __all__ = ["POLICY_MLP", "POLICY_CONV", "ACTIVATIONS", "CHARACTER_DEFAULTS", "controller_sections",
@@ -55,7 +55,7 @@ def _network_layers(model) -> Tuple[list, list, list]:
     """(header fields, conv layers, dense layers) of a registered network."""
     from torch import nn
 
-    from .networks import ObstacleActorCritic, PlaneActorCritic
+    from ..rl.networks import ObstacleActorCritic, PlaneActorCritic
 
     if isinstance(model, PlaneActorCritic):
         return [POLICY_MLP, 0, 0, 0, 0, 0, 0], [], _dense_layers(model.actor)
@@ -159,8 +159,8 @@ def _require(path, sections, name):
 def read_controller(path: "str | os.PathLike[str]") -> ControllerContents:
     """Read a controller file: its Database (rebuilt and validated by the C++ core), the
     task's and character's numbers, and every section."""
-    from . import _core
-    from .database import Database
+    from .. import _core
+    from ..motion.database import Database
 
     s = read_sections(path)
     state = {k: _require(path, s, f"db.{k}") for k in _DB_TEXT + _DB_ARRAYS}

@@ -7,7 +7,7 @@ name, ``model_kwargs``), ``optimizer``, ``obs_normalizer``, ``return_rms``, the 
 ``global_step``/``iteration``/``wall_s``, ``snapshots``, ``rng``, ``config`` (the PPOConfig as
 a dict), ``action_center``/``action_half`` and ``callbacks``. Loading never executes code:
 ``torch.load(weights_only=True)`` reads only tensors and plain containers, and the network
-is rebuilt from the registry in ``mmrl.networks``, never by importing a module the file names.
+is rebuilt from the registry in ``mmrl.rl.networks``, never by importing a module the file names.
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from .io import atomic_open
+from ..io import atomic_open
 from .networks import network_class, network_name, registered_networks
 
 if TYPE_CHECKING:  # imported for annotations only: trained_policy imports this module
@@ -80,7 +80,7 @@ def load_checkpoint(path: str | os.PathLike, map_location: Any = "cpu") -> dict:
 
 def build_network(state: dict, path: str | os.PathLike) -> nn.Module:
     """The (untrained) network a checkpoint names in ``model_class``, built with its
-    ``model_kwargs``. Only registered classes are built (``mmrl.networks.register_network``);
+    ``model_kwargs``. Only registered classes are built (``mmrl.rl.networks.register_network``);
     any other name raises ``CheckpointError`` naming the file and the known networks."""
     stored = state.get("model_class")
     try:
@@ -89,7 +89,7 @@ def build_network(state: dict, path: str | os.PathLike) -> nn.Module:
         raise CheckpointError(
             f"{path}: the network {stored!r} is not registered; known networks: "
             f"{', '.join(registered_networks())}. Register your own class with "
-            f"mmrl.networks.register_network before loading") from None
+            f"mmrl.rl.networks.register_network before loading") from None
     try:
         return cls(**state.get("model_kwargs", {}))
     except Exception as error:
@@ -137,13 +137,13 @@ def _as_tuple(value: Any) -> Any:
 
 @dataclass
 class TrainingState:
-    """What ``mmrl.ppo.train`` learns and counts: what a checkpoint holds, plus the run's
+    """What ``mmrl.rl.ppo.train`` learns and counts: what a checkpoint holds, plus the run's
     device and discounted-return accumulator (not saved: the envs restart on resume).
 
     ``train`` changes it only after a rollout, so between iterations it is consistent.
     """
 
-    cfg: Any  # mmrl.ppo.PPOConfig
+    cfg: Any  # mmrl.rl.ppo.PPOConfig
     model: nn.Module
     optimizer: torch.optim.Optimizer
     obs_normalizer: "ObsNormalizer"

@@ -1,11 +1,11 @@
 """A trained policy for evaluation and rendering, and the observation normalizer it applies.
 
-(``mmrl.policies`` holds the scripted joystick policies; this module is the learned one.)
+(``mmrl.rl.policies`` holds the scripted joystick policies; this module is the learned one.)
 
-``load_policy(path)`` rebuilds what ``mmrl.ppo.train`` saved: the network (from the registry
-in ``mmrl.networks``), the frozen observation normalization and the action rescaling.
+``load_policy(path)`` rebuilds what ``mmrl.rl.ppo.train`` saved: the network (from the registry
+in ``mmrl.rl.networks``), the frozen observation normalization and the action rescaling.
 ``RunningMeanStd`` and ``ObsNormalizer`` live here because acting needs them as much as
-training does; ``mmrl.ppo`` uses the same classes.
+training does; ``mmrl.rl.ppo`` uses the same classes.
 """
 from __future__ import annotations
 
@@ -134,10 +134,10 @@ class Policy:
 
 
 def load_policy(path: str | os.PathLike, device: str = "cpu") -> Policy:
-    """Rebuild the policy saved in a checkpoint written by ``mmrl.ppo.train``.
+    """Rebuild the policy saved in a checkpoint written by ``mmrl.rl.ppo.train``.
 
     Raises ``CheckpointError`` naming the file if it is missing, corrupt, foreign, or names
-    a network that is not registered (see ``mmrl.networks.register_network``).
+    a network that is not registered (see ``mmrl.rl.networks.register_network``).
     """
     device_t = resolve_device(device)
     state = load_checkpoint(path)

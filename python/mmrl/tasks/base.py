@@ -33,8 +33,8 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..database import Database
-from ..sources import resolve_database
+from ..motion.database import Database
+from ..motion.sources import resolve_database
 
 
 # ----------------------------------------------------------------------------- config
