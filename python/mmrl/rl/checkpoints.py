@@ -1,8 +1,7 @@
-"""PPO checkpoint files: atomic save, validated load, the network they name, RNG capture,
-and the training state they hold.
+"""PPO checkpoint files: atomic save, validated load, the network they name, RNG capture.
 
 A checkpoint is a ``torch.save``'d dict with ``format``/``version`` keys plus the keys of
-``TrainingState.checkpoint``: the network (``model`` weights, ``model_class`` its registered
+``TrainingState.checkpoint`` (:mod:`mmrl.rl.training_state`): the network (``model`` weights, ``model_class`` its registered
 name, ``model_kwargs``), ``optimizer``, ``obs_normalizer``, ``return_rms``, the counters
 ``global_step``/``iteration``/``wall_s``, ``snapshots``, ``rng``, ``config`` (the PPOConfig as
 a dict), ``action_center``/``action_half`` and ``callbacks``. Loading never executes code:
@@ -11,27 +10,22 @@ is rebuilt from the registry in ``mmrl.rl.networks``, never by importing a modul
 """
 from __future__ import annotations
 
-import dataclasses
 import os
 import pickle
 import random
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Optional
+from typing import Any, Optional
 
 import numpy as np
 import torch
 from torch import nn
 
 from ..io import atomic_open
-from .networks import network_class, network_name, registered_networks
-
-if TYPE_CHECKING:  # imported for annotations only: trained_policy imports this module
-    from .trained_policy import ObsNormalizer, RunningMeanStd
+from .networks import network_class, registered_networks
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint",
-           "build_network", "capture_rng_state", "restore_rng_state", "TrainingState", "save_due_checkpoints"]
+           "build_network", "capture_rng_state", "restore_rng_state"]
 
 CHECKPOINT_FORMAT = "mmrl-ppo-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -131,79 +125,3 @@ def restore_rng_state(state: dict, generator: Optional[torch.Generator] = None) 
 def _as_tuple(value: Any) -> Any:
     # A weights-only load turns python's nested state tuples into lists.
     return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
-
-
-# ----------------------------------------------------------------------------- the training state
-
-@dataclass
-class TrainingState:
-    """What ``mmrl.rl.ppo.train`` learns and counts: what a checkpoint holds, plus the run's
-    device and discounted-return accumulator (not saved: the envs restart on resume).
-
-    ``train`` changes it only after a rollout, so between iterations it is consistent.
-    """
-
-    cfg: Any  # mmrl.rl.ppo.PPOConfig
-    model: nn.Module
-    optimizer: torch.optim.Optimizer
-    obs_normalizer: "ObsNormalizer"
-    return_rms: "RunningMeanStd"  # discounted returns ("scale") or value targets ("value")
-    running_return: np.ndarray  # (num_envs,) discounted return so far, for "scale"
-    generator: torch.Generator  # PPO's own sampling: action noise, minibatch order
-    device: torch.device
-    action_center: Optional[np.ndarray]  # env action = center + half * policy action, if rescaled
-    action_half: Optional[np.ndarray]
-    callbacks: list
-    global_step: int = 0  # env steps summed over envs
-    iteration: int = 0
-    wall_s: float = 0.0  # training wall time in seconds, summed over resumes
-    snapshots: set = field(default_factory=set)  # the snapshot_steps already saved
-
-    def checkpoint(self, rng: dict) -> dict:
-        """The dict ``save_checkpoint`` writes; ``rng`` from ``capture_rng_state(self.generator)``."""
-        return {
-            "model": self.model.state_dict(), "model_class": network_name(self.model),
-            "model_kwargs": getattr(self.model, "init_kwargs", {}),
-            "optimizer": self.optimizer.state_dict(), "obs_normalizer": self.obs_normalizer.state_dict(),
-            "return_rms": self.return_rms.state_dict(), "global_step": self.global_step, "wall_s": self.wall_s,
-            "iteration": self.iteration, "snapshots": sorted(self.snapshots), "rng": rng,
-            "config": dataclasses.asdict(self.cfg),
-            "action_center": None if self.action_center is None else self.action_center.tolist(),
-            "action_half": None if self.action_half is None else self.action_half.tolist(),
-            "callbacks": {i: cb.state_dict() for i, cb in enumerate(self.callbacks) if hasattr(cb, "state_dict")},
-        }
-
-    def load(self, path: str | os.PathLike) -> None:
-        """Continue from a checkpoint ``train`` wrote (RNG states and callbacks included)."""
-        state = load_checkpoint(path)  # on the CPU: RNG states must stay there
-        try:
-            self.model.load_state_dict(state["model"])
-            self.optimizer.load_state_dict(state["optimizer"])
-        except Exception as error:
-            raise CheckpointError(f"{path}: does not fit this network/config: {error}") from error
-        self.obs_normalizer.load_state_dict(state["obs_normalizer"])
-        self.return_rms.load_state_dict(state["return_rms"])
-        self.global_step, self.wall_s, self.iteration = state["global_step"], state["wall_s"], state["iteration"]
-        self.snapshots = set(state["snapshots"])
-        restore_rng_state(state["rng"], self.generator)
-        for i, callback in enumerate(self.callbacks):
-            if hasattr(callback, "load_state_dict") and i in state["callbacks"]:
-                callback.load_state_dict(state["callbacks"][i])
-
-
-def save_due_checkpoints(learner: TrainingState, rng: dict, out_dir: Path, last_saved_step: int) -> int:
-    """Rewrite ``out_dir/latest.pt`` once ``cfg.checkpoint_interval_steps`` passed since the
-    last save, and write ``snapshot_<N>.pt`` the first time the step reaches each N of
-    ``cfg.snapshot_steps``. Returns the step of the last save."""
-    cfg = learner.cfg
-    due = [s for s in cfg.snapshot_steps if s <= learner.global_step and s not in learner.snapshots]
-    if not due and learner.global_step - last_saved_step < cfg.checkpoint_interval_steps:
-        return last_saved_step
-    learner.snapshots.update(due)
-    state = learner.checkpoint(rng)
-    # Snapshots first: latest.pt lists them as saved, so a kill between the two writes must
-    # leave a latest.pt that does not yet list them (the resumed run then writes them again).
-    for s in due:
-        save_checkpoint(state, out_dir / f"snapshot_{s}.pt")
-    save_checkpoint(state, out_dir / "latest.pt")
-    return learner.global_step
