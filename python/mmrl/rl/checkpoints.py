@@ -25,7 +25,7 @@ from ..io import atomic_open
 from .networks import network_class, registered_networks
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint",
-           "build_network", "capture_rng_state", "restore_rng_state"]
+           "build_network", "capture_rng_state", "restore_rng_state", "save_due_checkpoints"]
 
 CHECKPOINT_FORMAT = "mmrl-ppo-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -125,3 +125,24 @@ def restore_rng_state(state: dict, generator: Optional[torch.Generator] = None) 
 def _as_tuple(value: Any) -> Any:
     # A weights-only load turns python's nested state tuples into lists.
     return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
+
+
+# ----------------------------------------------------------------------------- when to save
+
+def save_due_checkpoints(learner: Any, rng: dict, out_dir: Path, last_saved_step: int) -> int:
+    """Rewrite ``out_dir/latest.pt`` once ``cfg.checkpoint_interval_steps`` passed since the
+    last save, and write ``snapshot_<N>.pt`` the first time the step reaches each N of
+    ``cfg.snapshot_steps``. Returns the step of the last save. ``learner`` is a
+    :class:`mmrl.rl.training_state.TrainingState` (not imported: it imports this module)."""
+    cfg = learner.cfg
+    due = [s for s in cfg.snapshot_steps if s <= learner.global_step and s not in learner.snapshots]
+    if not due and learner.global_step - last_saved_step < cfg.checkpoint_interval_steps:
+        return last_saved_step
+    learner.snapshots.update(due)
+    state = learner.checkpoint(rng)
+    # Snapshots first: latest.pt lists them as saved, so a kill between the two writes must
+    # leave a latest.pt that does not yet list them (the resumed run then writes them again).
+    for s in due:
+        save_checkpoint(state, out_dir / f"snapshot_{s}.pt")
+    save_checkpoint(state, out_dir / "latest.pt")
+    return learner.global_step

@@ -1,5 +1,5 @@
-"""What ``mmrl.rl.ppo.train`` learns and counts (:class:`TrainingState`), and when it is saved
-(:func:`save_due_checkpoints`).
+"""What ``mmrl.rl.ppo.train`` learns and counts: :class:`TrainingState`, the object a checkpoint
+is written from and read back into.
 
 The state sits beside, not inside, :mod:`mmrl.rl.checkpoints`: the checkpoint file format needs
 neither the normalizers nor the trainer, and the trained-policy loader needs the file format
@@ -10,18 +10,17 @@ from __future__ import annotations
 import dataclasses
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
 import torch
 from torch import nn
 
-from .checkpoints import CheckpointError, load_checkpoint, restore_rng_state, save_checkpoint
+from .checkpoints import CheckpointError, load_checkpoint, restore_rng_state
 from .networks import network_name
 from .normalizers import ObsNormalizer, RunningMeanStd
 
-__all__ = ["TrainingState", "save_due_checkpoints"]
+__all__ = ["TrainingState"]
 
 
 @dataclass
@@ -78,21 +77,3 @@ class TrainingState:
         for i, callback in enumerate(self.callbacks):
             if hasattr(callback, "load_state_dict") and i in state["callbacks"]:
                 callback.load_state_dict(state["callbacks"][i])
-
-
-def save_due_checkpoints(learner: TrainingState, rng: dict, out_dir: Path, last_saved_step: int) -> int:
-    """Rewrite ``out_dir/latest.pt`` once ``cfg.checkpoint_interval_steps`` passed since the
-    last save, and write ``snapshot_<N>.pt`` the first time the step reaches each N of
-    ``cfg.snapshot_steps``. Returns the step of the last save."""
-    cfg = learner.cfg
-    due = [s for s in cfg.snapshot_steps if s <= learner.global_step and s not in learner.snapshots]
-    if not due and learner.global_step - last_saved_step < cfg.checkpoint_interval_steps:
-        return last_saved_step
-    learner.snapshots.update(due)
-    state = learner.checkpoint(rng)
-    # Snapshots first: latest.pt lists them as saved, so a kill between the two writes must
-    # leave a latest.pt that does not yet list them (the resumed run then writes them again).
-    for s in due:
-        save_checkpoint(state, out_dir / f"snapshot_{s}.pt")
-    save_checkpoint(state, out_dir / "latest.pt")
-    return learner.global_step
