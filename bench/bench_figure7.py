@@ -50,7 +50,7 @@ LAST_STAGE = 10
 
 def run_status(run: Path, steps: int) -> str:
     """'done' (a checkpoint holding the budget), 'partial' (a shorter checkpoint) or 'new'."""
-    from mmrl.plots import read_metrics
+    from mmrl.viz.plots import read_metrics
 
     if not (run / "latest.pt").exists():
         return "new"
@@ -236,9 +236,9 @@ def main() -> None:
         raise SystemExit("--steps must be positive, --episodes non-negative and --fast-episodes at least 2")
 
     import mmrl
-    from mmrl import ppo
-    from mmrl.plots import read_metrics
-    from mmrl.policies import JoystickPolicy
+    from mmrl.rl import ppo
+    from mmrl.viz.plots import read_metrics
+    from mmrl.rl.policies import JoystickPolicy
 
     out = Path(args.out) if args.out else Path(tempfile.mkdtemp(prefix="mmrl-figure7-"))
     out.mkdir(parents=True, exist_ok=True)

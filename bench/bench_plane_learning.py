@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 import mmrl
-from mmrl import ppo
+from mmrl.rl import ppo
 from mmrl.rollout import evaluate_fast
 from mmrl.tasks.plane import PlaneVectorEnv
 
@@ -59,7 +59,7 @@ def main():
           f"time to target {e2['mean_time_to_target_s']:.2f} s")
 
     try:
-        from mmrl.policies import JoystickPolicy
+        from mmrl.rl.policies import JoystickPolicy
     except ImportError:
         print("joystick baseline not available in this build")
         return

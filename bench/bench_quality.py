@@ -94,7 +94,7 @@ def main() -> None:
     args = p.parse_args()
 
     import mmrl
-    from mmrl.policies import JoystickPolicy
+    from mmrl.rl.policies import JoystickPolicy
     from mmrl.runs import RunDir
 
     out = Path(args.out)

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 import mmrl
-from mmrl import ppo
+from mmrl.rl import ppo
 from mmrl.rollout import evaluate_fast
 from mmrl.tasks.plane import PlaneVectorEnv
 

@@ -109,11 +109,11 @@ def main() -> None:
     args = ap.parse_args()
 
     import mmrl
-    from mmrl import ppo
+    from mmrl.rl import ppo
     from mmrl.runs import RunDir
     from mmrl.tasks.curriculum import stage_params
     from mmrl.tasks.obstacles import ObstaclesConfig, ObstaclesVectorEnv
-    from mmrl.policies import JoystickPolicy
+    from mmrl.rl.policies import JoystickPolicy
 
     db = mmrl.Database.load(args.db) if args.db else mmrl.Database.from_bvh(args.data or DEFAULT_DATA)
     n = args.episodes

@@ -20,8 +20,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _toyenv import PointMassTargetVecEnv  # noqa: E402
 
-from mmrl.networks import ObstacleActorCritic  # noqa: E402
-from mmrl.ppo import PPOConfig, train  # noqa: E402
+from mmrl.rl.networks import ObstacleActorCritic  # noqa: E402
+from mmrl.rl.ppo import PPOConfig, train  # noqa: E402
 
 
 def measure(label: str, env, cfg: PPOConfig, policy_factory=None) -> None:

@@ -18,8 +18,8 @@ Markers: one line ``<phase> enter|exit <monotonic seconds>`` per event, written 
 
 - ``startup``: from ``main`` being called to the first rollout, npz save or download (data,
   envs, config.json, checkpoint load, metrics.csv trim; the BVH import of ``db build``);
-- ``rollout``: ``mmrl.ppo.collect_rollout``;
-- ``update``: ``mmrl.ppo._learn`` (advantages, the PPO update, counters, callbacks);
+- ``rollout``: ``mmrl.rl.ppo.collect_rollout``;
+- ``update``: ``mmrl.rl.ppo._learn`` (advantages, the PPO update, counters, callbacks);
 - ``log``: ``MetricsLogger.write`` (one metrics.csv row);
 - ``checkpoint``: each ``save_checkpoint`` (``latest.pt``, ``snapshot_<N>.pt``);
 - ``save``: ``Database.save`` (``mmrl db build``'s npz);
@@ -74,12 +74,12 @@ class SlowFile:
 
 
 def instrument() -> None:
-    import mmrl.checkpoints
-    import mmrl.data
-    import mmrl.database
+    import mmrl.rl.checkpoints
+    import mmrl.motion.data
+    import mmrl.motion.database
     import mmrl.io
-    import mmrl.logger
-    import mmrl.ppo
+    import mmrl.rl.logger
+    import mmrl.rl.ppo
 
     started = []
 
@@ -106,13 +106,13 @@ def instrument() -> None:
 
         return wrapper
 
-    mmrl.ppo.collect_rollout = first_work(phased("rollout", slow_steps(mmrl.ppo.collect_rollout)))
-    mmrl.ppo._learn = phased("update", mmrl.ppo._learn)
-    mmrl.logger.MetricsLogger.write = phased("log", mmrl.logger.MetricsLogger.write)
-    save = phased("checkpoint", mmrl.checkpoints.save_checkpoint)
-    mmrl.checkpoints.save_checkpoint = mmrl.ppo.save_checkpoint = save
-    mmrl.database.Database.save = first_work(phased("save", mmrl.database.Database.save))
-    mmrl.data._download = first_work(phased("download", mmrl.data._download))
+    mmrl.rl.ppo.collect_rollout = first_work(phased("rollout", slow_steps(mmrl.rl.ppo.collect_rollout)))
+    mmrl.rl.ppo._learn = phased("update", mmrl.rl.ppo._learn)
+    mmrl.rl.logger.MetricsLogger.write = phased("log", mmrl.rl.logger.MetricsLogger.write)
+    save = phased("checkpoint", mmrl.rl.checkpoints.save_checkpoint)
+    mmrl.rl.checkpoints.save_checkpoint = mmrl.rl.ppo.save_checkpoint = save
+    mmrl.motion.database.Database.save = first_work(phased("save", mmrl.motion.database.Database.save))
+    mmrl.motion.data._download = first_work(phased("download", mmrl.motion.data._download))
     real_open = mmrl.io.atomic_open
 
     @contextlib.contextmanager
@@ -120,7 +120,7 @@ def instrument() -> None:
         with real_open(*args, **kwargs) as file:
             yield SlowFile(file) if SLOW > 0 else file
 
-    for module in (mmrl.io, mmrl.checkpoints, mmrl.data, mmrl.logger):
+    for module in (mmrl.io, mmrl.rl.checkpoints, mmrl.motion.data, mmrl.rl.logger):
         module.atomic_open = slow_atomic_open
 
 

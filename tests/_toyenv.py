@@ -122,7 +122,7 @@ class PointMassTargetVecEnv(VectorEnv):
 
 def quiet_config(total_steps: int = 8192, **overrides):
     """A PPOConfig for tests: no progress bar, no TensorBoard, no periodic checkpoints."""
-    from mmrl.ppo import PPOConfig
+    from mmrl.rl.ppo import PPOConfig
 
     fields = dict(total_steps=total_steps, num_steps=32, progress=False, tensorboard=False,
                   checkpoint_interval_steps=10**9)

@@ -130,7 +130,7 @@ def check_run_dir(run: Path, batch: int, previous: Saved) -> Saved:
     """After a kill: every checkpoint file loads (none torn), latest.pt never went back, every
     snapshot latest.pt lists exists, config.json parses, and metrics.csv holds exactly one row per
     iteration up to the checkpoint's step (rows after it are dropped on resume)."""
-    from mmrl.checkpoints import load_checkpoint
+    from mmrl.rl.checkpoints import load_checkpoint
 
     states = {p.name: load_checkpoint(p) for p in visible(run, "*.pt")}  # raises on a torn file
     if (Path(run) / "config.json").exists():
@@ -155,7 +155,7 @@ def check_run_dir(run: Path, batch: int, previous: Saved) -> Saved:
 def check_finished_run(run: Path, batch: int, total: int, saves: list, snapshot_steps=()) -> list:
     """After the last (unkilled) run: one row per iteration, and for each checkpoint a child died
     with, the next row continues its step, iteration and curriculum stage. Returns the rows."""
-    from mmrl.checkpoints import load_checkpoint
+    from mmrl.rl.checkpoints import load_checkpoint
 
     rows = read_metrics(run)
     assert [int(r["step"]) for r in rows] == list(range(batch, total + 1, batch))

@@ -12,9 +12,9 @@ import pytest
 import mmrl
 from mmrl import _core
 from mmrl.controller import clip_cost_array
-from mmrl.policies import JoystickPolicy
+from mmrl.rl.policies import JoystickPolicy
 from mmrl.rollout import FullPath
-from mmrl.runtime_export import read_controller, write_controller
+from mmrl.export.runtime_export import read_controller, write_controller
 from mmrl.tasks.plane import PlaneConfig, PlaneVectorEnv
 from runtime_helpers import drive_both
 from test_import_axes_fps import other_skeleton_database
@@ -197,7 +197,7 @@ def test_bad_specs_name_the_option(db, tmp_path):
     path = tmp_path / "c.mmrl"
     write_controller(path, db, random_plane_policy(0), "plane", PlaneConfig(clip_costs=clip_spec(db, 0)))
     sections = read_controller(path).sections
-    from mmrl.runtime_file import write_sections
+    from mmrl.export.runtime_file import write_sections
 
     for bad, fragment in [(np.zeros(db.num_clips + 1, np.float32), "task.clip_costs"),
                           (np.full(db.num_clips, -1.0, np.float32), "must be >= 0")]:

@@ -16,10 +16,10 @@ sys.path.insert(0, str(Path(__file__).parent))
 from _toyenv import PointMassTargetVecEnv, read_rows  # noqa: E402
 from _toyenv import quiet_config as _quiet_config  # noqa: E402
 
-from mmrl import networks  # noqa: E402
-from mmrl.checkpoints import CheckpointError, load_checkpoint, save_checkpoint  # noqa: E402
-from mmrl.networks import ObstacleActorCritic, PlaneActorCritic, network_class, register_network  # noqa: E402
-from mmrl.ppo import PPOConfig, load_policy, train  # noqa: E402
+from mmrl.rl import networks  # noqa: E402
+from mmrl.rl.checkpoints import CheckpointError, load_checkpoint, save_checkpoint  # noqa: E402
+from mmrl.rl.networks import ObstacleActorCritic, PlaneActorCritic, network_class, register_network  # noqa: E402
+from mmrl.rl.ppo import PPOConfig, load_policy, train  # noqa: E402
 
 VARYING = ("wall_s", "sps", "env_us", "act_us", "update_us")  # wall time and speed
 
@@ -48,7 +48,7 @@ def trained(tmp_path_factory) -> Path:
 # ----------------------------------------------------------------------------- loading never executes code
 
 @pytest.mark.parametrize("model_class", ["os:system", "subprocess:run", "collections:OrderedDict", "EchoNet",
-                                         "mmrl.networks:_ObstacleTower", "mmrl.networks:PlaneActorCritic.x"])
+                                         "mmrl.rl.networks:_ObstacleTower", "mmrl.rl.networks:PlaneActorCritic.x"])
 def test_checkpoint_naming_an_unregistered_class_is_refused_without_importing_or_calling(
         tmp_path, trained, monkeypatch, model_class):
     state = load_checkpoint(trained)
@@ -67,11 +67,11 @@ def test_checkpoint_naming_an_unregistered_class_is_refused_without_importing_or
 def test_old_checkpoints_naming_module_and_class_still_load(tmp_path, trained):
     state = load_checkpoint(trained)
     assert state["model_class"] == "PlaneActorCritic"
-    state["model_class"] = "mmrl.networks:PlaneActorCritic"  # what checkpoints stored before the registry
+    state["model_class"] = "mmrl.rl.networks:PlaneActorCritic"  # what checkpoints stored before the registry
     old = save_checkpoint(state, tmp_path / "old.pt")
     obs = np.random.default_rng(0).standard_normal((5, 4)).astype(np.float32)
     np.testing.assert_array_equal(load_policy(old).act(obs), load_policy(trained).act(obs))
-    assert network_class("mmrl.networks:ObstacleActorCritic") is ObstacleActorCritic
+    assert network_class("mmrl.rl.networks:ObstacleActorCritic") is ObstacleActorCritic
 
 
 class UserNet(torch.nn.Module):
@@ -112,7 +112,7 @@ def test_register_network_refuses_bad_classes_and_name_clashes(registry):
         register_network(torch.nn.Linear)
     with pytest.raises(ValueError, match="invalid name"):
         register_network(UserNet, name="a:b")
-    with pytest.raises(ValueError, match="already registered for mmrl.networks:PlaneActorCritic"):
+    with pytest.raises(ValueError, match="already registered for mmrl.rl.networks:PlaneActorCritic"):
         register_network(UserNet, name="PlaneActorCritic")
     register_network(PlaneActorCritic)  # the same class again is fine
     assert network_class("PlaneActorCritic") is PlaneActorCritic

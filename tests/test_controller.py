@@ -11,7 +11,7 @@ from mmrl.tasks.plane import PlaneConfig
 
 def evaluate_full_path(db, policy, **kwargs):
     return rollout.evaluate_full_path(get_task("plane"), db, policy, **kwargs)
-from mmrl.policies import JoystickPolicy
+from mmrl.rl.policies import JoystickPolicy
 
 
 @pytest.fixture(scope="module")

@@ -7,11 +7,12 @@ from pathlib import Path
 import pytest
 
 from _toyenv import PointMassTargetVecEnv, quiet_config, read_rows
-from mmrl import checkpoints, io
-from mmrl.checkpoints import load_checkpoint
+from mmrl import io
+from mmrl.rl import checkpoints
+from mmrl.rl.checkpoints import load_checkpoint
 from mmrl.cli import main
-from mmrl.database import find_bvh_files
-from mmrl.ppo import train
+from mmrl.motion.database import find_bvh_files
+from mmrl.rl.ppo import train
 
 
 def _die_inside_atomic_write(path: Path) -> None:

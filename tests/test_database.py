@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import mmrl
-from mmrl.database import BLOCK_NAMES, FEATURE_BLOCKS
+from mmrl.motion.database import BLOCK_NAMES, FEATURE_BLOCKS
 
 CLIP = "normal/dataset-2_walk-turn-left_normal_001.bvh"
 
@@ -171,7 +171,7 @@ def test_load_corrupt_or_foreign(tmp_path, clip_text):
     np.savez(tmp_path / "future.npz", **arrays)
     with pytest.raises(mmrl.DatabaseFileError, match="version 99"):
         mmrl.Database.load(tmp_path / "future.npz")
-    arrays["version"] = np.array(mmrl.database.FILE_VERSION, np.int32)
+    arrays["version"] = np.array(mmrl.motion.database.FILE_VERSION, np.int32)
     arrays["features"] = arrays["features"][:-5]
     np.savez(tmp_path / "short.npz", **arrays)
     with pytest.raises(mmrl.DatabaseFileError, match="features"):
@@ -247,7 +247,7 @@ def test_with_weights_leaves_existing_matchers_exact(synth_db):
     assert isinstance(new, mmrl.Database) and new is not db
     assert not hasattr(db, "set_weights")
     np.testing.assert_array_equal(db.normalized_features, rows)  # the old database is untouched
-    assert db.weights == mmrl.database.DEFAULT_WEIGHTS and new.weights["trajectory_direction"] == 4.0
+    assert db.weights == mmrl.motion.database.DEFAULT_WEIGHTS and new.weights["trajectory_direction"] == 4.0
     assert env.db is db and db.matcher is matcher
     np.testing.assert_array_equal(new.features, db.features)
     assert np.abs(new.normalized_features - rows).max() > 0.5

@@ -6,8 +6,8 @@ from pathlib import Path
 import pytest
 
 import mmrl
-from mmrl.checkpoints import CheckpointError
-from mmrl.trained_policy import load_policy
+from mmrl.rl.checkpoints import CheckpointError
+from mmrl.rl.trained_policy import load_policy
 
 REGRESSIONS = Path(__file__).resolve().parent / "fuzz" / "regressions"
 # cpp/fuzz/fuzz_bvh.cpp: the first byte picks the import options.

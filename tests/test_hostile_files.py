@@ -9,9 +9,9 @@ import pytest
 import torch
 
 import mmrl
-from mmrl.checkpoints import CheckpointError, load_checkpoint, save_checkpoint
+from mmrl.rl.checkpoints import CheckpointError, load_checkpoint, save_checkpoint
 from mmrl.cli import main
-from mmrl.database import DatabaseFileError
+from mmrl.motion.database import DatabaseFileError
 
 
 class Planted:
@@ -82,7 +82,7 @@ def test_a_database_npz_with_a_pickled_object_array_is_refused_without_running_i
 
 def _other_skeleton(tmp_path):
     """A database whose skeleton renames the joints (the test_runtime Mixamo case, simplified)."""
-    from mmrl.synth import write_dataset
+    from mmrl.motion.synth import write_dataset
 
     src = tmp_path / "synth"
     paths = write_dataset(src, num_clips=2, seconds_per_clip=2.0)
@@ -114,7 +114,7 @@ def test_a_database_of_another_skeleton_given_to_a_run_is_refused(run, tmp_path,
 
 
 def test_a_policy_with_nan_weights_is_not_exported(tmp_path):
-    from mmrl.runtime_export import write_controller
+    from mmrl.export.runtime_export import write_controller
     from mmrl.tasks.plane import PlaneConfig
     from test_runtime import random_plane_policy
 

@@ -368,7 +368,7 @@ def test_motion_from_pose_and_bvh_writing(db, data):
 
 @pytest.fixture(scope="module")
 def runtime_files(db, tmp_path_factory):
-    from mmrl.runtime_export import write_controller
+    from mmrl.export.runtime_export import write_controller
     from mmrl.tasks.obstacles import ObstaclesConfig
     from mmrl.tasks.plane import PlaneConfig
     from test_runtime import random_obstacle_policy, random_plane_policy

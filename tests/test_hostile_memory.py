@@ -20,7 +20,7 @@ def _reuse_freed_memory():
 
 @pytest.fixture()
 def fresh_db():
-    return mmrl.Database.from_bvh(mmrl.synth.default_dataset_dir())
+    return mmrl.Database.from_bvh(mmrl.motion.synth.default_dataset_dir())
 
 
 def test_kdtree_and_matcher_outlive_their_arrays():
@@ -43,7 +43,7 @@ def test_kdtree_and_matcher_outlive_their_arrays():
 def test_views_outlive_their_owners(fresh_db):
     expected = fresh_db.features.copy(), fresh_db.normalized_features.copy(), fresh_db.valid_mask.copy()
     views = fresh_db.features, fresh_db.normalized_features, fresh_db.valid_mask
-    motion = mmrl.load_bvh(sorted(mmrl.synth.default_dataset_dir().glob("*.bvh"))[0])
+    motion = mmrl.load_bvh(sorted(mmrl.motion.synth.default_dataset_dir().glob("*.bvh"))[0])
     rotations, rotations_copy = motion.local_rotations, np.array(motion.local_rotations)
     del fresh_db, motion
     junk = _reuse_freed_memory()
@@ -57,7 +57,7 @@ def test_views_outlive_their_owners(fresh_db):
 @pytest.mark.parametrize("task", ["plane", "obstacles"])
 def test_env_core_outlives_database_matcher_and_python_env(task):
     def make():
-        db = mmrl.Database.from_bvh(mmrl.synth.default_dataset_dir())
+        db = mmrl.Database.from_bvh(mmrl.motion.synth.default_dataset_dir())
         env = mmrl.get_task(task).make_vector_env(3, db=db, num_threads=1)
         env.reset(seed=4)
         return env
@@ -84,7 +84,7 @@ def test_env_core_outlives_database_matcher_and_python_env(task):
 
 def test_character_outlives_its_database_and_matcher():
     def make():
-        db = mmrl.Database.from_bvh(mmrl.synth.default_dataset_dir())
+        db = mmrl.Database.from_bvh(mmrl.motion.synth.default_dataset_dir())
         character = _core.Character(db._db, db.matcher, _core.CharacterOptions())
         character.reset(100, 0.0, 0.0, 0.0)
         return character
@@ -101,7 +101,7 @@ def test_character_outlives_its_database_and_matcher():
 
 
 def test_runtime_character_outlives_its_controller(tmp_path):
-    from mmrl.runtime_export import write_controller
+    from mmrl.export.runtime_export import write_controller
     from mmrl.tasks.plane import PlaneConfig
     from test_runtime import random_plane_policy
 

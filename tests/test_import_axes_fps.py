@@ -15,7 +15,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 import mmrl
 from mmrl import synth
-from mmrl.bvh import MotionImportWarning
+from mmrl.motion.bvh import MotionImportWarning
 from mmrl.cli import main as cli_main
 
 # Rotates a Y-up world to Z up: +90 degrees about X, (x, y, z) -> (x, -z, y).

@@ -100,8 +100,8 @@ def test_train_obstacles_keeps_its_curriculum_stage_across_kills(server):
 
 
 def test_db_build_npz_is_old_new_or_absent_after_sigkill(server):
-    from mmrl.database import Database
-    from mmrl.synth import write_dataset
+    from mmrl.motion.database import Database
+    from mmrl.motion.synth import write_dataset
 
     rng = random.Random(20)
     bvh = server.workdir / "bvh"
@@ -135,7 +135,7 @@ def test_db_build_npz_is_old_new_or_absent_after_sigkill(server):
 def test_data_fetch_never_leaves_a_partial_file_after_sigkill(server):
     from conftest import require_shared_data
     from mmrl import data
-    from mmrl.database import find_bvh_files
+    from mmrl.motion.database import find_bvh_files
 
     from test_data_fetch import serving_httpd
 

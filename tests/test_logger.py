@@ -1,4 +1,4 @@
-"""mmrl.logger: the progress bar counts what bounds the run; TensorBoard is optional."""
+"""mmrl.rl.logger: the progress bar counts what bounds the run; TensorBoard is optional."""
 from __future__ import annotations
 
 import io
@@ -11,9 +11,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from _toyenv import PointMassTargetVecEnv  # noqa: E402
 
-from mmrl import logger  # noqa: E402
-from mmrl.logger import ProgressBar, progress_settings  # noqa: E402
-from mmrl.ppo import PPOConfig, train  # noqa: E402
+from mmrl.rl import logger  # noqa: E402
+from mmrl.rl.logger import ProgressBar, progress_settings  # noqa: E402
+from mmrl.rl.ppo import PPOConfig, train  # noqa: E402
 
 ROW = {"sps": 300.0, "episode_return": 12.3, "success_rate": 0.25}
 

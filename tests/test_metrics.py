@@ -183,7 +183,7 @@ def test_animated_feet_are_the_ankles_of_the_same_run_with_ik_off():
 
 
 def test_eval_reports_sliding_with_ik_on_and_off_from_one_run():
-    from mmrl.policies import JoystickPolicy
+    from mmrl.rl.policies import JoystickPolicy
     from mmrl.rollout import evaluate_full_path
 
     db = default_database()

@@ -687,7 +687,7 @@ def test_fast_evaluation_counts_each_first_episode(db):
 
     def evaluate_obstacles_fast(policy, db, **kwargs):
         return evaluate_fast(get_task("obstacles"), db, policy, **kwargs)
-    from mmrl.policies import JoystickPolicy
+    from mmrl.rl.policies import JoystickPolicy
 
     joy = JoystickPolicy.preset(db, "joystick")
     empty = evaluate_obstacles_fast(joy, db, episodes=64, seed=3, config=ObstaclesConfig(num_obstacles=0), stage=1)

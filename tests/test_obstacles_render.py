@@ -23,7 +23,7 @@ def evaluate_obstacles(db, policy, **kwargs):
 
 def follow_obstacles(db, policy, **kwargs):
     return follow(OBSTACLES, db, policy, **kwargs)
-from mmrl.policies import JoystickPolicy
+from mmrl.rl.policies import JoystickPolicy
 
 
 @pytest.fixture(scope="module")
@@ -156,7 +156,7 @@ def test_rendered_obstacles_gif_reads_back(tmp_path, capsys):
 
 def test_obstacles_change_the_picture(db):
     """The same motion rendered with and without the obstacles, sensors and hit points differs."""
-    from mmrl.render import render_video
+    from mmrl.viz.render import render_video
 
     rec = follow_obstacles(db, JoystickPolicy.preset(db, "joystick"), seconds=0.5, seed=0, stage=10)
     plain = {k: v for k, v in rec.items() if k not in ("obstacles", "sensor_maps", "sensor_positions",

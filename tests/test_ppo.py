@@ -15,9 +15,9 @@ import torch
 sys.path.insert(0, str(Path(__file__).parent))
 from _toyenv import quiet_config, read_rows, PointMassTargetVecEnv  # noqa: E402
 
-from mmrl import ppo  # noqa: E402
-from mmrl.networks import OBSTACLE_DEFAULT_LAYOUT, ObstacleActorCritic, PlaneActorCritic  # noqa: E402
-from mmrl.ppo import (  # noqa: E402
+from mmrl.rl import ppo  # noqa: E402
+from mmrl.rl.networks import OBSTACLE_DEFAULT_LAYOUT, ObstacleActorCritic, PlaneActorCritic  # noqa: E402
+from mmrl.rl.ppo import (  # noqa: E402
     CheckpointError, NonFiniteError, PPOConfig, compute_gae, load_checkpoint, load_policy,
     save_checkpoint, successor_values, train,
 )

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import mmrl
-from mmrl import ppo
-from mmrl.quality_log import MatchQualityLog
+from mmrl.rl import ppo
+from mmrl.rl.quality_log import MatchQualityLog
 from mmrl.rollout import FullPath
 from mmrl.tasks.plane import PlaneVectorEnv
 

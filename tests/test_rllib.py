@@ -17,7 +17,7 @@ import torch
 
 import mmrl
 from mmrl.cli import main
-from mmrl.logger import MetricsLogger
+from mmrl.rl.logger import MetricsLogger
 
 if os.environ.get("CI"):
     import ray  # noqa: F401  (CI installs mmrl[rllib]: a missing Ray fails here)
@@ -82,7 +82,7 @@ def _rows(run):
 def test_rllib_trains_the_plane_and_the_run_loads_like_any_other(local_ray, tmp_path, capsys):
     from mmrl.integrations.rllib.envs import process_memory  # noqa: F401
     from mmrl.runs import RunDir
-    from mmrl.trained_policy import load_policy
+    from mmrl.rl.trained_policy import load_policy
 
     run = tmp_path / "run"
     assert main(["train", "plane", "--backend", "rllib", "--workers", "2", "--envs-per-worker", "8",

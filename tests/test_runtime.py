@@ -12,12 +12,12 @@ import mmrl
 from mmrl import _core
 from mmrl.cli import main
 from mmrl.commands.export import sample_observations
-from mmrl.networks import PlaneActorCritic
+from mmrl.rl.networks import PlaneActorCritic
 from mmrl.rollout import FullPath
 from mmrl.runs import RunDir
-from mmrl.runtime_export import read_controller, write_controller
+from mmrl.export.runtime_export import read_controller, write_controller
 from mmrl.tasks.plane import PlaneConfig
-from mmrl.trained_policy import ObsNormalizer, Policy
+from mmrl.rl.trained_policy import ObsNormalizer, Policy
 from runtime_helpers import drive_both
 
 
@@ -124,7 +124,7 @@ def test_runtime_on_another_skeleton(tmp_path):
 
 
 def random_obstacle_policy(seed: int) -> Policy:
-    from mmrl.networks import ObstacleActorCritic
+    from mmrl.rl.networks import ObstacleActorCritic
 
     torch.manual_seed(seed)
     model = ObstacleActorCritic(12)

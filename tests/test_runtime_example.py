@@ -12,7 +12,7 @@ import pytest
 
 import mmrl
 from mmrl import _core
-from mmrl.runtime_export import write_controller
+from mmrl.export.runtime_export import write_controller
 from mmrl.tasks.plane import PlaneConfig
 from mmrl.viewer.live import LiveSession
 from test_runtime import random_plane_policy

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from mmrl import _core
-from mmrl.runtime_export import controller_sections, read_controller, write_controller
-from mmrl.runtime_file import ControllerFileError, read_sections, write_sections
+from mmrl.export.runtime_export import controller_sections, read_controller, write_controller
+from mmrl.export.runtime_file import ControllerFileError, read_sections, write_sections
 from mmrl.tasks.plane import PlaneConfig
 from test_runtime import random_plane_policy
 

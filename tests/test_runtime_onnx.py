@@ -7,10 +7,10 @@ import torch
 import mmrl
 from mmrl.cli import main
 from mmrl.commands.export import sample_observations
-from mmrl.integrations.onnx_export import check_onnx, export_onnx
-from mmrl.networks import ObstacleActorCritic
+from mmrl.export.onnx_export import check_onnx, export_onnx
+from mmrl.rl.networks import ObstacleActorCritic
 from mmrl.runs import RunDir
-from mmrl.trained_policy import ObsNormalizer, Policy
+from mmrl.rl.trained_policy import ObsNormalizer, Policy
 
 import onnxruntime as ort  # the onnx extra: CI installs it (.ci/run)
 

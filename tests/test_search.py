@@ -5,7 +5,7 @@ import pytest
 
 import mmrl
 from mmrl import _core
-from mmrl.search import KDTree
+from mmrl.motion.search import KDTree
 
 
 def numpy_knn(points, queries, k):

@@ -53,7 +53,7 @@ def test_every_part_runs_at_a_tiny_scale(tmp_path):
 def test_live_session_timing_stays_bounded(monkeypatch):
     # The soak of `mmrl play` found RSS growing by 23 MB/hour: the timing lists kept every sample.
     import mmrl
-    from mmrl.policies import JoystickPolicy
+    from mmrl.rl.policies import JoystickPolicy
     from mmrl.viewer import live
 
     monkeypatch.setattr(live, "TIMING_SAMPLES", 5)

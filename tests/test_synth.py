@@ -1,4 +1,4 @@
-"""Tests of mmrl.synth: determinism, skeleton, planted feet, commanded speeds and turn rates.
+"""Tests of mmrl.motion.synth: determinism, skeleton, planted feet, commanded speeds and turn rates.
 
 The clips are checked with a small independent BVH reader and forward kinematics written here
 (any channel order, 3 or 6 channels, positions replace the offset), and, once mmrl's own

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from mmrl import Controller, default_database, get_task
-from mmrl.policies import JoystickPolicy
+from mmrl.rl.policies import JoystickPolicy
 from mmrl.rollout import FullPath
 from mmrl.tasks.plane import PlaneVectorEnv
 

@@ -13,7 +13,7 @@ import pytest
 import mmrl
 from mmrl import _core, synth
 from mmrl.metrics import rate_per_second
-from mmrl.policies import JoystickPolicy
+from mmrl.rl.policies import JoystickPolicy
 from mmrl.viewer.live import LiveSession
 
 TRACE_KEYS = {"t", "root", "target", "frame", "transition"}
@@ -21,7 +21,7 @@ TRACE_KEYS = {"t", "root", "target", "frame", "transition"}
 
 @pytest.fixture(scope="module")
 def db():
-    return mmrl.sources.database_from_spec({"synthetic": True})
+    return mmrl.motion.sources.database_from_spec({"synthetic": True})
 
 
 def session(db, task="plane", **kw):
@@ -183,7 +183,7 @@ def other_bvh(tmp_path_factory):
 
 
 def test_bvh_playback_on_another_skeleton(other_bvh):
-    from mmrl.render import joint_sides, skeleton_bones
+    from mmrl.viz.render import joint_sides, skeleton_bones
     from mmrl.viewer.clips import load_playback
 
     pb = load_playback(str(other_bvh))

@@ -30,7 +30,7 @@ pytestmark = pytest.mark.browser
 # MMRL_CHROMIUM points at another chromium build (a distribution's, never a downloaded one).
 CHROMIUM = os.environ.get("MMRL_CHROMIUM") or shutil.which("chromium") or "/usr/bin/chromium"
 VIEWPORT = {"width": 960, "height": 600}
-# The figure's right-side bones (mmrl.render.RIGHT, orange) as the page draws them (RGB 0..255).
+# The figure's right-side bones (mmrl.viz.render.RIGHT, orange) as the page draws them (RGB 0..255).
 FIGURE_ORANGE = np.array([230, 128, 51])
 
 

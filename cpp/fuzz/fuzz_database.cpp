@@ -2,7 +2,7 @@
 // N, J and C, the hierarchy, channels, roles, clip ranges, NaN checks, then the derived valid
 // mask, clip index and normalized features), fed with arrays of any shape and any values.
 //
-// The .npz container itself is numpy's (python/mmrl/database.py reads it with
+// The .npz container itself is numpy's (python/mmrl/motion/database.py reads it with
 // allow_pickle=False, tests/fuzz/fuzz_python.py fuzzes that path with atheris); this target
 // takes the arrays as they come out of it, in a plain encoding (tests/fuzz/make_corpus.py
 // writes the seeds from real databases):

@@ -16,7 +16,7 @@ StateArray<T> stored(const Container& v, std::vector<int64_t> shape) {
   return StateArray<T>{std::vector<T>(v.begin(), v.end()), std::move(shape)};
 }
 
-// The state a save writes (python/mmrl/database.py saves Database.state()).
+// The state a save writes (python/mmrl/motion/database.py saves Database.state()).
 DatabaseState state_of(const Database& db) {
   const int64_t N = db.num_frames, J = db.num_joints, C = db.num_clips();
   DatabaseState s;

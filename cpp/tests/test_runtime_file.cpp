@@ -26,7 +26,7 @@ void put(std::vector<uint8_t>& out, size_t at, T value) {
   std::memcpy(out.data() + at, &value, sizeof(T));
 }
 
-// Writes the format of docs/runtime.md (the reference writer is python/mmrl/runtime_file.py).
+// Writes the format of docs/runtime.md (the reference writer is python/mmrl/export/runtime_file.py).
 std::vector<uint8_t> build_file(const std::vector<TestSection>& sections) {
   const size_t table_end = 64 + 128 * sections.size();
   size_t offset = (table_end + 63) / 64 * 64;

@@ -12,17 +12,28 @@ from importlib.metadata import PackageNotFoundError, version as _version
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from . import _core  # noqa: F401  (the C++ core)
-from .bvh import BVHError, JointRoleError, Motion, load_bvh, parse_bvh
-from .database import Database, DatabaseFileError
+from . import _compat
+
+# The flat layout's module paths (mmrl.ppo, mmrl.database, ...) import for one more release, with a
+# DeprecationWarning naming the new path (mmrl/_compat.py).
+_compat.install()
+from .motion.bvh import BVHError, JointRoleError, Motion, load_bvh, parse_bvh
+from .motion.database import Database, DatabaseFileError
 from .errors import InputError
-from .search import KDTree
-from .ppo import CheckpointError, NonFiniteError, PPOConfig, TrainResult, load_policy, train
+from .motion.search import KDTree
+from .rl.ppo import CheckpointError, NonFiniteError, PPOConfig, TrainResult, load_policy, train
 from .controller import Controller, StepResult
-from .sources import default_database
+from .motion.sources import default_database
 from .tasks import Task, get_task, register_task, task_names  # registers mmrl/Plane-v0, mmrl/MovingObstacles-v0
 from .runs import RunDir
-from . import metrics, policies, rollout  # noqa: F401
-from . import synth, data  # noqa: F401
+from . import metrics, rollout  # noqa: F401
+from .rl import policies  # noqa: F401
+from .motion import synth, data  # noqa: F401
+
+
+def __getattr__(name: str):  # mmrl.ppo as an attribute: the new module, with a warning
+    return _compat.moved_attribute(name)
+
 
 try:
     __version__ = _version("mmrl")

@@ -11,8 +11,8 @@ from typing import List, Optional
 
 # Modules that contribute subcommands, in help order. A module that is missing (a partial
 # install) is skipped rather than breaking the whole command line.
-COMMAND_MODULES = ["mmrl.commands.db", "mmrl.data", "mmrl.commands.train", "mmrl.commands.run", "mmrl.commands.export",
-                   "mmrl.commands.view"]
+COMMAND_MODULES = ["mmrl.commands.db", "mmrl.motion.data", "mmrl.commands.train", "mmrl.commands.run",
+                   "mmrl.commands.export", "mmrl.commands.view"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -51,11 +51,11 @@ def main(argv: Optional[List[str]] = None) -> int:
 
 def user_errors() -> tuple:
     """The exception types that mean bad input (a file, a directory or an argument), not a bug."""
-    from .bvh import BVHError, JointRoleError
-    from .data import ChecksumError, DownloadError
-    from .database import DatabaseFileError
+    from .motion.bvh import BVHError, JointRoleError
+    from .motion.data import ChecksumError, DownloadError
+    from .motion.database import DatabaseFileError
     from .errors import InputError
-    from .ppo import CheckpointError
+    from .rl.ppo import CheckpointError
 
     return (InputError, BVHError, JointRoleError, DatabaseFileError, CheckpointError, ChecksumError, DownloadError,
             FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError, PermissionError)

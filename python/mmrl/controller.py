@@ -23,7 +23,7 @@ import numpy as np
 
 from . import _core
 from .arrays import real_array
-from .database import POSE_DIM, TRAJECTORY_DIM, Database
+from .motion.database import POSE_DIM, TRAJECTORY_DIM, Database
 
 
 def clip_cost_array(spec: str, db: Database, option: str = "clip_costs") -> np.ndarray:

@@ -4,7 +4,7 @@ Every motion-quality number mmrl reports comes from this module: ``mmrl eval --j
 (:func:`mmrl.rollout.evaluate_full_path`, for every task: the plane and the moving-obstacles
 evaluation run the same loop), ``render``/``export-bvh`` (:func:`mmrl.rollout.follow`), the
 benches that call them, ``mmrl db info`` (the raw-mocap floor) and the training log
-(:mod:`mmrl.quality_log`).
+(:mod:`mmrl.rl.quality_log`).
 
 Definitions (positions in meters, world space; one database frame per shown frame):
 
@@ -48,7 +48,7 @@ measure, e.g. on the fast path):
 
 ``mmrl eval --json`` adds ``raw_mocap``: ``{foot_sliding_cm_per_s, foot_sliding_p95_cm_per_s,
 pose_jump_p99_cm}`` of :func:`raw_mocap_floor`. The training CSV carries the fast-path
-``transitions_per_s`` and ``matched_cost`` (:mod:`mmrl.quality_log`).
+``transitions_per_s`` and ``matched_cost`` (:mod:`mmrl.rl.quality_log`).
 """
 from __future__ import annotations
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from . import metrics
 from .controller import Controller
-from .database import POSE_DIM, Database
+from .motion.database import POSE_DIM, Database
 from .tasks import Task
 
 #: Per-shown-frame keys of a controller recording (trimmed together).

@@ -21,7 +21,7 @@ from typing import Any, Dict, Optional
 
 from .errors import InputError
 from .io import atomic_write_text
-from .sources import database_from_spec
+from .motion.sources import database_from_spec
 from .tasks import Task, get_task
 
 CONFIG_NAME = "config.json"
@@ -130,7 +130,7 @@ class RunDir:
 
     def policy(self, device: str = "cpu"):
         """The run's trained policy (``latest.pt``)."""
-        from .ppo import load_policy
+        from .rl.ppo import load_policy
 
         if not self.checkpoint.is_file():
             raise InputError(f"{self.checkpoint}: no trained policy in this run directory")

@@ -1,7 +1,7 @@
 """atheris fuzz targets for the loaders written in Python (docs/hardening.md).
 
     python tests/fuzz/fuzz_python.py TARGET [libFuzzer flags] [corpus dirs]
-    TARGET: checkpoint    a PPO checkpoint file -> mmrl.trained_policy.load_policy
+    TARGET: checkpoint    a PPO checkpoint file -> mmrl.rl.trained_policy.load_policy
                           (torch.load(weights_only=True), the format checks, the registered
                           network rebuilt and its weights loaded, the observation normalizer)
             database_npz  a database file -> mmrl.Database.load (numpy's .npz reader with
@@ -29,9 +29,9 @@ import atheris
 
 with atheris.instrument_imports(include=["mmrl"]):
     import mmrl  # noqa: F401  (instrumented: its Python loaders)
-    from mmrl.checkpoints import CheckpointError
-    from mmrl.database import Database, DatabaseFileError
-    from mmrl.trained_policy import load_policy
+    from mmrl.rl.checkpoints import CheckpointError
+    from mmrl.motion.database import Database, DatabaseFileError
+    from mmrl.rl.trained_policy import load_policy
 
 import numpy.lib.format
 import torch._weights_only_unpickler

@@ -149,11 +149,11 @@ def database_seeds(db) -> None:
 def runtime_seeds(db, tmp: Path) -> None:
     import torch
 
-    from mmrl.networks import PlaneActorCritic
-    from mmrl.runtime_export import controller_sections, write_controller
-    from mmrl.runtime_file import write_sections
+    from mmrl.rl.networks import PlaneActorCritic
+    from mmrl.export.runtime_export import controller_sections, write_controller
+    from mmrl.export.runtime_file import write_sections
     from mmrl.tasks.plane import PlaneConfig
-    from mmrl.trained_policy import ObsNormalizer, Policy
+    from mmrl.rl.trained_policy import ObsNormalizer, Policy
 
     torch.manual_seed(0)
     model = PlaneActorCritic(17, 12, hidden=(8,))
@@ -182,9 +182,9 @@ def runtime_seeds(db, tmp: Path) -> None:
 def python_seeds(db, tmp: Path) -> None:
     import torch
 
-    from mmrl.checkpoints import save_checkpoint
-    from mmrl.networks import PlaneActorCritic
-    from mmrl.trained_policy import ObsNormalizer
+    from mmrl.rl.checkpoints import save_checkpoint
+    from mmrl.rl.networks import PlaneActorCritic
+    from mmrl.rl.trained_policy import ObsNormalizer
 
     db.save(tmp / "db.npz")
     write("database_npz", "tiny", (tmp / "db.npz").read_bytes())

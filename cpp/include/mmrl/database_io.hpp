@@ -1,5 +1,5 @@
 // The saved form of a Database: the arrays of mmrl's database file (version 2 of the .npz
-// that python/mmrl/database.py writes atomically and reads without pickles), and the rules
+// that python/mmrl/motion/database.py writes atomically and reads without pickles), and the rules
 // that turn them back into a Database. The Python layer owns the file; this owns the format's
 // meaning: shapes, the skeleton's channel text, the role layout, the derived arrays.
 #pragma once

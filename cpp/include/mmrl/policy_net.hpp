@@ -2,7 +2,7 @@
 //
 //   action = action_center + action_half * net(clamp(obs * obs_scale + obs_shift, -clip, clip))
 //
-// which is mmrl.load_policy(...).act(obs) (python/mmrl/trained_policy.py). Two networks:
+// which is mmrl.load_policy(...).act(obs) (python/mmrl/rl/trained_policy.py). Two networks:
 //   - kMlp: dense layers with an activation after each (PlaneActorCritic's actor: 32 x 32 tanh);
 //   - kConvTower: ObstacleActorCritic's actor: the observation's map segment (C x H x W, C order)
 //     through convolutions (stride 1, no padding, each with its activation), flattened in

@@ -1,6 +1,6 @@
 // The exported controller file (.mmrl) read back: a versioned, little-endian container of
 // named, typed, checksummed sections (docs/runtime.md has the layout field by field;
-// python/mmrl/runtime_file.py writes it).
+// python/mmrl/export/runtime_file.py writes it).
 //
 // Reading never trusts the file: the magic, the endianness marker, the version, the header's
 // and the table's CRC-32, every section's bounds, alignment, dtype, shape and CRC-32 are

@@ -6,9 +6,9 @@ import time
 
 import numpy as np
 
-from ..database import DEFAULT_FPS
+from ..motion.database import DEFAULT_FPS
 from ..errors import InputError
-from ..sources import load_any
+from ..motion.sources import load_any
 
 
 def parse_roles(items):
@@ -57,7 +57,7 @@ def import_options(args: argparse.Namespace) -> dict:
 
 
 def cmd_build(args: argparse.Namespace) -> int:
-    from ..database import Database
+    from ..motion.database import Database
 
     t0 = time.perf_counter()
     db = Database.from_bvh(args.data, mirror=args.mirror, scale=args.scale, roles=parse_roles(args.role),
@@ -84,7 +84,7 @@ def source_lines(db) -> list:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    from ..database import FEATURE_BLOCKS
+    from ..motion.database import FEATURE_BLOCKS
     from ..metrics import raw_mocap_floor
 
     db = load_any(args.database, **import_options(args))

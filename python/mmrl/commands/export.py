@@ -55,14 +55,14 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise InputError(f"{args.run}: not a training run (no config.json)")
     policy, db, config = run.policy(), run.database(), run.task_config(task)
     if args.output is not None:
-        from ..runtime_export import write_controller
+        from ..export.runtime_export import write_controller
 
         t0 = time.perf_counter()
         size = write_controller(args.output, db, policy, task.name, config)
         print(f"wrote {args.output}: {size / 1e6:.1f} MB, {db.num_frames} frames, {db.num_joints} joints "
               f"({time.perf_counter() - t0:.1f} s)")
     if args.onnx is not None:
-        from ..integrations.onnx_export import check_onnx, export_onnx
+        from ..export.onnx_export import check_onnx, export_onnx
 
         if args.check_observations < 1:
             raise InputError(f"--check-observations must be >= 1, got {args.check_observations}")

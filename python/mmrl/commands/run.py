@@ -90,7 +90,7 @@ class Setup:
                             inertialization_halflife=0.0 if args.no_inertialization else 0.1)
 
     def _policy(self, args, run):
-        from ..policies import JoystickPolicy
+        from ..rl.policies import JoystickPolicy
 
         if args.policy is not None:
             return JoystickPolicy.preset(self.db, args.policy), args.policy
@@ -165,7 +165,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if out.suffix.lower() not in (".mp4", ".gif"):
         raise InputError(f"{out}: the output must end in .mp4 or .gif")
-    from ..render import render_video
+    from ..viz.render import render_video
 
     s, rec = _follow(args)
     t0 = time.perf_counter()

@@ -1,16 +1,15 @@
 """``mmrl train TASK`` and ``mmrl plot``: argument parsing only; the work is in
-:mod:`mmrl.ppo`, :mod:`mmrl.tasks` and :mod:`mmrl.runs`."""
+:mod:`mmrl.rl.ppo`, :mod:`mmrl.tasks` and :mod:`mmrl.runs`."""
 from __future__ import annotations
 
 import argparse
-from dataclasses import fields
 from pathlib import Path
-from typing import Any, Dict, List
+from typing import Any, Dict
 
 from ..errors import InputError
-from ..quality_log import MatchQualityLog
+from ..rl.quality_log import MatchQualityLog
 from ..tasks import Task, get_task, task_names
-from .common import add_data_options, data_spec_from_args
+from .common import add_data_options, apply_values, report_training, resolve_run, split_overrides, task_flag_options
 
 
 def register_cli(sub) -> None:
@@ -71,99 +70,17 @@ def register_cli(sub) -> None:
 
 
 # ---------------------------------------------------------------------- options
-def _coerce(value: str, like):
-    if isinstance(like, bool):
-        if value.lower() in ("1", "true", "yes", "on"):
-            return True
-        if value.lower() in ("0", "false", "no", "off"):
-            return False
-        raise InputError(f"--set: expected true or false, got {value!r}")
-    try:
-        if isinstance(like, int):
-            return int(float(value))
-        if isinstance(like, tuple):
-            return tuple(int(v) for v in value.split(",") if v)
-    except ValueError:
-        raise InputError(f"--set: cannot read {value!r} as {type(like).__name__}") from None
-    if isinstance(like, float) or like is None:
-        try:
-            return float(value)
-        except ValueError:
-            return None if value.lower() == "none" else value
-    return value
-
-
-def split_overrides(items, *dataclasses_) -> List[Dict[str, Any]]:
-    """KEY=VALUE items -> one dict of overrides per dataclass instance (by field name)."""
-    out: List[Dict[str, Any]] = [dict() for _ in dataclasses_]
-    for item in items:
-        if "=" not in item:
-            raise InputError(f"--set expects KEY=VALUE, got {item!r}")
-        k, v = item.split("=", 1)
-        for d, o in zip(dataclasses_, out):
-            if k in {f.name for f in fields(d)}:
-                o[k] = _coerce(v, getattr(d, k))
-                break
-        else:
-            names = sorted({f.name for d in dataclasses_ for f in fields(d)})
-            raise InputError(f"--set: unknown option {k!r}; options are {', '.join(names)}")
-    return out
-
-
-def _apply(obj, values: Dict[str, Any]) -> None:
-    for k, v in values.items():
-        setattr(obj, k, tuple(v) if isinstance(getattr(obj, k), tuple) and v is not None else v)
-
-
-def task_flag_options(task: Task, args, saved: Dict[str, Any], sets: List[str]) -> Dict[str, Any]:
-    """The callback options (a resumed run's, then the task's switches that set them); the
-    switches that set task options are appended to ``sets`` as KEY=VALUE. A switch of
-    another task is refused."""
-    options: Dict[str, Any] = dict(saved.get("callback_options", {})) if saved else {}
-    own_flags = {f.flag for f in task.flags}
-    for name in task_names():
-        for flag in get_task(name).flags:
-            if getattr(args, flag.flag.lstrip("-").replace("-", "_")) and flag.flag not in own_flags:
-                raise InputError(f"{flag.flag} applies to the {name} task only")
-    for flag in task.flags:
-        if getattr(args, flag.flag.lstrip("-").replace("-", "_")):
-            if flag.target == "callbacks":
-                options[flag.option] = flag.value
-            else:
-                sets.append(f"{flag.option}={flag.value}")
-    return options
-
-
-def resolve_run(task: Task, args, default_out: str):
-    """(saved config.json, run directory, data spec): a resumed run's, or a new directory
-    (``--out`` or ``default_out``) that must not hold a run yet."""
-    from ..runs import RunDir
-
-    if args.resume:
-        run = RunDir(args.resume)
-        saved = run.config
-        if not saved:
-            raise InputError(f"{run.path}: no config.json; not a run directory")
-        if run.task_name != task.name:
-            raise InputError(f"{run.path} holds a '{run.task_name}' run, not '{task.name}'")
-        return saved, run.path, run.data_spec
-    out = Path(args.out or default_out)
-    if (out / "latest.pt").exists():
-        raise InputError(f"{out} already holds a run; use --resume {out} or another --out")
-    return {}, out, data_spec_from_args(args)
-
-
 def _configs(task: Task, args, saved: Dict[str, Any]):
     """(task config, PPOConfig, callback options) from the task's defaults, a resumed run's
     saved values, the preset, the task's flags and --set, in that order."""
-    from .. import ppo
+    from ..rl import ppo
 
     task_cfg = task.default_config()
     cfg = ppo.PPOConfig(seed=args.seed)
-    _apply(cfg, dict(task.ppo_defaults))
+    apply_values(cfg, dict(task.ppo_defaults))
     if saved:
-        _apply(task_cfg, {k: v for k, v in saved.get("task_config", {}).items() if hasattr(task_cfg, k)})
-        _apply(cfg, {k: v for k, v in saved.get("ppo", {}).items() if hasattr(cfg, k)})
+        apply_values(task_cfg, {k: v for k, v in saved.get("task_config", {}).items() if hasattr(task_cfg, k)})
+        apply_values(cfg, {k: v for k, v in saved.get("ppo", {}).items() if hasattr(cfg, k)})
     sets = list(args.set)
     preset = args.preset if args.preset is not None or saved else task.default_preset
     if preset is not None:
@@ -177,13 +94,13 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
         sets = [f"{k}={v}" for k, v in task.presets[preset].items()] + sets
     options = task_flag_options(task, args, saved, sets)
     ppo_over, task_over = split_overrides(sets, cfg, task_cfg)
-    _apply(cfg, ppo_over)
-    _apply(task_cfg, task_over)
+    apply_values(cfg, ppo_over)
+    apply_values(task_cfg, task_over)
     return task_cfg, cfg, options
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from .. import ppo
+    from ..rl import ppo
     from ..runs import RunDir
 
     task = get_task(args.task)
@@ -211,7 +128,7 @@ def cmd_train(args: argparse.Namespace) -> int:
     cfg.progress = not args.no_progress
     num_envs = args.envs or saved.get("num_envs") or 64
 
-    from ..sources import database_from_spec
+    from ..motion.sources import database_from_spec
 
     db = database_from_spec(data)
     try:  # the options are the user's: a value the env refuses is bad input
@@ -239,17 +156,8 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def report_training(steps: int, seconds: float, how: str, row: Dict[str, Any], checkpoint, callbacks) -> None:
-    """The lines ``mmrl train`` ends with (either backend)."""
-    print(f"trained {steps:,} steps in {seconds:.1f} s ({how}); success {row.get('success_rate', float('nan')):.3f}, "
-          f"return {row.get('episode_return', float('nan')):.1f}; checkpoint {checkpoint}")
-    for cb in callbacks:
-        if hasattr(cb, "describe"):
-            print(cb.describe())
-
-
 def cmd_plot(args: argparse.Namespace) -> int:
-    from ..plots import plot_run
+    from ..viz.plots import plot_run
 
     for path in plot_run(Path(args.run), Path(args.output) if args.output else None, num_targets=args.targets,
                          seed=args.seed):

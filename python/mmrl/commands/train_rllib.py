@@ -7,6 +7,7 @@ from typing import Any, Dict
 
 from ..errors import InputError
 from ..tasks import Task
+from .common import apply_values, report_training, resolve_run, split_overrides, task_flag_options
 
 # Our trainer's option names for the knobs RLlib also has (a task preset may set them).
 PPO_TO_RLLIB = {"gamma": "gamma", "learning_rate": "lr", "anneal_lr": "anneal_lr", "gae_lambda": "lambda_",
@@ -25,14 +26,13 @@ def _configs(task: Task, args: argparse.Namespace, saved: Dict[str, Any]):
     """(task config, RLlibConfig, callback options) from the defaults, a resumed run's saved
     values, the preset (a task preset, or paper-rllib), the task's flags and --set."""
     from ..integrations.rllib import RLLIB_PRESETS, RLlibConfig
-    from .train import _apply, split_overrides, task_flag_options
 
     task_cfg = task.default_config()
     cfg = RLlibConfig(seed=args.seed)
-    _apply(cfg, ppo_settings(task.ppo_defaults))  # what the task trains best with, in RLlib's names
+    apply_values(cfg, ppo_settings(task.ppo_defaults))  # what the task trains best with, in RLlib's names
     if saved:
-        _apply(task_cfg, {k: v for k, v in saved.get("task_config", {}).items() if hasattr(task_cfg, k)})
-        _apply(cfg, {k: v for k, v in saved.get("rllib", {}).items() if hasattr(cfg, k)})
+        apply_values(task_cfg, {k: v for k, v in saved.get("task_config", {}).items() if hasattr(task_cfg, k)})
+        apply_values(cfg, {k: v for k, v in saved.get("rllib", {}).items() if hasattr(cfg, k)})
         if args.preset is not None:
             raise InputError("--preset: a resumed run keeps its configuration (change options with --set)")
     preset = args.preset if args.preset is not None or saved else task.default_preset
@@ -52,8 +52,8 @@ def _configs(task: Task, args: argparse.Namespace, saved: Dict[str, Any]):
             # Other trainer options of the preset have no RLlib knob here.
     options = task_flag_options(task, args, saved, sets)
     rllib_over, task_over = split_overrides(sets + list(args.set), cfg, task_cfg)
-    _apply(cfg, rllib_over)
-    _apply(task_cfg, task_over)
+    apply_values(cfg, rllib_over)
+    apply_values(task_cfg, task_over)
     return task_cfg, cfg, options
 
 
@@ -63,8 +63,7 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
     except ImportError as e:
         raise InputError(f"--backend rllib: {e}") from None
     from ..runs import RunDir
-    from ..sources import database_from_spec
-    from .train import report_training, resolve_run
+    from ..motion.sources import database_from_spec
 
     saved, out, data = resolve_run(task, args, f"runs/{task.name}-rllib-seed{args.seed}")
     task_cfg, cfg, options = _configs(task, args, saved)

@@ -1,1 +1,1 @@
-"""Bridges to other tools: the policy as ONNX (:mod:`mmrl.integrations.onnx_export`)."""
+"""Bridges to other frameworks: Ray RLlib's PPO on mmrl's envs (:mod:`mmrl.integrations.rllib`)."""

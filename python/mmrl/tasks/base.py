@@ -34,8 +34,8 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..controller import clip_cost_array
-from ..database import Database
-from ..sources import resolve_database
+from ..motion.database import Database
+from ..motion.sources import resolve_database
 
 
 # ----------------------------------------------------------------------------- config

@@ -64,7 +64,7 @@ def obstacle_policy_factory(envs=None):
     def factory(obs_dim: int, act_dim: int):
         if obs_dim != sum(size for _, size in layout):
             raise ValueError(f"obstacle_policy_factory: obs_dim {obs_dim} does not match the layout {layout}")
-        from ..networks import ObstacleActorCritic
+        from ..rl.networks import ObstacleActorCritic
 
         return ObstacleActorCritic(act_dim, layout=layout, map_shape=map_shape)
 

@@ -45,7 +45,7 @@ class PlaneVectorEnv(TargetVectorEnv):
     config_type = PlaneConfig
 
     def render(self):
-        from ..render import render_topdown
+        from ..viz.render import render_topdown
 
         return render_topdown([self.env_state(i) for i in range(self.num_envs)])
 
@@ -57,7 +57,7 @@ class PlaneEnv(SingleEnv):
     vector_type = PlaneVectorEnv
 
     def render(self):
-        from ..render import render_state
+        from ..viz.render import render_state
 
         return render_state(self.db, self._vec.env_state(0))
 

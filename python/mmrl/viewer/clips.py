@@ -21,7 +21,7 @@ from ..errors import InputError
 @dataclass
 class Playback:
     """Frames to play: ``recording`` holds per-frame ``positions`` (T, J, 3) world meters and
-    optionally the keys of :func:`mmrl.render.recording_frame` plus ``contacts`` (T, 2) and
+    optionally the keys of :func:`mmrl.viz.render.recording_frame` plus ``contacts`` (T, 2) and
     per decision ``match_points`` / ``match_directions`` (S, 3, 2)."""
 
     name: str
@@ -46,8 +46,8 @@ class Playback:
         return -1 if q is None else int(np.searchsorted(q, t, side="right")) - 1
 
     def frame(self, t: int) -> Dict[str, Any]:
-        """What frame t shows (see :func:`mmrl.render.recording_frame`)."""
-        from ..render import recording_frame
+        """What frame t shows (see :func:`mmrl.viz.render.recording_frame`)."""
+        from ..viz.render import recording_frame
 
         rec = self.recording
         if "query_frames" in rec:
@@ -89,7 +89,7 @@ def load_playback(source: str, *, seconds: float = 20.0, seed: int = 0, stage: O
 
 
 def bvh_playback(path: Path) -> Playback:
-    from ..bvh import load_bvh
+    from ..motion.bvh import load_bvh
 
     motion = load_bvh(path)
     positions = np.asarray(motion.global_positions(), np.float32)
@@ -100,7 +100,7 @@ def bvh_playback(path: Path) -> Playback:
 
 def database_playback(path: Path) -> Playback:
     from .. import _core
-    from ..database import Database
+    from ..motion.database import Database
     from ..metrics import body_joints, feet
 
     db = Database.load(path)
@@ -161,7 +161,7 @@ def add_matched_queries(db, rec: Dict[str, Any]) -> None:
 
     Decision q is made on shown frame ``query_frames[q]``; it plays match + 1, ... so the
     match is the next shown frame's database frame minus one."""
-    from ..database import POSE_DIM
+    from ..motion.database import POSE_DIM
     from ..rollout import _world_query
 
     qf = np.asarray(rec["query_frames"], np.int64)

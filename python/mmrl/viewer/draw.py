@@ -1,7 +1,7 @@
 """What the browser viewer draws for one frame, on a :class:`~mmrl.viewer.scene.Scene`.
 
-The same shown values as the MP4 renderer (:func:`mmrl.render.recording_frame`): the figure
-as bones colored by side (:func:`mmrl.render.skeleton_bones`, :func:`mmrl.render.joint_sides`),
+The same shown values as the MP4 renderer (:func:`mmrl.viz.render.recording_frame`): the figure
+as bones colored by side (:func:`mmrl.viz.render.skeleton_bones`, :func:`mmrl.viz.render.joint_sides`),
 the target as a ring of the success radius, obstacles as low boxes, the sensor map (occupied
 cells orange), the policy's three trajectory points with their facing directions (green, red
 when inside an obstacle) and the matched frame's three (blue), and foot contacts (a dot under
@@ -13,7 +13,7 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 
-from ..render import OBSTACLE_HEIGHT, SIDE_COLORS, joint_sides, skeleton_bones
+from ..viz.render import OBSTACLE_HEIGHT, SIDE_COLORS, joint_sides, skeleton_bones
 
 TARGET = (0.85, 0.2, 0.2)
 QUERY = (0.1, 0.6, 0.2)
@@ -133,7 +133,7 @@ class Painter:
         self.scene.lines(self.root + "/trajectory", segments, TRAJECTORY, thickness=0.015)
 
     def show(self, shown: Dict[str, object]) -> None:
-        """One frame of :func:`mmrl.render.recording_frame` (plus ``contacts`` and the matched
+        """One frame of :func:`mmrl.viz.render.recording_frame` (plus ``contacts`` and the matched
         frame's ``match_points`` / ``match_directions``, when present)."""
         with self.scene.atomic():
             self.figure(shown["positions"])

@@ -27,8 +27,8 @@ import numpy as np
 
 from .. import metrics
 from ..controller import Controller
-from ..database import POSE_DIM
-from ..policies import JoystickPolicy
+from ..motion.database import POSE_DIM
+from ..rl.policies import JoystickPolicy
 from ..rollout import FullPath, _world_query, policy_actions
 
 
@@ -113,7 +113,7 @@ class LiveSession:
     # ------------------------------------------------------------------ the loop
     def step(self) -> Dict[str, Any]:
         """Show the next frame (deciding first when the last decision's frames are used up).
-        Returns what the frame shows (:func:`mmrl.render.recording_frame`'s keys)."""
+        Returns what the frame shows (:func:`mmrl.viz.render.recording_frame`'s keys)."""
         if self.k >= self.F:
             self._decide()
         res = self.last

@@ -1,6 +1,6 @@
 """The settings of ``mmrl train --backend rllib`` and its presets.
 
-``RLlibConfig`` is to RLlib what ``mmrl.ppo.PPOConfig`` is to our trainer; ``mmrl train
+``RLlibConfig`` is to RLlib what ``mmrl.rl.ppo.PPOConfig`` is to our trainer; ``mmrl train
 --backend rllib --set KEY=VALUE`` sets its fields, and ``config.json`` records them under
 ``"rllib"``. The defaults follow our PPO's choices where RLlib has the same knob (GAE 0.95,
 clip 0.2, 8 epochs, observation normalization, actions in the box's standardized units); the

@@ -58,7 +58,7 @@ def worker_database(shared: SharedDatabase):
     """The database behind ``shared``, borrowed from the object store (once per process)."""
     import ray
 
-    from ...database import Database
+    from ...motion.database import Database
 
     key = shared.ref.hex()
     if key not in _WORKER_DATABASES:

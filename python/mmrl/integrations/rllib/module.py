@@ -1,6 +1,6 @@
 """The mmrl actor-critic networks as an RLlib RLModule.
 
-RLlib trains the very network class our PPO trains (``mmrl.networks``: the paper's 32 x 32
+RLlib trains the very network class our PPO trains (``mmrl.rl.networks``: the paper's 32 x 32
 MLP for the plane, its CNN for the obstacles), so a run trained by RLlib exports to the same
 ``latest.pt`` that ``mmrl eval``, ``render``, ``play`` and ``export`` load. The action
 distribution is RLlib's diagonal Gaussian over [mean, log_std], with the network's free
@@ -18,7 +18,7 @@ from ray.rllib.core.columns import Columns
 from ray.rllib.core.rl_module.apis.value_function_api import ValueFunctionAPI
 from ray.rllib.core.rl_module.torch import TorchRLModule
 
-from ...networks import network_class
+from ...rl.networks import network_class
 
 
 class MMRLTorchModule(TorchRLModule, ValueFunctionAPI):

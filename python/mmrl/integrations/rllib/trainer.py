@@ -23,11 +23,11 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 import torch
 
-from ...checkpoints import load_checkpoint, save_checkpoint
+from ...rl.checkpoints import load_checkpoint, save_checkpoint
 from ...errors import InputError
-from ...logger import MetricsLogger, ProgressBar
+from ...rl.logger import MetricsLogger, ProgressBar
 from ...metrics import rate_per_second
-from ...networks import network_name
+from ...rl.networks import network_name
 from .config import RLlibConfig
 from .envs import ENV_PREFIX, drain_worker, register_envs, set_worker_stage, share_database
 from .module import MMRLTorchModule, range_mean_std_filter
@@ -205,7 +205,7 @@ class RLlibRun:
         if task.policy_factory is not None:
             self.model = task.policy_factory(probe)(self.obs_dim, self.act_dim)
         else:
-            from ...networks import PlaneActorCritic
+            from ...rl.networks import PlaneActorCritic
             self.model = PlaneActorCritic(self.obs_dim, self.act_dim, init_log_std=cfg.init_log_std)
         probe.close()
         self.resources = init_ray(address, cfg.workers)

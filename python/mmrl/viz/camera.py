@@ -1,4 +1,4 @@
-"""The small perspective camera of :mod:`mmrl.render` (numpy): world points to pixels."""
+"""The small perspective camera of :mod:`mmrl.viz.render` (numpy): world points to pixels."""
 from __future__ import annotations
 
 from typing import Optional

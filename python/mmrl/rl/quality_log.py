@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Dict
 
-from .metrics import rate_per_second
+from ..metrics import rate_per_second
 
 
 class MatchQualityLog:

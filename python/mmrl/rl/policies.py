@@ -11,8 +11,8 @@ from typing import Optional, Tuple
 
 import numpy as np
 
-from . import _core
-from .database import POSE_DIM, TRAJECTORY_DIM, Database
+from .. import _core
+from ..motion.database import POSE_DIM, TRAJECTORY_DIM, Database
 
 #: Observation sizes the scripted policies read: the plane task's and the moving-obstacles task's.
 OBSERVATION_DIMS = (POSE_DIM + 2, int(_core.ObstacleVecEnv.obs_dim))

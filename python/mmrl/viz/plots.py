@@ -45,8 +45,8 @@ def rollout_to_targets(policy, db, targets, seed: int = 0, max_steps: int = 100,
     """Drive one character from the same start toward each target in turn (one episode per
     target, each from the seeded start, on the fast path). Returns a list of (K, 2) root
     paths (x, z), one point per played frame."""
-    from .rollout import FullPath, policy_actions
-    from .tasks import get_task
+    from ..rollout import FullPath, policy_actions
+    from ..tasks import get_task
 
     task = task or get_task("plane")
     config = (config or task.default_config()).replace(max_steps=max_steps)
@@ -67,7 +67,7 @@ def rollout_to_targets(policy, db, targets, seed: int = 0, max_steps: int = 100,
 def plot_run(run: Path, out_dir: Optional[Path] = None, num_targets: int = 4, seed: int = 0) -> List[Path]:
     """Write learning.png (return, length and success against steps and wall time) and, when the
     run has snapshots, trajectories.png (top-down paths of each snapshot toward the same targets)."""
-    from .errors import require_extra
+    from ..errors import require_extra
 
     matplotlib = require_extra("matplotlib", "viz", "mmrl plot")
     matplotlib.use("Agg")
@@ -100,8 +100,8 @@ def plot_run(run: Path, out_dir: Optional[Path] = None, num_targets: int = 4, se
     written.append(path)
 
     if snaps:
-        from . import ppo
-        from .runs import RunDir
+        from ..rl import ppo
+        from ..runs import RunDir
 
         rundir = RunDir(run)
         if rundir.task is None or rundir.task.scene is None:  # paths on an empty plane
@@ -134,7 +134,7 @@ def plot_run(run: Path, out_dir: Optional[Path] = None, num_targets: int = 4, se
 
 def _save(fig, path: Path) -> None:
     """Save a figure atomically (a PNG is complete or absent)."""
-    from .io import atomic_path
+    from ..io import atomic_path
 
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110, format="png")

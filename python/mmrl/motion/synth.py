@@ -6,7 +6,7 @@ tests need no data and a user without motion capture still gets a working motion
 database (``default_dataset_dir()``).
 
 How a clip is made (commands, gait, footholds, pelvis height, IK legs, upper body) is told and
-done in :mod:`mmrl.synth_motion`; this module writes the result as BVH and holds the public API.
+done in :mod:`mmrl.motion.synth_motion`; this module writes the result as BVH and holds the public API.
 
 Skeleton and file format
 ------------------------
@@ -38,7 +38,7 @@ from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .io import atomic_write_text
+from ..io import atomic_write_text
 from .synth_motion import JOINT_NAMES, JOINT_OFFSETS_CM, JOINT_PARENTS, _SKELETON, _animate, _Clip, _draw_style
 
 __all__ = [
@@ -262,7 +262,7 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
     that list (default: all 27, 3.6 minutes at 8 s each); more clips than that add random constant
     (speed, turn rate) clips.
 
-    ``manifest.json``: {"generator": "mmrl.synth", "version", "seed", "fps", "clips": [{"file",
+    ``manifest.json``: {"generator": "mmrl.motion.synth", "version", "seed", "fps", "clips": [{"file",
     "kind", "speed" (m/s, at the start), "speed_end" (m/s), "turn_rate" (rad/s, + = left),
     "ramp_seconds" ([start, end] of a linear speed ramp, or null), "frames", "fps",
     "contacts" (stance intervals per foot, [start, stop) frames)}]}.
@@ -289,7 +289,7 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
         entries.append(info)
         paths.append(path)
     manifest = {
-        "generator": "mmrl.synth",
+        "generator": "mmrl.motion.synth",
         "version": SYNTH_VERSION,
         "seed": seed,
         "fps": fps,
@@ -331,10 +331,10 @@ def default_dataset_dir() -> Path:
 
 
 def _main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m mmrl.synth OUT_DIR [--num-clips N] [--seconds S] [--fps F] [--seed K]``."""
+    """``python -m mmrl.motion.synth OUT_DIR [--num-clips N] [--seconds S] [--fps F] [--seed K]``."""
     import argparse
 
-    parser = argparse.ArgumentParser(prog="python -m mmrl.synth", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m mmrl.motion.synth", description=__doc__.splitlines()[0])
     parser.add_argument("out_dir")
     parser.add_argument("--num-clips", type=int, default=None)
     parser.add_argument("--seconds", type=float, default=8.0)

@@ -12,7 +12,7 @@ import os
 import warnings
 from typing import List, Optional
 
-from . import _core
+from .. import _core
 
 BVHError = _core.BVHError
 JointRoleError = _core.JointRoleError

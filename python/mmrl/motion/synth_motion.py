@@ -1,4 +1,4 @@
-"""The procedural animation behind :mod:`mmrl.synth`: commands to a root path, gait timing,
+"""The procedural animation behind :mod:`mmrl.motion.synth`: commands to a root path, gait timing,
 footholds, pelvis, two-bone IK legs and the upper body, as joint rotations per frame.
 
 How a clip is made
@@ -28,7 +28,7 @@ How a clip is made
 Skeleton (the rest pose, all rotations zero, stands upright with the arms hanging down):
 centimetres, Y up, the character faces +Z at yaw 0 and +X is its left; offsets in the parent's
 frame. World rotations below are (F, 3, 3) matrices whose columns are the joint's local X, Y, Z
-axes in world coordinates (metres, Y up). :mod:`mmrl.synth` writes the result as BVH.
+axes in world coordinates (metres, Y up). :mod:`mmrl.motion.synth` writes the result as BVH.
 """
 from __future__ import annotations
 

@@ -10,7 +10,7 @@ from typing import Tuple
 
 import numpy as np
 
-from . import _core
+from .. import _core
 
 
 class KDTree:

@@ -37,7 +37,7 @@ OPSET = 17
 def policy_graph_module(policy, action_low: Optional[np.ndarray] = None, action_high: Optional[np.ndarray] = None):
     """A torch module ``obs -> (action, clipped_action)`` equal to ``policy.act`` (deterministic).
 
-    ``policy``: an :class:`mmrl.trained_policy.Policy`; ``action_low``/``action_high``: the
+    ``policy``: an :class:`mmrl.rl.trained_policy.Policy`; ``action_low``/``action_high``: the
     env's action box (12 each; None: no clipping, ``clipped_action`` equals ``action``).
     """
     import torch

@@ -40,8 +40,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Iterable, List, Optional, Sequence
 
-from .errors import InputError
-from .io import atomic_open, atomic_write_text, remove_stale_temps
+from ..errors import InputError
+from ..io import atomic_open, atomic_write_text, remove_stale_temps
 
 __all__ = [
     "DATASETS",
@@ -250,7 +250,7 @@ def _fetch_command(args) -> int:
 
 
 def _main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m mmrl.data fetch ...`` until the ``mmrl`` command wires ``register_cli``."""
+    """``python -m mmrl.motion.data fetch ...`` until the ``mmrl`` command wires ``register_cli``."""
     import argparse
 
     parser = argparse.ArgumentParser(prog="python -m mmrl")

@@ -1,6 +1,6 @@
 """The paper's policy and value networks (section 5, Figure 3).
 
-Every actor-critic here has the interface ``mmrl.ppo`` relies on:
+Every actor-critic here has the interface ``mmrl.rl.ppo`` relies on:
 
 - ``actor_mean(obs) -> (B, act_dim)``: the mean of the Gaussian policy, with
   no tanh squashing; the env clips actions to its box.
@@ -11,7 +11,7 @@ Every actor-critic here has the interface ``mmrl.ppo`` relies on:
   PPO on continuous control, is cheaper, and keeps exploration from collapsing
   in states the value function has not seen yet.
 - ``init_kwargs``: the constructor arguments, saved in checkpoints so
-  ``mmrl.ppo.load_policy`` can rebuild the network without the env.
+  ``mmrl.rl.ppo.load_policy`` can rebuild the network without the env.
 
 Loading a checkpoint never imports code: a checkpoint names its network, and only classes
 in this module's registry can be built. The paper's networks are registered here; register
@@ -53,7 +53,7 @@ def register_network(cls: NetworkClass, name: Optional[str] = None) -> NetworkCl
         raise TypeError(f"register_network: expected a torch.nn.Module subclass, got {cls!r}")
     missing = [method for method in ("actor_mean", "value") if not callable(getattr(cls, method, None))]
     if missing:
-        raise TypeError(f"register_network: {cls.__qualname__} lacks {', '.join(missing)} (see mmrl.networks)")
+        raise TypeError(f"register_network: {cls.__qualname__} lacks {', '.join(missing)} (see mmrl.rl.networks)")
     name = cls.__qualname__ if name is None else str(name)
     if not name or ":" in name:
         raise ValueError(f"register_network: invalid name {name!r} (non-empty, no ':')")
@@ -71,7 +71,7 @@ def registered_networks() -> list[str]:
 
 def network_class(stored_name: str) -> type:
     """The registered class a checkpoint's ``model_class`` names: a registered name, or the
-    "module:qualname" form older checkpoints store (e.g. "mmrl.networks:PlaneActorCritic"),
+    "module:qualname" form older checkpoints store (e.g. "mmrl.rl.networks:PlaneActorCritic"),
     matched against the registered classes. Never imports anything; raises ``KeyError``
     for any other name."""
     if stored_name in _NETWORKS:

@@ -14,10 +14,10 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
-from . import _core
+from .. import _core
 from .bvh import _options as _bvh_options, check_motion, warn_if_implausible
-from .arrays import MAX_ENTRIES, index_array, real_array
-from .io import atomic_write_npz
+from ..arrays import MAX_ENTRIES, index_array, real_array
+from ..io import atomic_write_npz
 
 PathLike = Union[str, os.PathLike]
 
@@ -29,7 +29,7 @@ FEATURE_BLOCKS: List[Tuple[str, List[int], float]] = [tuple(b) for b in _core.FE
 BLOCK_NAMES: List[str] = [b[0] for b in FEATURE_BLOCKS]
 DEFAULT_WEIGHTS: Dict[str, float] = {b[0]: b[2] for b in FEATURE_BLOCKS}
 
-FILE_FORMAT = "mmrl.database"
+FILE_FORMAT = "mmrl.motion.database"
 # Version 2 files written before import metadata existed lack "clip_source_fps" and
 # "clip_source_up"; they load with the database's rate and Y up.
 FILE_VERSION = 2
@@ -149,7 +149,7 @@ class Database:
 
         Warns:
             MotionImportWarning: per file whose motion looks implausible after import
-                (lying flat, travelling vertically; see :func:`mmrl.bvh.check_motion`).
+                (lying flat, travelling vertically; see :func:`mmrl.motion.bvh.check_motion`).
         """
         files = find_bvh_files(paths)
         s, u, f = _bvh_options(scale, up, fps)

@@ -21,9 +21,9 @@ from typing import Dict, Optional, Sequence
 
 import numpy as np
 
-from .errors import require_extra
+from ..errors import require_extra
 from .camera import Camera
-from .io import atomic_path
+from ..io import atomic_path
 
 SKY = (0.86, 0.90, 0.95)
 GROUND = (0.80, 0.80, 0.77)
@@ -354,8 +354,8 @@ def render_state(db, state: dict, *, width: int = 640, height: int = 360) -> np.
     character frame to the world root (no inertialization or IK: the env's fast path keeps no
     pose history).
     """
-    from . import _core
-    from .metrics import body_joints
+    from .. import _core
+    from ..metrics import body_joints
 
     f = int(state["frame"])
     q = _core.database_global_positions(db._db, np.array([f], np.int64))[0].astype(np.float64)
@@ -382,7 +382,7 @@ def render_video(path: "str | os.PathLike[str]", recording: Dict[str, np.ndarray
     iio = require_extra("imageio.v2", "viz", "writing videos")
     require_extra("imageio_ffmpeg", "viz", "writing videos")
 
-    from .metrics import body_joints
+    from ..metrics import body_joints
 
     path = Path(path)
     suffix = path.suffix.lower()

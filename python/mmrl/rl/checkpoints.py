@@ -1,37 +1,31 @@
-"""PPO checkpoint files: atomic save, validated load, the network they name, RNG capture,
-and the training state they hold.
+"""PPO checkpoint files: atomic save, validated load, the network they name, RNG capture.
 
 A checkpoint is a ``torch.save``'d dict with ``format``/``version`` keys plus the keys of
-``TrainingState.checkpoint``: the network (``model`` weights, ``model_class`` its registered
+``TrainingState.checkpoint`` (:mod:`mmrl.rl.training_state`): the network (``model`` weights, ``model_class`` its registered
 name, ``model_kwargs``), ``optimizer``, ``obs_normalizer``, ``return_rms``, the counters
 ``global_step``/``iteration``/``wall_s``, ``snapshots``, ``rng``, ``config`` (the PPOConfig as
 a dict), ``action_center``/``action_half`` and ``callbacks``. Loading never executes code:
 ``torch.load(weights_only=True)`` reads only tensors and plain containers, and the network
-is rebuilt from the registry in ``mmrl.networks``, never by importing a module the file names.
+is rebuilt from the registry in ``mmrl.rl.networks``, never by importing a module the file names.
 """
 from __future__ import annotations
 
-import dataclasses
 import os
 import pickle
 import random
 import re
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Optional
+from typing import Any, Optional
 
 import numpy as np
 import torch
 from torch import nn
 
-from .io import atomic_open
-from .networks import network_class, network_name, registered_networks
-
-if TYPE_CHECKING:  # imported for annotations only: trained_policy imports this module
-    from .trained_policy import ObsNormalizer, RunningMeanStd
+from ..io import atomic_open
+from .networks import network_class, registered_networks
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint",
-           "build_network", "capture_rng_state", "restore_rng_state", "TrainingState", "save_due_checkpoints"]
+           "build_network", "capture_rng_state", "restore_rng_state", "save_due_checkpoints"]
 
 CHECKPOINT_FORMAT = "mmrl-ppo-checkpoint"
 CHECKPOINT_VERSION = 1
@@ -80,7 +74,7 @@ def load_checkpoint(path: str | os.PathLike, map_location: Any = "cpu") -> dict:
 
 def build_network(state: dict, path: str | os.PathLike) -> nn.Module:
     """The (untrained) network a checkpoint names in ``model_class``, built with its
-    ``model_kwargs``. Only registered classes are built (``mmrl.networks.register_network``);
+    ``model_kwargs``. Only registered classes are built (``mmrl.rl.networks.register_network``);
     any other name raises ``CheckpointError`` naming the file and the known networks."""
     stored = state.get("model_class")
     try:
@@ -89,7 +83,7 @@ def build_network(state: dict, path: str | os.PathLike) -> nn.Module:
         raise CheckpointError(
             f"{path}: the network {stored!r} is not registered; known networks: "
             f"{', '.join(registered_networks())}. Register your own class with "
-            f"mmrl.networks.register_network before loading") from None
+            f"mmrl.rl.networks.register_network before loading") from None
     try:
         return cls(**state.get("model_kwargs", {}))
     except Exception as error:
@@ -133,68 +127,13 @@ def _as_tuple(value: Any) -> Any:
     return tuple(_as_tuple(v) for v in value) if isinstance(value, (list, tuple)) else value
 
 
-# ----------------------------------------------------------------------------- the training state
+# ----------------------------------------------------------------------------- when to save
 
-@dataclass
-class TrainingState:
-    """What ``mmrl.ppo.train`` learns and counts: what a checkpoint holds, plus the run's
-    device and discounted-return accumulator (not saved: the envs restart on resume).
-
-    ``train`` changes it only after a rollout, so between iterations it is consistent.
-    """
-
-    cfg: Any  # mmrl.ppo.PPOConfig
-    model: nn.Module
-    optimizer: torch.optim.Optimizer
-    obs_normalizer: "ObsNormalizer"
-    return_rms: "RunningMeanStd"  # discounted returns ("scale") or value targets ("value")
-    running_return: np.ndarray  # (num_envs,) discounted return so far, for "scale"
-    generator: torch.Generator  # PPO's own sampling: action noise, minibatch order
-    device: torch.device
-    action_center: Optional[np.ndarray]  # env action = center + half * policy action, if rescaled
-    action_half: Optional[np.ndarray]
-    callbacks: list
-    global_step: int = 0  # env steps summed over envs
-    iteration: int = 0
-    wall_s: float = 0.0  # training wall time in seconds, summed over resumes
-    snapshots: set = field(default_factory=set)  # the snapshot_steps already saved
-
-    def checkpoint(self, rng: dict) -> dict:
-        """The dict ``save_checkpoint`` writes; ``rng`` from ``capture_rng_state(self.generator)``."""
-        return {
-            "model": self.model.state_dict(), "model_class": network_name(self.model),
-            "model_kwargs": getattr(self.model, "init_kwargs", {}),
-            "optimizer": self.optimizer.state_dict(), "obs_normalizer": self.obs_normalizer.state_dict(),
-            "return_rms": self.return_rms.state_dict(), "global_step": self.global_step, "wall_s": self.wall_s,
-            "iteration": self.iteration, "snapshots": sorted(self.snapshots), "rng": rng,
-            "config": dataclasses.asdict(self.cfg),
-            "action_center": None if self.action_center is None else self.action_center.tolist(),
-            "action_half": None if self.action_half is None else self.action_half.tolist(),
-            "callbacks": {i: cb.state_dict() for i, cb in enumerate(self.callbacks) if hasattr(cb, "state_dict")},
-        }
-
-    def load(self, path: str | os.PathLike) -> None:
-        """Continue from a checkpoint ``train`` wrote (RNG states and callbacks included)."""
-        state = load_checkpoint(path)  # on the CPU: RNG states must stay there
-        try:
-            self.model.load_state_dict(state["model"])
-            self.optimizer.load_state_dict(state["optimizer"])
-        except Exception as error:
-            raise CheckpointError(f"{path}: does not fit this network/config: {error}") from error
-        self.obs_normalizer.load_state_dict(state["obs_normalizer"])
-        self.return_rms.load_state_dict(state["return_rms"])
-        self.global_step, self.wall_s, self.iteration = state["global_step"], state["wall_s"], state["iteration"]
-        self.snapshots = set(state["snapshots"])
-        restore_rng_state(state["rng"], self.generator)
-        for i, callback in enumerate(self.callbacks):
-            if hasattr(callback, "load_state_dict") and i in state["callbacks"]:
-                callback.load_state_dict(state["callbacks"][i])
-
-
-def save_due_checkpoints(learner: TrainingState, rng: dict, out_dir: Path, last_saved_step: int) -> int:
+def save_due_checkpoints(learner: Any, rng: dict, out_dir: Path, last_saved_step: int) -> int:
     """Rewrite ``out_dir/latest.pt`` once ``cfg.checkpoint_interval_steps`` passed since the
     last save, and write ``snapshot_<N>.pt`` the first time the step reaches each N of
-    ``cfg.snapshot_steps``. Returns the step of the last save."""
+    ``cfg.snapshot_steps``. Returns the step of the last save. ``learner`` is a
+    :class:`mmrl.rl.training_state.TrainingState` (not imported: it imports this module)."""
     cfg = learner.cfg
     due = [s for s in cfg.snapshot_steps if s <= learner.global_step and s not in learner.snapshots]
     if not due and learner.global_step - last_saved_step < cfg.checkpoint_interval_steps:

@@ -5,9 +5,10 @@
 Reads top to bottom like cleanrl's single file: the config, GAE, rollout collection, the
 update, and ``train``'s short loop (collect a rollout, compute advantages, update, log,
 checkpoint). The rest lives in modules of its own and is re-exported here: checkpoint files
-and RNG capture in ``mmrl.checkpoints``, the metrics log and progress bar in
-``mmrl.logger``, the observation normalizer and the policy loader used by ``mmrl
-eval``/``render`` in ``mmrl.trained_policy``, the networks in ``mmrl.networks``.
+and RNG capture in ``mmrl.rl.checkpoints``, the learner's state in
+``mmrl.rl.training_state``, the metrics log and progress bar in ``mmrl.rl.logger``, the
+observation normalizer in ``mmrl.rl.normalizers``, the policy loader used by ``mmrl
+eval``/``render`` in ``mmrl.rl.trained_policy``, the networks in ``mmrl.rl.networks``.
 
 The env contract (what the mmrl envs provide, and ``tests/_toyenv.py``):
 
@@ -56,11 +57,12 @@ import numpy as np
 import torch
 from torch import nn
 
-from .checkpoints import (CheckpointError, TrainingState, capture_rng_state, load_checkpoint, save_checkpoint,
-                          save_due_checkpoints)
-from .io import remove_stale_temps
+from ..io import remove_stale_temps
+from .checkpoints import CheckpointError, capture_rng_state, load_checkpoint, save_checkpoint, save_due_checkpoints
 from .logger import MetricsLogger, ProgressBar
-from .trained_policy import NonFiniteError, ObsNormalizer, Policy, RunningMeanStd, load_policy, resolve_device
+from .normalizers import ObsNormalizer, RunningMeanStd
+from .trained_policy import NonFiniteError, Policy, load_policy, resolve_device
+from .training_state import TrainingState
 
 __all__ = [
     "PPOConfig", "TrainResult", "train", "load_policy", "Policy", "compute_gae", "successor_values",
@@ -682,7 +684,7 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
     """Train a Gaussian policy with PPO on ``envs``; write metrics and checkpoints to ``out_dir``.
 
     ``policy_factory(obs_dim, act_dim)`` builds the actor-critic (default: the
-    paper's ``PlaneActorCritic``); see ``mmrl.networks`` for the interface, and register
+    paper's ``PlaneActorCritic``); see ``mmrl.rl.networks`` for the interface, and register
     the class there (``register_network``) so ``load_policy`` can rebuild it.
     ``resume=True`` continues from ``out_dir/latest.pt``: model, optimizer,
     normalizers, step, wall time, RNG and callback state. The envs are reset

@@ -21,8 +21,8 @@ from typing import Dict, List, Union
 
 import numpy as np
 
-from .errors import InputError
-from .io import atomic_open
+from ..errors import InputError
+from ..io import atomic_open
 
 __all__ = ["MAGIC", "VERSION", "ControllerFileError", "write_sections", "read_sections", "DTYPES"]
 

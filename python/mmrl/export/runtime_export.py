@@ -15,7 +15,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 from .runtime_file import ControllerFileError, Section, read_sections, write_sections
 
 __all__ = ["POLICY_MLP", "POLICY_CONV", "ACTIVATIONS", "CHARACTER_DEFAULTS", "controller_sections",
@@ -55,7 +55,7 @@ def _network_layers(model) -> Tuple[list, list, list]:
     """(header fields, conv layers, dense layers) of a registered network."""
     from torch import nn
 
-    from .networks import ObstacleActorCritic, PlaneActorCritic
+    from ..rl.networks import ObstacleActorCritic, PlaneActorCritic
 
     if isinstance(model, PlaneActorCritic):
         return [POLICY_MLP, 0, 0, 0, 0, 0, 0], [], _dense_layers(model.actor)
@@ -119,7 +119,7 @@ def _numbers(prefix: str, values: Dict[str, float]) -> Dict[str, Section]:
 def _task_core(task_name: str) -> str:
     """The C++ env core a registered task runs on ("plane", "obstacles"): what the runtime
     builds to observe and decide as training did."""
-    from .tasks import get_task
+    from ..tasks import get_task
 
     try:
         return str(get_task(task_name).vector_env.core_type.core_name)
@@ -143,7 +143,7 @@ def controller_sections(db, policy, task_name: str, task_config,
     out.update(_numbers("task", numbers))
     clip_costs = getattr(task_config, "clip_costs", "")
     if clip_costs:  # the decision's clip-cost filter, one cost per clip (docs/runtime.md)
-        from .controller import clip_cost_array
+        from ..controller import clip_cost_array
 
         out["task.clip_costs"] = clip_cost_array(clip_costs, db)
     out.update(_numbers("character", dict(CHARACTER_DEFAULTS, **(character or {}))))
@@ -176,8 +176,8 @@ def _require(path, sections, name):
 def read_controller(path: "str | os.PathLike[str]") -> ControllerContents:
     """Read a controller file: its Database (rebuilt and validated by the C++ core), the
     task's and character's numbers, and every section."""
-    from . import _core
-    from .database import Database
+    from .. import _core
+    from ..motion.database import Database
 
     s = read_sections(path)
     state = {k: _require(path, s, f"db.{k}") for k in _DB_TEXT + _DB_ARRAYS}
