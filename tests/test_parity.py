@@ -1,0 +1,106 @@
+"""One rule, one place: the batched env's fast path, the full path and the engine runtime make the
+same decisions, for 1,000 decisions per task and across episode ends.
+
+- fast path: env 0 of a 4-env, 2-thread vector env, stepped with the full path's actions (the
+  other envs act at random), equals the full path's one-env env step for step: decision, cost,
+  frame and root;
+- full path: the Controller plays the env's decision (it never decides again), so its shown
+  frames are the match's and its root is the env's;
+- runtime: a RuntimeCharacter started where each episode starts, given the same target and (on
+  the obstacles task) the env's obstacles with their velocities before every decision, writes
+  the same observation bit for bit, decides the same frames and shows the same roots.
+
+The configs switch on every rule that changes a match: a continuation bias, the obstacles'
+bias_yields with a look-ahead and a hit disc, and a clip-cost filter."""
+import numpy as np
+import pytest
+import torch
+
+import mmrl
+from mmrl import _core
+from mmrl.export.runtime_export import write_controller
+from mmrl.rl.networks import PlaneActorCritic
+from mmrl.rl.normalizers import ObsNormalizer
+from mmrl.rl.trained_policy import Policy
+from mmrl.rollout import FullPath, apply_stage
+from test_runtime import random_obstacle_policy
+
+
+def random_plane_policy(seed):
+    torch.manual_seed(seed)
+    model = PlaneActorCritic(17, 12)
+    with torch.no_grad():
+        model.actor[-1].weight.normal_(0, 0.5)
+    norm = ObsNormalizer(17, True, None, 10.0, torch.device("cpu"))
+    norm.rms.var = np.full(17, 4.0)
+    norm.refresh()
+    return Policy(model, norm, torch.device("cpu"))
+
+
+def configs(db):
+    busy = db.clip_names[int(np.argmax(np.diff(db.clip_ranges, axis=1)))]
+    plane = mmrl.get_task("plane").default_config().replace(transition_cost=3.0, clip_costs=f"{busy}=2.0",
+                                                            max_steps=40)
+    obstacles = mmrl.get_task("obstacles").default_config().replace(
+        transition_cost=5.0, bias_yields=True, hit_lookahead=True, hit_radius=0.3, num_obstacles=40,
+        obstacle_max_speed=1.0, clip_costs=f"{busy}=2.0", max_steps=60)
+    return {"plane": (plane, random_plane_policy(4)), "obstacles": (obstacles, random_obstacle_policy(5))}
+
+
+def hand_obstacles(character, env):
+    o = env.obstacles(0)
+    character.set_obstacles(*(np.ascontiguousarray(o[k], np.float32)
+                              for k in ("centres", "half_sizes", "angles", "velocities")))
+
+
+@pytest.mark.parametrize("task_name", ["plane", "obstacles"])
+def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(task_name, tmp_path):
+    db = mmrl.default_database()
+    task = mmrl.get_task(task_name)
+    config, policy = configs(db)[task_name]
+    path = tmp_path / f"{task_name}.mmrl"
+    write_controller(path, db, policy, task_name, config)
+    controller = _core.RuntimeController.load(str(path))
+    fp = FullPath(task, db, config=config, seed=11, record=False)
+    fast = task.make_vector_env(4, db=db, config=config, num_threads=2)
+    apply_stage(task, fast, None)  # the full path's stage: the last
+    fast.reset(seed=11)
+    rng = np.random.default_rng(0)
+    decisions = episodes = transitions = filtered = yielded = 0
+    while decisions < 1000:
+        character = _core.RuntimeCharacter(controller, *fp.ctrl.root, fp.ctrl.frame)  # each episode's start
+        character.set_target(*fp.target)
+        episodes += 1
+        while True:
+            if task_name == "obstacles":
+                hand_obstacles(character, fp.env)
+            np.testing.assert_array_equal(character.observe(), fp.obs)
+            action = controller.act(fp.obs)
+            actions = np.concatenate([action[None], rng.normal(0, 1, (3, 12))]).astype(np.float32)
+            fast_obs, *_ = fast.step(actions)
+            out = fp.step(action)
+            match, cost = fp.env.last_step_decision(0)
+            # fast path == the full path's env
+            assert fast.last_step_decision(0) == (match, cost)
+            np.testing.assert_array_equal(fast_obs[0], fp.obs)
+            # full path plays the env's decision
+            res = out["res"]
+            assert res.match == match and res.cost == cost
+            np.testing.assert_array_equal(res.frames, match + 1 + np.arange(res.frames.size))
+            # runtime
+            for k in range(out["shown"]):
+                character.advance_frame()
+                assert character.frame == res.frames[k]
+                np.testing.assert_allclose(character.root, res.roots[k], atol=1e-5)
+            assert character.last_decision()["match"] == match
+            decisions += 1
+            transitions += res.transition
+            yielded += fp.env.last_step_transition_cost(0) == 0.0
+            filtered += int(db.clip_names[db.frame_clip[match]] == config.clip_costs.split("=")[0])
+            if out["done"]:
+                break
+            assert fp.root_error() == (0, 0.0)
+    # Not vacuous: many episodes and clip changes; the filtered clip still plays sometimes.
+    assert episodes >= 10 and transitions >= 50 and filtered >= 1, (episodes, transitions, filtered)
+    if task_name == "obstacles":  # bias_yields acted: continuations that ran into obstacles
+        assert yielded >= 20, yielded
