@@ -29,7 +29,7 @@ FEATURE_BLOCKS: List[Tuple[str, List[int], float]] = [tuple(b) for b in _core.FE
 BLOCK_NAMES: List[str] = [b[0] for b in FEATURE_BLOCKS]
 DEFAULT_WEIGHTS: Dict[str, float] = {b[0]: b[2] for b in FEATURE_BLOCKS}
 
-FILE_FORMAT = "mmrl.motion.database"
+FILE_FORMAT = "mmrl.database"  # the file format's name, not a module path: never changes with the layout
 # Version 2 files written before import metadata existed lack "clip_source_fps" and
 # "clip_source_up"; they load with the database's rate and Y up.
 FILE_VERSION = 2

@@ -262,7 +262,7 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
     that list (default: all 27, 3.6 minutes at 8 s each); more clips than that add random constant
     (speed, turn rate) clips.
 
-    ``manifest.json``: {"generator": "mmrl.motion.synth", "version", "seed", "fps", "clips": [{"file",
+    ``manifest.json``: {"generator": "mmrl.synth", "version", "seed", "fps", "clips": [{"file",
     "kind", "speed" (m/s, at the start), "speed_end" (m/s), "turn_rate" (rad/s, + = left),
     "ramp_seconds" ([start, end] of a linear speed ramp, or null), "frames", "fps",
     "contacts" (stance intervals per foot, [start, stop) frames)}]}.
@@ -289,7 +289,7 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
         entries.append(info)
         paths.append(path)
     manifest = {
-        "generator": "mmrl.motion.synth",
+        "generator": "mmrl.synth",
         "version": SYNTH_VERSION,
         "seed": seed,
         "fps": fps,

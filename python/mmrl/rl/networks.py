@@ -71,11 +71,16 @@ def registered_networks() -> list[str]:
 
 def network_class(stored_name: str) -> type:
     """The registered class a checkpoint's ``model_class`` names: a registered name, or the
-    "module:qualname" form older checkpoints store (e.g. "mmrl.rl.networks:PlaneActorCritic"),
-    matched against the registered classes. Never imports anything; raises ``KeyError``
-    for any other name."""
+    "module:qualname" form older checkpoints store (e.g. "mmrl.networks:PlaneActorCritic", from
+    before the subpackages: the flat layout's module paths are translated), matched against the
+    registered classes. Never imports anything; raises ``KeyError`` for any other name."""
+    from .._compat import MOVED
+
     if stored_name in _NETWORKS:
         return _NETWORKS[stored_name]
+    module, sep, qualname = stored_name.partition(":")
+    if sep and module in MOVED:
+        stored_name = f"{MOVED[module]}:{qualname}"
     for cls in _NETWORKS.values():
         if _class_path(cls) == stored_name:
             return cls
