@@ -115,7 +115,7 @@ void bind_search(py::module_& m) {
             py::array_t<float> dists({mq, static_cast<py::ssize_t>(k)});
             {
               py::gil_scoped_release release;
-              self.tree.knn_batch(queries.data(), mq, k, indices.mutable_data(), dists.mutable_data());
+              kdtree_knn_batch(self.tree, queries.data(), mq, k, indices.mutable_data(), dists.mutable_data());
             }
             return py::make_tuple(indices, dists);
           },

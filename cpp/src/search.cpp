@@ -159,4 +159,14 @@ void Matcher::brute_force_batch(const float* queries, int64_t num_queries, int64
             });
 }
 
+MMRL_MULTIVERSION int kdtree_knn(const KDTree& tree, const float* query, int k, int64_t* out_indices,
+                                 float* out_sqdist, const SearchFilter& filter) {
+  return tree.knn(query, k, out_indices, out_sqdist, filter);
+}
+
+MMRL_MULTIVERSION void kdtree_knn_batch(const KDTree& tree, const float* queries, int64_t num_queries, int k,
+                                        int64_t* out_indices, float* out_sqdist, const SearchFilter& filter) {
+  tree.knn_batch(queries, num_queries, k, out_indices, out_sqdist, filter);
+}
+
 }  // namespace mmrl
