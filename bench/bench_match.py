@@ -10,10 +10,12 @@ Query sets (noise in units of the per-dimension std of the normalized features):
 Usage: python bench/bench_match.py [--data DIR] [--batches 64 4096] [--seconds 1.0]
 
 --knn: the public k-NN instead, mmrl.KDTree.query (k=1) vs numpy/BLAS brute force and scipy
-cKDTree(workers=-1), over all rows of the database's normalized features standardized per
+cKDTree, over all rows of the database's normalized features standardized per
 column (mean 0, std 1). 4,096 policy-like queries: frame i's pose part [0:15] with frame j's
 trajectory part [15:27] + 0.5 std of noise. The database is built once and cached
-(--db-cache, an .npz under /tmp by default; --rebuild to build it again).
+(--db-cache, an .npz under /tmp by default; --rebuild to build it again). --threads sets the
+threads of KDTree and cKDTree; BLAS takes its own from the environment (OPENBLAS_NUM_THREADS=1
+with --threads 1 compares one core each, less disturbed by other work on the machine).
 
        python bench/bench_match.py --knn [--data DIR] [--db-cache FILE.npz] [--queries 4096]
 """
@@ -147,7 +149,7 @@ def knn_main(args):
     print(f"mmrl {mmrl.__file__}\n{len(x)} rows x {x.shape[1]}, {m} queries, {args.threads} threads "
           f"(database cache {cache})")
 
-    tree = mmrl.KDTree(x, leaf_size=16)
+    tree = mmrl.KDTree(x, leaf_size=16, num_threads=args.threads)
     ckd = cKDTree(x)
 
     def numpy_brute(q, query_chunk=256, row_chunk=16384):
@@ -170,7 +172,7 @@ def knn_main(args):
     peers = {
         "KDTree.query": lambda q: tree.query(q, k=1)[0][:, 0],
         "numpy/BLAS": numpy_brute,
-        "cKDTree": lambda q: ckd.query(q, k=1, workers=-1)[1],
+        "cKDTree": lambda q: ckd.query(q, k=1, workers=args.threads)[1],
     }
     ref = peers["KDTree.query"](queries)
     for peer, fn in peers.items():  # the same answers, up to float near-ties of other formulas

@@ -88,4 +88,10 @@ int kdtree_knn(const KDTree& tree, const float* query, int k, int64_t* out_indic
 void kdtree_knn_batch(const KDTree& tree, const float* queries, int64_t num_queries, int k, int64_t* out_indices,
                       float* out_sqdist, const SearchFilter& filter = {});
 
+// The same batch across the pool: contiguous chunks of queries, each answered by the serial
+// kdtree_knn_batch above (one clone dispatch per chunk). Checks everything before the workers
+// start (nothing throws inside them). Results do not depend on the number of threads.
+void kdtree_knn_batch(const KDTree& tree, const float* queries, int64_t num_queries, int k, int64_t* out_indices,
+                      float* out_sqdist, ThreadPool& pool, const SearchFilter& filter = {});
+
 }  // namespace mmrl
