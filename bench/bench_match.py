@@ -8,6 +8,16 @@ Query sets (noise in units of the per-dimension std of the normalized features):
   far     frame i's pose part, trajectory part uniform in mean +- 3 std
 
 Usage: python bench/bench_match.py [--data DIR] [--batches 64 4096] [--seconds 1.0]
+
+--knn: the public k-NN instead, mmrl.KDTree.query (k=1) vs numpy/BLAS brute force and scipy
+cKDTree, over all rows of the database's normalized features standardized per
+column (mean 0, std 1). 4,096 policy-like queries: frame i's pose part [0:15] with frame j's
+trajectory part [15:27] + 0.5 std of noise. The database is built once and cached
+(--db-cache, an .npz under /tmp by default; --rebuild to build it again). --threads sets the
+threads of KDTree and cKDTree; BLAS takes its own from the environment (OPENBLAS_NUM_THREADS=1
+with --threads 1 compares one core each, less disturbed by other work on the machine).
+
+       python bench/bench_match.py --knn [--data DIR] [--db-cache FILE.npz] [--queries 4096]
 """
 import argparse
 import os
@@ -52,7 +62,14 @@ def main():
     ap.add_argument("--batches", type=int, nargs="+", default=[64, 4096])
     ap.add_argument("--seconds", type=float, default=1.0)
     ap.add_argument("--threads", type=int, default=os.cpu_count())
+    ap.add_argument("--knn", action="store_true", help="benchmark mmrl.KDTree.query instead (see above)")
+    ap.add_argument("--db-cache", type=Path, default=None,
+                    help="--knn: the database .npz cache (default /tmp/mmrl-bench-match-<data dir name>.npz)")
+    ap.add_argument("--rebuild", action="store_true", help="--knn: build the cached database again")
+    ap.add_argument("--queries", type=int, default=4096, help="--knn: number of queries, all in one batch")
     args = ap.parse_args()
+    if args.knn:
+        return knn_main(args)
 
     import faiss
     from scipy.spatial import cKDTree
@@ -103,6 +120,69 @@ def main():
         o = r["ours"]
         print(f"| {batch} | {name} | {o:,.0f} | {r['ours+bound']:,.0f} | {r['numpy']:,.0f} | {o / r['numpy']:.1f} | "
               f"{r['cKDTree']:,.0f} | {o / r['cKDTree']:.0f} | {r['faiss']:,.0f} | {o / r['faiss']:.1f} |")
+
+
+def cached_database(data, cache, rebuild):
+    """The database of `data`, built once and saved to `cache` (building all shared data takes a while)."""
+    if cache.is_file() and not rebuild:
+        return mmrl.Database.load(cache)
+    db = mmrl.Database.from_bvh(data)
+    db.save(cache)
+    return db
+
+
+def knn_main(args):
+    from scipy.spatial import cKDTree
+
+    cache = args.db_cache or Path("/tmp") / f"mmrl-bench-match-{args.data.name}.npz"
+    db = cached_database(args.data, cache, args.rebuild)
+    x = np.asarray(db.normalized_features, dtype=np.float64)
+    std = x.std(0)
+    x = np.ascontiguousarray((x - x.mean(0)) / np.where(std > 0, std, 1.0), dtype=np.float32)
+    x_sq = (x.astype(np.float64) ** 2).sum(1).astype(np.float32)
+
+    rng = np.random.default_rng(0)
+    m = args.queries
+    i, j = rng.integers(0, len(x), m), rng.integers(0, len(x), m)
+    queries = np.concatenate([x[i, :15], x[j, 15:] + 0.5 * rng.normal(size=(m, 12))], 1)
+    queries = np.ascontiguousarray(queries, dtype=np.float32)
+    print(f"mmrl {mmrl.__file__}\n{len(x)} rows x {x.shape[1]}, {m} queries, {args.threads} threads "
+          f"(database cache {cache})")
+
+    tree = mmrl.KDTree(x, leaf_size=16, num_threads=args.threads)
+    ckd = cKDTree(x)
+
+    def numpy_brute(q, query_chunk=256, row_chunk=16384):
+        """argmin of |q|^2 - 2 q.x + |x|^2, the products through BLAS, in chunks of both."""
+        best = np.empty(len(q), np.int64)
+        for a in range(0, len(q), query_chunk):
+            qc = q[a:a + query_chunk]
+            best_d = np.full(len(qc), np.inf, np.float32)
+            best_i = np.zeros(len(qc), np.int64)
+            q_sq = (qc * qc).sum(1)
+            for b in range(0, len(x), row_chunk):
+                d = q_sq[:, None] - 2.0 * (qc @ x[b:b + row_chunk].T) + x_sq[None, b:b + row_chunk]
+                arg = d.argmin(1)
+                dmin = d[np.arange(len(qc)), arg]
+                better = dmin < best_d
+                best_d[better], best_i[better] = dmin[better], arg[better] + b
+            best[a:a + query_chunk] = best_i
+        return best
+
+    peers = {
+        "KDTree.query": lambda q: tree.query(q, k=1)[0][:, 0],
+        "numpy/BLAS": numpy_brute,
+        "cKDTree": lambda q: ckd.query(q, k=1, workers=args.threads)[1],
+    }
+    ref = peers["KDTree.query"](queries)
+    for peer, fn in peers.items():  # the same answers, up to float near-ties of other formulas
+        agree = (fn(queries) == ref).mean()
+        if agree < 0.99:
+            print(f"warning: {peer} agrees with KDTree.query on {agree:.1%} of the queries")
+    rates = {p: throughput(fn, queries, m, args.seconds) for p, fn in peers.items()}
+    base = rates["numpy/BLAS"]
+    for p, r in rates.items():
+        print(f"{p:14s} {r:10,.0f} q/s  {r / base:5.2f}x numpy/BLAS")
 
 
 if __name__ == "__main__":

@@ -197,11 +197,15 @@ class CtrlCAfterIteration(StageCounter):
 
 
 def test_ctrl_c_during_the_update_finishes_the_iteration_first(tmp_path):
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # what a terminal run has
-    callback = CtrlCAfterIteration(at=2)
-    with pytest.raises(KeyboardInterrupt):
-        train(PointMassTargetVecEnv(8), quiet_config(), tmp_path, callbacks=[callback])
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+    # Python's default handler, what a terminal run has (a background job or nohup ignores SIGINT).
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        callback = CtrlCAfterIteration(at=2)
+        with pytest.raises(KeyboardInterrupt):
+            train(PointMassTargetVecEnv(8), quiet_config(), tmp_path, callbacks=[callback])
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # restored
+    finally:
+        signal.signal(signal.SIGINT, previous)
     state = load_checkpoint(tmp_path / "latest.pt")
     rows = read_rows(tmp_path / "metrics.csv")
     assert callback.stage == 3 and state["callbacks"][0] == {"stage": 3}

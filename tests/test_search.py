@@ -74,6 +74,21 @@ def test_empty_and_one_row_trees():
     assert idx.shape == (0, 1)
 
 
+def test_kdtree_threads_do_not_change_the_results():
+    rng = np.random.default_rng(3)
+    points = rng.normal(size=(3000, 27)).astype(np.float32)
+    queries = (points[rng.integers(0, 3000, 500)] + 0.5 * rng.normal(size=(500, 27))).astype(np.float32)
+    serial = KDTree(points, num_threads=1)
+    assert serial.num_threads == 1 and KDTree(points, num_threads=2).num_threads == 2
+    for k in (1, 5):
+        idx, dist = serial.query(queries, k=k)
+        assert_knn_matches(points, queries, idx, dist, k)
+        for threads in (2, 3, 0):
+            other_idx, other_dist = KDTree(points, num_threads=threads).query(queries, k=k)
+            np.testing.assert_array_equal(other_idx, idx)
+            np.testing.assert_array_equal(other_dist, dist)  # bit for bit
+
+
 def test_kdtree_keeps_points_alive():
     tree = KDTree(np.arange(12, dtype=np.float32).reshape(6, 2))
     import gc
@@ -92,6 +107,7 @@ def test_kdtree_keeps_points_alive():
     (lambda: KDTree(np.zeros((6, 4), np.float32)[:, ::2]), ValueError, "contiguous"),
     (lambda: KDTree(np.full((5, 3), np.nan, np.float32)), ValueError, "NaN"),
     (lambda: KDTree(np.zeros((5, 3), np.float32), leaf_size=0), ValueError, "leaf_size"),
+    (lambda: KDTree(np.zeros((5, 3), np.float32), num_threads=-1), ValueError, "num_threads"),
 ])
 def test_kdtree_refuses_bad_construction(bad, exc, word):
     with pytest.raises(exc, match=word):

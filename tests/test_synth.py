@@ -5,7 +5,6 @@ The clips are checked with a small independent BVH reader and forward kinematics
 loader and Database exist, against their features.
 """
 import json
-import os
 import re
 
 import numpy as np
@@ -287,19 +286,10 @@ def test_default_dataset_dir_is_generated_once_atomically(tmp_path, monkeypatch)
 # ------------------------------------------------------------------------------------------
 # Against mmrl's own loader and database (from the BVH/database work on main)
 # ------------------------------------------------------------------------------------------
-def _require(attr):
-    if not hasattr(mmrl, attr):
-        if os.environ.get("CI"):
-            pytest.fail(f"mmrl.{attr} is missing")
-        pytest.skip(f"mmrl.{attr} not merged yet")
-    return getattr(mmrl, attr)
-
-
 def test_mmrl_loader_agrees_with_reference_fk(dataset):
-    load_bvh = _require("load_bvh")
     for path, _ in list(_clip_entries(dataset))[:4]:
         ours, names, parents, *_ = forward_kinematics(path)
-        motion = load_bvh(str(path))
+        motion = mmrl.load_bvh(str(path))
         assert list(motion.joint_names) == names
         assert list(motion.parents) == parents
         assert motion.num_frames == len(ours)
@@ -308,9 +298,8 @@ def test_mmrl_loader_agrees_with_reference_fk(dataset):
 
 
 def test_database_features_match_commanded_speed_and_turn_rate(dataset):
-    database = _require("Database")
     entries = [(p, e) for p, e in _clip_entries(dataset) if e["speed"] == e["speed_end"]]
-    db = database.from_bvh([str(p) for p, _ in entries])
+    db = mmrl.Database.from_bvh([str(p) for p, _ in entries])
     features = np.asarray(db.features)
     ranges = np.asarray(db.clip_ranges)
     assert features.shape == (sum(e["frames"] for _, e in entries), 27)

@@ -16,6 +16,7 @@ namespace {
 struct PyKDTree {
   carray<float> points;
   KDTree tree;
+  std::unique_ptr<ThreadPool> pool;  // query() answers its batch across these threads
 };
 
 carray<float> check_points(const py::handle& obj) {
@@ -94,14 +95,16 @@ py::tuple run_match(PyMatcher& self, const py::handle& queries_obj, const py::ob
 void bind_search(py::module_& m) {
   py::class_<PyKDTree>(m, "KDTree",
                        "Exact k-NN KD-tree over float32 rows (squared L2). Borrows `points` (kept alive) and "
-                       "holds a permuted, blocked copy of the rows in its leaves.")
-      .def(py::init([](const py::handle& points_obj, int leaf_size) {
+                       "holds a permuted, blocked copy of the rows in its leaves. query() runs across num_threads threads "
+                       "(0 = all cores).")
+      .def(py::init([](const py::handle& points_obj, int leaf_size, int num_threads) {
              auto points = check_points(points_obj);
              if (leaf_size < 1) throw py::value_error("leaf_size: must be >= 1, got " + std::to_string(leaf_size));
+             if (num_threads < 0) throw py::value_error("num_threads: must be >= 0 (0 = all cores)");
              KDTree tree(points.data(), points.shape(0), static_cast<int>(points.shape(1)), leaf_size);
-             return new PyKDTree{points, std::move(tree)};
+             return new PyKDTree{points, std::move(tree), std::make_unique<ThreadPool>(num_threads)};
            }),
-           py::arg("points"), py::arg("leaf_size") = 16)
+           py::arg("points"), py::arg("leaf_size") = 16, py::arg("num_threads") = 0)
       .def(
           "query",
           [](const PyKDTree& self, const py::handle& queries_obj, int k) {
@@ -115,7 +118,7 @@ void bind_search(py::module_& m) {
             py::array_t<float> dists({mq, static_cast<py::ssize_t>(k)});
             {
               py::gil_scoped_release release;
-              self.tree.knn_batch(queries.data(), mq, k, indices.mutable_data(), dists.mutable_data());
+              kdtree_knn_batch(self.tree, queries.data(), mq, k, indices.mutable_data(), dists.mutable_data(), *self.pool);
             }
             return py::make_tuple(indices, dists);
           },
@@ -125,7 +128,8 @@ void bind_search(py::module_& m) {
       .def_property_readonly("size", [](const PyKDTree& self) { return self.tree.size(); })
       .def_property_readonly("dim", [](const PyKDTree& self) { return self.tree.dim(); })
       .def_property_readonly("leaf_size", [](const PyKDTree& self) { return self.tree.leaf_size(); })
-      .def_property_readonly("depth", [](const PyKDTree& self) { return self.tree.depth(); });
+      .def_property_readonly("depth", [](const PyKDTree& self) { return self.tree.depth(); })
+      .def_property_readonly("num_threads", [](const PyKDTree& self) { return self.pool->num_threads(); });
 
   py::class_<PyMatcher>(m, "Matcher",
                         "Motion-matching search over normalized feature rows: nearest valid row, optionally "

@@ -164,4 +164,33 @@ void Matcher::brute_force_batch(const float* queries, int64_t num_queries, int64
             });
 }
 
+MMRL_MULTIVERSION int kdtree_knn(const KDTree& tree, const float* query, int k, int64_t* out_indices,
+                                 float* out_sqdist, const SearchFilter& filter) {
+  return tree.knn(query, k, out_indices, out_sqdist, filter);
+}
+
+MMRL_MULTIVERSION void kdtree_knn_batch(const KDTree& tree, const float* queries, int64_t num_queries, int k,
+                                        int64_t* out_indices, float* out_sqdist, const SearchFilter& filter) {
+  tree.knn_batch(queries, num_queries, k, out_indices, out_sqdist, filter);
+}
+
+void kdtree_knn_batch(const KDTree& tree, const float* queries, int64_t num_queries, int k, int64_t* out_indices,
+                      float* out_sqdist, ThreadPool& pool, const SearchFilter& filter) {
+  const char* who = "kdtree_knn_batch";
+  if (num_queries < 0) throw std::invalid_argument(std::string(who) + ": num_queries must be >= 0");
+  if (num_queries == 0) return;
+  if (!queries || !out_indices || !out_sqdist) throw std::invalid_argument(std::string(who) + ": null pointer");
+  const int64_t max_k = std::max<int64_t>(1, tree.indexed_size());
+  if (k < 1 || k > max_k)
+    throw std::invalid_argument(std::string(who) + ": k = " + std::to_string(k) + " is outside [1, " +
+                                std::to_string(max_k) + "]");
+  const int dim = tree.dim();
+  pool.parallel_for(
+      num_queries,
+      [&](int64_t b, int64_t e, int) {
+        kdtree_knn_batch(tree, queries + b * dim, e - b, k, out_indices + b * k, out_sqdist + b * k, filter);
+      },
+      /*min_chunk=*/16);
+}
+
 }  // namespace mmrl

@@ -280,4 +280,67 @@ TEST(Matcher, RefusesBadInput) {
   EXPECT_THROW(mmrl::brute_force_match(rows.data(), 10, 3, nullptr, nullptr, 0, 0, -1, cost), std::invalid_argument);
 }
 
+// The multiversioned entry points of the public k-NN (serial and across a pool) ==
+// brute_force_knn, exactly, and refuse what KDTree::knn refuses.
+TEST(KDTreeEntryPoints, EqualBruteForceWithAndWithoutFilters) {
+  for (int64_t n : {1, 17, 1000, 20000})
+    for (int dim : {2, 27})
+      for (int k : {1, 3, 10}) {
+        if (k > n) continue;
+        const auto rows = walk_rows(n, dim, static_cast<uint32_t>(n * 7 + dim));
+        const mmrl::KDTree tree(rows.data(), n, dim, 16);
+        std::mt19937 rng(static_cast<uint32_t>(n + k));
+        std::vector<uint8_t> allowed(static_cast<size_t>(n));
+        for (auto& a : allowed) a = (rng() % 4) != 0;
+        mmrl::SearchFilter masked;
+        masked.allowed = allowed.data();
+        masked.exclude_lo = n / 3;
+        masked.exclude_hi = n / 2;
+        const int m = 100;
+        mmrl::ThreadPool pool(2);
+        const Case c = make_queries(rows, std::max<int64_t>(n, 2), dim, m, 0.5f, 5);
+        for (const mmrl::SearchFilter& filter : {mmrl::SearchFilter{}, masked}) {
+          std::vector<int64_t> batch_idx(static_cast<size_t>(m) * k), one_idx(k), brute_idx(k);
+          std::vector<float> batch_d(static_cast<size_t>(m) * k), one_d(k), brute_d(k);
+          std::vector<int64_t> pool_idx(batch_idx.size());
+          std::vector<float> pool_d(batch_d.size());
+          mmrl::kdtree_knn_batch(tree, c.queries.data(), m, k, batch_idx.data(), batch_d.data(), filter);
+          mmrl::kdtree_knn_batch(tree, c.queries.data(), m, k, pool_idx.data(), pool_d.data(), pool, filter);
+          ASSERT_EQ(pool_idx, batch_idx);
+          ASSERT_EQ(pool_d, batch_d);
+          for (int q = 0; q < m; ++q) {
+            const float* query = c.queries.data() + q * dim;
+            const int found = mmrl::kdtree_knn(tree, query, k, one_idx.data(), one_d.data(), filter);
+            ASSERT_EQ(found, mmrl::brute_force_knn(rows.data(), n, dim, query, k, brute_idx.data(), brute_d.data(),
+                                                   filter));
+            for (int j = 0; j < k; ++j) {
+              ASSERT_EQ(one_idx[j], brute_idx[j]) << "n=" << n << " dim=" << dim << " k=" << k << " q=" << q;
+              ASSERT_EQ(one_d[j], brute_d[j]) << "n=" << n << " dim=" << dim << " k=" << k << " q=" << q;
+              ASSERT_EQ(batch_idx[q * k + j], brute_idx[j]) << "n=" << n << " dim=" << dim << " k=" << k;
+              ASSERT_EQ(batch_d[q * k + j], brute_d[j]) << "n=" << n << " dim=" << dim << " k=" << k;
+            }
+          }
+        }
+      }
+}
+
+TEST(KDTreeEntryPoints, RefuseBadInput) {
+  std::vector<float> rows(30, 0.0f);
+  const mmrl::KDTree tree(rows.data(), 10, 3, 4);
+  int64_t idx[11];
+  float d[11];
+  EXPECT_THROW(mmrl::kdtree_knn(tree, nullptr, 1, idx, d), std::invalid_argument);
+  EXPECT_THROW(mmrl::kdtree_knn(tree, rows.data(), 0, idx, d), std::invalid_argument);
+  EXPECT_THROW(mmrl::kdtree_knn(tree, rows.data(), 11, idx, d), std::invalid_argument);
+  EXPECT_THROW(mmrl::kdtree_knn_batch(tree, rows.data(), -1, 1, idx, d), std::invalid_argument);
+  EXPECT_THROW(mmrl::kdtree_knn_batch(tree, nullptr, 2, 1, idx, d), std::invalid_argument);
+  mmrl::kdtree_knn_batch(tree, nullptr, 0, 1, nullptr, nullptr);  // nothing to do
+  mmrl::ThreadPool pool(2);
+  EXPECT_THROW(mmrl::kdtree_knn_batch(tree, rows.data(), 2, 0, idx, d, pool), std::invalid_argument);
+  EXPECT_THROW(mmrl::kdtree_knn_batch(tree, rows.data(), 2, 11, idx, d, pool), std::invalid_argument);
+  EXPECT_THROW(mmrl::kdtree_knn_batch(tree, rows.data(), -1, 1, idx, d, pool), std::invalid_argument);
+  EXPECT_THROW(mmrl::kdtree_knn_batch(tree, rows.data(), 2, 1, nullptr, d, pool), std::invalid_argument);
+  mmrl::kdtree_knn_batch(tree, nullptr, 0, 1, nullptr, nullptr, pool);
+}
+
 }  // namespace

@@ -166,9 +166,9 @@ class Database:
         ...
 class KDTree:
     """
-    Exact k-NN KD-tree over float32 rows (squared L2). Borrows `points` (kept alive) and holds a permuted, blocked copy of the rows in its leaves.
+    Exact k-NN KD-tree over float32 rows (squared L2). Borrows `points` (kept alive) and holds a permuted, blocked copy of the rows in its leaves. query() runs across num_threads threads (0 = all cores).
     """
-    def __init__(self, points: typing.Any, leaf_size: typing.SupportsInt | typing.SupportsIndex = 16) -> None:
+    def __init__(self, points: typing.Any, leaf_size: typing.SupportsInt | typing.SupportsIndex = 16, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
     def query(self, queries: typing.Any, k: typing.SupportsInt | typing.SupportsIndex = 1) -> tuple[numpy.typing.NDArray[numpy.int64], numpy.typing.NDArray[numpy.float32]]:
         """
@@ -182,6 +182,9 @@ class KDTree:
         ...
     @property
     def leaf_size(self) -> int:
+        ...
+    @property
+    def num_threads(self) -> int:
         ...
     @property
     def size(self) -> int:

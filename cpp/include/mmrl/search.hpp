@@ -83,4 +83,18 @@ class Matcher {
   KDTree tree_;
 };
 
+// The public k-NN (mmrl.KDTree.query) through multiversioned entry points, so a portable
+// build answers it with the AVX2 clone where the CPU has one, like the Matcher. Same
+// contract and results, bit for bit, as KDTree::knn and KDTree::knn_batch (kdtree.hpp).
+int kdtree_knn(const KDTree& tree, const float* query, int k, int64_t* out_indices, float* out_sqdist,
+               const SearchFilter& filter = {});
+void kdtree_knn_batch(const KDTree& tree, const float* queries, int64_t num_queries, int k, int64_t* out_indices,
+                      float* out_sqdist, const SearchFilter& filter = {});
+
+// The same batch across the pool: contiguous chunks of queries, each answered by the serial
+// kdtree_knn_batch above (one clone dispatch per chunk). Checks everything before the workers
+// start (nothing throws inside them). Results do not depend on the number of threads.
+void kdtree_knn_batch(const KDTree& tree, const float* queries, int64_t num_queries, int k, int64_t* out_indices,
+                      float* out_sqdist, ThreadPool& pool, const SearchFilter& filter = {});
+
 }  // namespace mmrl

@@ -24,14 +24,16 @@ class KDTree:
     Args:
         points: (N, D) float32, C-contiguous, finite; 1 <= D <= 128. N may be 0.
         leaf_size: rows per leaf (>= 1). 16 is a good default for 27-d motion features.
+        num_threads: threads that answer a batch of queries, the caller's included
+            (0 = all cores, 1 = the caller only). Results do not depend on it.
 
     Raises:
         TypeError: ``points`` is not a float32 numpy array.
-        ValueError: wrong shape, non-contiguous, NaN/inf, or leaf_size < 1.
+        ValueError: wrong shape, non-contiguous, NaN/inf, leaf_size < 1 or num_threads < 0.
     """
 
-    def __init__(self, points: np.ndarray, leaf_size: int = 16):
-        self._tree = _core.KDTree(points, leaf_size=leaf_size)
+    def __init__(self, points: np.ndarray, leaf_size: int = 16, num_threads: int = 0):
+        self._tree = _core.KDTree(points, leaf_size=leaf_size, num_threads=num_threads)
 
     def query(self, queries: np.ndarray, k: int = 1) -> Tuple[np.ndarray, np.ndarray]:
         """The k nearest rows of each query.
@@ -59,6 +61,11 @@ class KDTree:
     @property
     def leaf_size(self) -> int:
         return self._tree.leaf_size
+
+    @property
+    def num_threads(self) -> int:
+        """Threads that answer a batch of queries (the caller's included)."""
+        return self._tree.num_threads
 
     def __repr__(self) -> str:
         return f"KDTree(size={self.size}, dim={self.dim}, leaf_size={self.leaf_size})"
