@@ -90,11 +90,12 @@ void bind_obstacles(py::module_& m) {
              const py::handle& terminated, const py::handle& truncated, const py::handle& success,
              const py::handle& collision, const py::handle& hits, const py::handle& final_obs,
              const py::handle& episode_return, const py::handle& episode_length, const py::handle& step_frames,
-             const py::handle& transitions, const py::handle& costs) {
+             const py::handle& transitions, const py::handle& costs, const py::handle& episode_frames) {
             const py::ssize_t n = s.env.num_envs();
             auto a = step_actions(s.env, actions);
             const TargetStepBuffers out = step_buffers(s.env, obs, rewards, terminated, truncated, success, final_obs,
-                                                       episode_return, episode_length, step_frames, transitions, costs);
+                                                       episode_return, episode_length, step_frames, transitions, costs,
+                                                   episode_frames);
             uint8_t* co = writable_buffer<uint8_t>(collision, "collision", {n});
             int32_t* hi = writable_buffer<int32_t>(hits, "hits", {n});
             py::gil_scoped_release release;
@@ -103,10 +104,11 @@ void bind_obstacles(py::module_& m) {
           py::arg("actions"), py::arg("obs"), py::arg("rewards"), py::arg("terminated"), py::arg("truncated"),
           py::arg("success"), py::arg("collision"), py::arg("hits"), py::arg("final_obs"), py::arg("episode_return"),
           py::arg("episode_length"), py::arg("step_frames") = py::none(), py::arg("transitions") = py::none(),
-          py::arg("costs") = py::none(),
+          py::arg("costs") = py::none(), py::arg("episode_frames") = py::none(),
           "One step of every env (actions float32 N x 12, finite), writing every buffer; collision (uint8, N) and "
           "hits (int32, N) are the task's. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if "
-          "given, get every env's last_step_frames and last_step_matches, so one call returns all a step produced.")
+          "given, get every env's last_step_frames and last_step_matches, and episode_frames (int64, N) where an "
+          "episode ended the frames it played: one call returns all a step produced.")
       .def(
           "obstacles", [](const PyObstacleVecEnv& s, int i) { return obstacle_dict(s.env, checked_index(s, i), kNow); },
           py::arg("index"),

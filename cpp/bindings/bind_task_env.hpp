@@ -70,7 +70,8 @@ TargetStepBuffers step_buffers(const Env& env, const py::handle& obs, const py::
                                const py::handle& terminated, const py::handle& truncated, const py::handle& success,
                                const py::handle& final_obs, const py::handle& episode_return,
                                const py::handle& episode_length, const py::handle& step_frames,
-                               const py::handle& transitions, const py::handle& costs) {
+                               const py::handle& transitions, const py::handle& costs,
+                               const py::handle& episode_frames) {
   const py::ssize_t n = env.num_envs();
   TargetStepBuffers out{writable_buffer<float>(obs, "obs", {n, Env::kObsDim}),
                         writable_buffer<float>(rewards, "rewards", {n}),
@@ -83,6 +84,7 @@ TargetStepBuffers step_buffers(const Env& env, const py::handle& obs, const py::
   if (!step_frames.is_none()) out.step_frames = writable_buffer<int32_t>(step_frames, "step_frames", {n});
   if (!transitions.is_none()) out.transitions = writable_buffer<uint8_t>(transitions, "transitions", {n});
   if (!costs.is_none()) out.costs = writable_buffer<float>(costs, "costs", {n});
+  if (!episode_frames.is_none()) out.episode_frames = writable_buffer<int64_t>(episode_frames, "episode_frames", {n});
   return out;
 }
 
@@ -167,6 +169,19 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
           py::arg("index"),
           "The continuation bias env i's last step matched with (the config's transition_cost, or what the task "
           "made of it for that decision). Kept through the autoreset; 0 after reset.")
+      .def(
+          "pop_match_stats",
+          [](Wrapper& s) {
+            const MatchStats t = s.env.pop_match_stats();
+            py::dict d;
+            d["decisions"] = t.decisions;
+            d["transitions"] = t.transitions;
+            d["cost_sum"] = t.cost_sum;
+            d["frames"] = t.frames;
+            return d;
+          },
+          "Every env's decisions since the last call, summed, then zeroed: decisions (steps that matched), "
+          "transitions, cost_sum (their matched costs) and frames (played, each step up to its ending frame).")
       .def(
           "last_step_decision",
           [](const Wrapper& s, int i) {

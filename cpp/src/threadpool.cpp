@@ -1,8 +1,26 @@
 #include "mmrl/threadpool.hpp"
 
 #include <algorithm>
+#include <chrono>
 
 namespace mmrl {
+
+namespace {
+
+// Spins until done() or kSpinMicros have passed; true if done() came true.
+template <class Done>
+bool spin_until(Done&& done, int micros) {
+  const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(micros);
+  for (int k = 0;; ++k) {
+    if (done()) return true;
+    if ((k & 63) == 63 && std::chrono::steady_clock::now() >= until) return false;
+#if defined(__x86_64__) || defined(__i386__)
+    __builtin_ia32_pause();
+#endif
+  }
+}
+
+}  // namespace
 
 ThreadPool::ThreadPool(int num_threads) {
   if (num_threads <= 0) num_threads = std::max(1u, std::thread::hardware_concurrency());
@@ -43,28 +61,32 @@ void ThreadPool::run(int64_t n, int64_t min_chunk, Job job, void* ctx) {
     n_ = n;
     chunk_ = chunk;
     next_.store(0);
-    pending_ = static_cast<int>(workers_.size());
-    ++generation_;
+    pending_.store(static_cast<int>(workers_.size()));
+    generation_.fetch_add(1);
   }
   start_cv_.notify_all();
   run_chunks(0);
+  if (spin_until([this] { return pending_.load() == 0; }, kSpinMicros)) return;
   std::unique_lock<std::mutex> lock(mutex_);
-  done_cv_.wait(lock, [this] { return pending_ == 0; });
+  done_cv_.wait(lock, [this] { return pending_.load() == 0; });
 }
 
 void ThreadPool::worker_loop(int index) {
   uint64_t seen = 0;
   for (;;) {
+    // A spinning worker sees the new generation (and, through the mutex the job was written
+    // under, the job); then it takes the mutex anyway, once, to read the job's fields safely.
+    spin_until([&] { return generation_.load() != seen; }, kSpinMicros);
     {
       std::unique_lock<std::mutex> lock(mutex_);
-      start_cv_.wait(lock, [&] { return stop_ || generation_ != seen; });
+      start_cv_.wait(lock, [&] { return stop_ || generation_.load() != seen; });
       if (stop_) return;
-      seen = generation_;
+      seen = generation_.load();
     }
     run_chunks(index);
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      if (--pending_ == 0) done_cv_.notify_one();
+    if (pending_.fetch_sub(1) == 1) {
+      std::lock_guard<std::mutex> lock(mutex_);  // the caller may be about to sleep on done_cv_
+      done_cv_.notify_one();
     }
   }
 }

@@ -316,6 +316,10 @@ class PlaneVecEnv:
         """
         Writes environment i's current observation into out (float32, obs_dim).
         """
+    def pop_match_stats(self) -> dict:
+        """
+        Every env's decisions since the last call, summed, then zeroed: decisions (steps that matched), transitions, cost_sum (their matched costs) and frames (played, each step up to its ending frame).
+        """
     def reset(self, seed: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
         ...
     def reset_env(self, index: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
@@ -332,9 +336,9 @@ class PlaneVecEnv:
         """
         The world-space state of environment i (root, frame, target and the task's own).
         """
-    def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None) -> None:
+    def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None, episode_frames: typing.Any = None) -> None:
         """
-        One step of every env (actions float32 N x 12, finite), writing every buffer. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's last_step_frames and last_step_matches, so one call returns all a step produced.
+        One step of every env (actions float32 N x 12, finite), writing every buffer. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's last_step_frames and last_step_matches, and episode_frames (int64, N) where an episode ended the frames it played: one call returns all a step produced.
         """
     @property
     def action_high(self) -> numpy.typing.NDArray[numpy.float32]:
@@ -698,6 +702,10 @@ class ObstacleVecEnv:
         """
         Env i's obstacles (the obstacles() dict) after `frames` more played frames of the env's own motion (constant velocity, bounce at the square's border), bit for bit as steps move them. Called at a step's start with frames = last_step_frames, it gives the obstacles at the step's end.
         """
+    def pop_match_stats(self) -> dict:
+        """
+        Every env's decisions since the last call, summed, then zeroed: decisions (steps that matched), transitions, cost_sum (their matched costs) and frames (played, each step up to its ending frame).
+        """
     def reset(self, seed: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
         ...
     def reset_env(self, index: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
@@ -736,9 +744,9 @@ class ObstacleVecEnv:
         """
         The world-space state of environment i (root, frame, target and the task's own).
         """
-    def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, collision: typing.Any, hits: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None) -> None:
+    def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, collision: typing.Any, hits: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None, episode_frames: typing.Any = None) -> None:
         """
-        One step of every env (actions float32 N x 12, finite), writing every buffer; collision (uint8, N) and hits (int32, N) are the task's. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's last_step_frames and last_step_matches, so one call returns all a step produced.
+        One step of every env (actions float32 N x 12, finite), writing every buffer; collision (uint8, N) and hits (int32, N) are the task's. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's last_step_frames and last_step_matches, and episode_frames (int64, N) where an episode ended the frames it played: one call returns all a step produced.
         """
     @property
     def action_high(self) -> numpy.typing.NDArray[numpy.float32]:

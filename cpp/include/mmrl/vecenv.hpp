@@ -40,6 +40,14 @@
 
 namespace mmrl {
 
+// The decisions of one env since they were last popped (training's cheap quality log):
+// decisions (steps that matched), transitions among them, their matched costs summed, frames
+// played.
+struct MatchStats {
+  int64_t decisions = 0, transitions = 0, frames = 0;
+  double cost_sum = 0;
+};
+
 // Per-environment state every target task keeps (world meters, radians).
 struct TargetEnvState {
   RootState root;
@@ -69,6 +77,8 @@ struct TargetEnvState {
   float last_step_transition_cost = 0;
   // NEXT_STEP autoreset: the episode ended on the last step and the next step resets it.
   bool autoreset_pending = false;
+  int64_t episode_frames = 0;  // frames played in this episode (the last step up to its ending frame)
+  MatchStats stats;            // since the last pop_match_stats
   Rng rng;
 };
 
@@ -97,6 +107,7 @@ struct TargetStepBuffers {
   int32_t* step_frames = nullptr;
   uint8_t* transitions = nullptr;
   float* costs = nullptr;
+  int64_t* episode_frames = nullptr;  // optional, written only where an episode ended
 };
 
 // Draws an episode start shared by the target tasks: a uniformly random valid frame, the
@@ -153,6 +164,7 @@ class TargetVecEnv {
     task().begin_episode(i);
     State& s = envs_[i];
     s.autoreset_pending = false;
+    s.episode_frames = 0;
     s.steps = 0;
     s.episode_return = 0;
     s.last_match = -1;
@@ -205,6 +217,19 @@ class TargetVecEnv {
       for (int k = 0; k < kPoseDim; ++k) s.last_pose_jump += (a[k] - b[k]) * (a[k] - b[k]);
     }
     return j;
+  }
+
+  // Every env's MatchStats since the last call, summed; zeroes them.
+  MatchStats pop_match_stats() {
+    MatchStats total;
+    for (State& s : envs_) {
+      total.decisions += s.stats.decisions;
+      total.transitions += s.stats.transitions;
+      total.frames += s.stats.frames;
+      total.cost_sum += s.stats.cost_sum;
+      s.stats = MatchStats{};
+    }
+    return total;
   }
 
   // Each environment's current database frame (N).
@@ -272,6 +297,11 @@ class TargetVecEnv {
         s.last_step_cost = s.last_cost;
         s.last_step_match = s.last_match;
         s.last_step_transition_cost = s.last_transition_cost;
+        s.episode_frames += r.frames_played;
+        s.stats.decisions += 1;
+        s.stats.transitions += s.last_transition;
+        s.stats.cost_sum += s.last_cost;
+        s.stats.frames += r.frames_played;
         const bool truncated = !r.terminated && s.steps >= config_.max_steps;
         out.rewards[i] = r.reward;
         out.terminated[i] = r.terminated;
@@ -284,6 +314,7 @@ class TargetVecEnv {
           task().observe(env, final_row);
           out.episode_return[i] = static_cast<float>(s.episode_return);
           out.episode_length[i] = s.steps;
+          if (out.episode_frames) out.episode_frames[i] = s.episode_frames;
           if (next_step_autoreset_) {
             std::copy(final_row, final_row + Task::kObsDim, row);
             s.autoreset_pending = true;

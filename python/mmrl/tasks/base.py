@@ -118,9 +118,12 @@ def check_actions(actions, shape, finite: bool = True) -> np.ndarray:
         raise ValueError(f"actions: expected an array of shape {tuple(shape)} ({e})") from None
     if a.shape != tuple(shape):
         raise ValueError(f"actions: expected shape {tuple(shape)}, got {a.shape}")
-    if not np.issubdtype(a.dtype, np.floating):
-        raise TypeError(f"actions: expected a float array, got dtype {a.dtype}")
-    a = np.ascontiguousarray(a, dtype=np.float32)
+    if a.dtype != np.float32:
+        if not np.issubdtype(a.dtype, np.floating):
+            raise TypeError(f"actions: expected a float array, got dtype {a.dtype}")
+        a = np.ascontiguousarray(a, dtype=np.float32)
+    elif not a.flags.c_contiguous:
+        a = np.ascontiguousarray(a)
     if finite and not np.isfinite(a).all():
         raise ValueError("actions: contains NaN or inf")
     return a
@@ -188,17 +191,14 @@ class TargetVectorEnv(VectorEnv):
         self._ep_return = np.zeros(n, np.float32)
         self._ep_length = np.zeros(n, np.int32)
         self._step_frames = np.zeros(n, np.int32)
-        self._ep_frames = np.zeros(n, np.int64)
-        # The last step's decisions and their running sums since pop_match_stats (training's
-        # cheap quality log): in-place adds only, nothing allocated per step.
+        self._ep_frames = np.zeros(n, np.int64)  # written by the C++ step where an episode ended
+        # The last step's decisions (their running sums since pop_match_stats, training's cheap
+        # quality log, are kept in C++).
         self._step_transitions = np.zeros(n, np.uint8)
         self._step_costs = np.zeros(n, np.float32)
-        self._sum_transitions = np.zeros(n, np.int64)
-        self._sum_costs = np.zeros(n, np.float64)
-        self._sum_frames = np.zeros(n, np.int64)
-        self._sum_decisions = 0
         # NEXT_STEP: envs whose next step is their reset (no decision is made in it).
         self._pending = np.zeros(n, bool)
+        self._any_pending = False
         self._seeded = False
 
     # -- hooks -------------------------------------------------------------------------------
@@ -215,7 +215,8 @@ class TargetVectorEnv(VectorEnv):
         frames and decisions included: the one call a step makes."""
         self._core.step(actions, obs, self._rewards, self._terminated, self._truncated, self._success,
                         *self._task_step_buffers(), self._final_obs, self._ep_return, self._ep_length,
-                        step_frames=self._step_frames, transitions=self._step_transitions, costs=self._step_costs)
+                        step_frames=self._step_frames, transitions=self._step_transitions, costs=self._step_costs,
+                        episode_frames=self._ep_frames)
 
     def _task_infos(self, done: np.ndarray) -> Dict[str, np.ndarray]:
         """Extra per-episode infos where ``done`` (each gets a ``_key`` mask)."""
@@ -236,8 +237,8 @@ class TargetVectorEnv(VectorEnv):
         else:
             for i in range(self.num_envs):
                 self._core.reset_env(i, self._obs)
-        self._ep_frames[:] = 0
         self._pending[:] = False
+        self._any_pending = False
         self._on_reset(None)
         return self._obs.copy(), {}
 
@@ -259,29 +260,22 @@ class TargetVectorEnv(VectorEnv):
     def _step(self, actions, obs_out: np.ndarray):
         a = check_actions(actions, (self.num_envs, self.act_dim), finite=False)
         self._step_core(a, obs_out)
-        self._sum_transitions += self._step_transitions
-        self._sum_costs += self._step_costs
-        self._sum_frames += self._step_frames
-        if self._pending.any():  # NEXT_STEP: these envs were reset by this step
+        if self._any_pending:  # NEXT_STEP: these envs were reset by this step
             resetting = self._pending.copy()
-            self._ep_frames[resetting] = 0
             self._on_reset(resetting)
-            self._sum_decisions += self.num_envs - int(resetting.sum())
             self._pending[:] = False
-        else:
-            self._sum_decisions += self.num_envs
-        self._ep_frames += self._step_frames
+            self._any_pending = False
         terminated = self._terminated.astype(bool)
         truncated = self._truncated.astype(bool)
         infos: Dict[str, Any] = {}
         done = terminated | truncated
         if done.any():
             values = {
-                "final_obs": np.where(done[:, None], self._final_obs, 0.0).astype(np.float32),
+                "final_obs": np.where(done[:, None], self._final_obs, np.float32(0)),
                 "success": self._success.astype(bool),
-                "episode_return": np.where(done, self._ep_return, 0.0).astype(np.float32),
-                "episode_length": np.where(done, self._ep_length, 0).astype(np.int32),
-                "episode_frames": np.where(done, self._ep_frames, 0).astype(np.int64),
+                "episode_return": np.where(done, self._ep_return, np.float32(0)),
+                "episode_length": np.where(done, self._ep_length, np.int32(0)),
+                "episode_frames": np.where(done, self._ep_frames, np.int64(0)),
             }
             values.update(self._task_infos(done))
             for key, value in values.items():
@@ -289,8 +283,8 @@ class TargetVectorEnv(VectorEnv):
                 infos["_" + key] = done.copy()
             if self.autoreset_mode == AutoresetMode.NEXT_STEP:
                 self._pending |= done
+                self._any_pending = True
             else:
-                self._ep_frames[done] = 0
                 self._on_reset(done)
         return obs_out, self._rewards.copy(), terminated, truncated, infos
 
@@ -306,13 +300,7 @@ class TargetVectorEnv(VectorEnv):
         current clip's continuation), ``cost_sum`` (their matched costs, normalized weighted
         feature space, summed) and ``frames`` (frames played, each step up to the frame that
         ended its episode). :mod:`mmrl.quality_log` turns them into training-log columns."""
-        out = {"decisions": self._sum_decisions, "transitions": int(self._sum_transitions.sum()),
-               "cost_sum": float(self._sum_costs.sum()), "frames": int(self._sum_frames.sum())}
-        self._sum_transitions[:] = 0
-        self._sum_costs[:] = 0.0
-        self._sum_frames[:] = 0
-        self._sum_decisions = 0
-        return out
+        return {k: (float(v) if k == "cost_sum" else int(v)) for k, v in self._core.pop_match_stats().items()}
 
     def last_step_decision(self, i: int) -> Tuple[int, float]:
         """(match, cost) of env ``i``'s last step: the frame its match chose (what the full path
