@@ -1,5 +1,5 @@
 """The decision's candidate filter (kdtree.hpp's CandidateFilter), through its first rule: the
-task option ``clip_costs`` (controller.hpp's ClipCostFilter), written once in C++.
+task option ``clip_costs`` (decision.hpp's ClipCostFilter), written once in C++.
 
 A numpy brute force with the same rule checks the env's decisions; the full path plays the
 env's decisions (it never decides again); the engine runtime reads the costs from the
@@ -11,7 +11,7 @@ import pytest
 
 import mmrl
 from mmrl import _core
-from mmrl.controller import clip_cost_array
+from mmrl.character import clip_cost_array
 from mmrl.rl.policies import JoystickPolicy
 from mmrl.rollout import FullPath
 from mmrl.export.runtime_export import read_controller, write_controller
@@ -33,7 +33,7 @@ def mixamo_db(tmp_path_factory):
 
 def brute_force_decision(db, frame, action, low, high, transition_cost, clip_costs):
     """(frame to play from, its filtered cost, slack to the nearest competitor) by the rule of
-    controller.hpp with a per-clip extra cost."""
+    decision.hpp with a per-clip extra cost."""
     rows = np.asarray(db.normalized_features, np.float64)
     query = np.concatenate([rows[frame, :15], np.clip(action, low, high)])
     cost = ((rows - query) ** 2).sum(1) + np.asarray(clip_costs, np.float64)[db.frame_clip]

@@ -1,4 +1,4 @@
-"""mmrl.Controller: the same decisions and root trajectory as the env and the fast path,
+"""mmrl.Character: the same decisions and root trajectory as the env and the fast path,
 poses placed by the database's character frames, inertialization, IK, bad inputs."""
 import numpy as np
 import pytest
@@ -41,9 +41,9 @@ def test_full_and_fast_paths_match_the_env(synth_db):
     env.set_target(0, 1e4, 1e4)  # never reached: no autoreset during the test
     s = env.state(0)
     kw = dict(start_frame=int(s["frame"]), position=(s["x"], s["z"]), yaw=s["yaw"])
-    full = mmrl.Controller(db, **kw)
-    fast = mmrl.Controller(db, fast=True, **kw)
-    hard = mmrl.Controller(db, inertialization_halflife=0, ik=False, **kw)
+    full = mmrl.Character(db, **kw)
+    fast = mmrl.Character(db, fast=True, **kw)
+    hard = mmrl.Character(db, inertialization_halflife=0, ik=False, **kw)
     bufs = [np.zeros(1, np.float32), np.zeros(1, np.uint8), np.zeros(1, np.uint8), np.zeros(1, np.uint8),
             np.zeros((1, 17), np.float32), np.zeros(1, np.float32), np.zeros(1, np.int32)]
     transitions = 0
@@ -66,7 +66,7 @@ def test_full_and_fast_paths_match_the_env(synth_db):
 def test_pose_is_the_database_pose_placed_at_the_root(synth_db, normal_db):
     for db in (synth_db, normal_db):  # hips as the BVH root, and a static root dummy above the hips
         f = int(np.flatnonzero(db.valid_mask)[50])
-        ctrl = mmrl.Controller(db, start_frame=f, position=(3.0, -2.0), yaw=1.0)
+        ctrl = mmrl.Character(db, start_frame=f, position=(3.0, -2.0), yaw=1.0)
         gp, _ = ctrl.pose()
         q = _core.database_global_positions(db._db, np.array([f], np.int64))[0]
         # Expected: W * C_f^-1 applied to the database pose.
@@ -84,7 +84,7 @@ def test_inertialization_removes_the_jump_at_transitions(synth_db):
     acts = random_actions(db, 80, 3)
     jumps = {}
     for hl in (0.0, 0.1):
-        ctrl = mmrl.Controller(db, start_frame=int(np.flatnonzero(db.valid_mask)[0]), inertialization_halflife=hl,
+        ctrl = mmrl.Character(db, start_frame=int(np.flatnonzero(db.valid_mask)[0]), inertialization_halflife=hl,
                                ik=False, record=True)
         for a in acts:
             ctrl.step(a)
@@ -98,7 +98,7 @@ def test_inertialization_removes_the_jump_at_transitions(synth_db):
 
 
 def test_bad_inputs_are_refused(synth_db):
-    ctrl = mmrl.Controller(synth_db)
+    ctrl = mmrl.Character(synth_db)
     with pytest.raises(TypeError, match="numpy array"):
         ctrl.step([0.0] * 12)
     with pytest.raises(TypeError, match="float"):
@@ -112,17 +112,17 @@ def test_bad_inputs_are_refused(synth_db):
     with pytest.raises(ValueError, match="NaN"):
         ctrl._core.step(np.full(12, np.inf, np.float32))
     with pytest.raises(ValueError, match="out of range"):
-        mmrl.Controller(synth_db, start_frame=synth_db.num_frames)
+        mmrl.Character(synth_db, start_frame=synth_db.num_frames)
     with pytest.raises(ValueError, match="frames_per_step"):
-        mmrl.Controller(synth_db, frames_per_step=0)
+        mmrl.Character(synth_db, frames_per_step=0)
     with pytest.raises(ValueError, match="halflife"):
-        mmrl.Controller(synth_db, inertialization_halflife=-1)
+        mmrl.Character(synth_db, inertialization_halflife=-1)
     with pytest.raises(ValueError, match="position"):
-        mmrl.Controller(synth_db, position=(np.nan, 0))
+        mmrl.Character(synth_db, position=(np.nan, 0))
     with pytest.raises(TypeError, match="Database"):
-        mmrl.Controller("db.npz")
+        mmrl.Character("db.npz")
     with pytest.raises(ValueError, match="fast path"):
-        mmrl.Controller(synth_db, fast=True)._core.poses()
+        mmrl.Character(synth_db, fast=True)._core.poses()
     with pytest.raises(ValueError, match="record=False"):
         ctrl.recording()
 

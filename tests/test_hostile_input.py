@@ -315,7 +315,7 @@ def test_obstacle_env_set_obstacles_and_action_hits(db, data):
 @given(query=hostile(np.zeros(12, np.float32)), target=hostile(np.array([1.0, 2.0])),
        position=hostile(np.array([0.5, -0.5])))
 def test_controller_step_observation_reset(db, query, target, position):
-    ctrl = mmrl.Controller(db)
+    ctrl = mmrl.Character(db)
     ctrl.reset()
     refused_or_equal(ctrl.step, "trajectory_query", (query[1],))
     clean = _clean(target[1], np.float64)

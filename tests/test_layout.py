@@ -134,7 +134,7 @@ def test_no_import_circles_in_mmrl():
 # The layout itself
 # ------------------------------------------------------------------------------------------
 #: The top folder keeps the cross-cutting modules only; everything else sits in a subpackage.
-TOP_LEVEL = {"__init__", "__main__", "_compat", "arrays", "cli", "controller", "errors", "io", "metrics",
+TOP_LEVEL = {"__init__", "__main__", "_compat", "arrays", "cli", "character", "errors", "io", "metrics",
              "rollout", "runs"}
 
 

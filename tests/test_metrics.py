@@ -111,11 +111,11 @@ def test_foot_sliding_pools_samples_over_recordings():
 
 
 def _straight_controller(db, ik: bool, start: int, steps: int):
-    """A Controller fed the database's own trajectory features: each query equals the current
+    """A Character fed the database's own trajectory features: each query equals the current
     frame's features, so the continuation (cost 0) always wins: the clip played straight."""
-    from mmrl.controller import Controller
+    from mmrl.character import Character
 
-    c = Controller(db, ik=ik, foot_locking=ik, record=True, start_frame=start, action_limit_std=None)  # no clipping
+    c = Character(db, ik=ik, foot_locking=ik, record=True, start_frame=start, action_limit_std=None)  # no clipping
     for _ in range(steps):
         c.step(db.normalized_features[c.frame, 15:].copy())
     return c.recording()
@@ -164,12 +164,12 @@ def test_a_clip_played_straight_has_no_transition_no_excess_jump_and_the_raw_sli
 
 
 def test_animated_feet_are_the_ankles_of_the_same_run_with_ik_off():
-    from mmrl.controller import Controller
+    from mmrl.character import Character
 
     db = default_database()
     rng = np.random.default_rng(3)
-    on = Controller(db, record=True)
-    off = Controller(db, ik=False, foot_locking=False, record=True)
+    on = Character(db, record=True)
+    off = Character(db, ik=False, foot_locking=False, record=True)
     for _ in range(40):
         q = db.normalized_features[rng.choice(np.flatnonzero(db.valid_mask)), 15:] + rng.normal(0, 0.3, 12)
         q = q.astype(np.float32)

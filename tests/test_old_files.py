@@ -73,3 +73,14 @@ def test_saved_databases_keep_their_format_name(tmp_path):
     with np.load(tmp_path / "db.npz") as z:
         assert str(z["format"]) == "mmrl.database"
     assert mmrl.Database.load(tmp_path / "db.npz").num_frames == db.num_frames
+
+
+def test_the_old_names_of_renamed_things_still_work_and_warn():
+    """One name per concept: mmrl.Controller is mmrl.Character, _core.TargetTaskConfig is
+    _core.PlaneTaskConfig; the old names stay for one release."""
+    with pytest.warns(DeprecationWarning, match="mmrl.Character"):
+        old = mmrl.Controller
+    assert old is mmrl.Character
+    assert _core.TargetTaskConfig is _core.PlaneTaskConfig
+    c = old(mmrl.default_database(), fast=True)
+    assert c.step(np.zeros(12, np.float32)).frames.shape == (6,)

@@ -4,13 +4,13 @@ same decisions, for 1,000 decisions per task and across episode ends.
 - fast path: env 0 of a 4-env, 2-thread vector env, stepped with the full path's actions (the
   other envs act at random), equals the full path's one-env env step for step: decision, cost,
   frame and root;
-- full path: the Controller plays the env's decision (it never decides again), so its shown
+- full path: the Character plays the env's decision (it never decides again), so its shown
   frames are the match's and its root is the env's;
 - runtime: a RuntimeCharacter started where each episode starts, given the same target and (on
   the obstacles task) the env's obstacles with their velocities before every decision, writes
   the same observation bit for bit, decides the same frames and shows the same roots.
 
-The configs switch on every rule that changes a match: a continuation bias, the obstacles'
+The configs switch on every rule that changes a match: a transition cost, the obstacles'
 bias_yields with a look-ahead and a hit disc, and a clip-cost filter."""
 import numpy as np
 import pytest

@@ -1,5 +1,5 @@
 """The cheap fast-path quality log of training (issue 14): the envs' per-step transition flag and
-matched cost against the full-path Controller in lockstep, and the training CSV's columns
+matched cost against the full-path Character in lockstep, and the training CSV's columns
 against a brute-force recomputation of every decision of a toy run."""
 import csv
 

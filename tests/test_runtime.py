@@ -23,7 +23,7 @@ from runtime_helpers import drive_both
 
 @pytest.fixture(scope="module")
 def plane(tmp_path_factory):
-    """A plane run (the quality preset: a continuation bias of 60) exported to a controller file."""
+    """A plane run (the quality preset: a transition cost of 60) exported to a controller file."""
     out = tmp_path_factory.mktemp("runtime")
     run = out / "plane"
     assert main(["train", "plane", "--steps", "65536", "--seed", "0", "--out", str(run), "--no-progress"]) == 0

@@ -1,10 +1,10 @@
-"""The continuation bias (``transition_cost``): another frame replaces the current clip's
+"""The transition cost (``transition_cost``): another frame replaces the current clip's
 continuation only when it matches better by more than the cost. Checked against a numpy
 brute force with the same rule, and the fast and full paths still agree step for step."""
 import numpy as np
 import pytest
 
-from mmrl import Controller, default_database, get_task
+from mmrl import Character, default_database, get_task
 from mmrl.rl.policies import JoystickPolicy
 from mmrl.rollout import FullPath
 from mmrl.tasks.plane import PlaneVectorEnv
@@ -16,7 +16,7 @@ def db():
 
 
 def brute_force_decision(db, frame: int, action: np.ndarray, low, high, transition_cost: float):
-    """(frame to play from, margin to the rule's threshold) by the rule of controller.hpp."""
+    """(frame to play from, margin to the rule's threshold) by the rule of decision.hpp."""
     rows = np.asarray(db.normalized_features, np.float64)
     query = np.concatenate([rows[frame, :15], np.clip(action, low, high)])
     cost = ((rows - query) ** 2).sum(1)
@@ -94,10 +94,10 @@ def test_fast_and_full_paths_agree_with_a_transition_cost(db, task_name):
 def test_bad_transition_cost_is_refused(db):
     with pytest.raises(ValueError, match="transition_cost"):
         PlaneVectorEnv(2, db=db, transition_cost=-1.0)
-    from mmrl import Controller
+    from mmrl import Character
 
     with pytest.raises(ValueError, match="transition_cost"):
-        Controller(db, transition_cost=float("nan"))
+        Character(db, transition_cost=float("nan"))
 
 
 def test_plane_quality_preset_sets_its_options(tmp_path):
@@ -187,7 +187,7 @@ def test_the_obstacles_bias_yields_when_the_continuation_hits(db):
 
 
 def test_controller_transition_cost_is_settable_and_checked(db):
-    ctrl = Controller(db, transition_cost=2.0)
+    ctrl = Character(db, transition_cost=2.0)
     ctrl.transition_cost = 7.5
     assert ctrl.transition_cost == 7.5
     for bad in (-1.0, float("nan"), "x"):

@@ -42,7 +42,7 @@ void bind_character(py::module_& m) {
       .def_readwrite("transition_cost", &CharacterOptions::transition_cost)
       .def_readwrite("clip_costs", &CharacterOptions::clip_costs);
 
-  py::class_<Character>(m, "Character", "A motion-matching character (C++ core of mmrl.Controller).")
+  py::class_<Character>(m, "Character", "A motion-matching character (C++ core of mmrl.Character).")
       .def(py::init([](const Database& db, PyMatcher& matcher, const CharacterOptions& options) {
              return new Character(db, matcher.matcher, options);
            }),
@@ -80,7 +80,7 @@ void bind_character(py::module_& m) {
       .def_property(
           "transition_cost", [](const Character& c) { return c.options().transition_cost; },
           [](Character& c, float cost) { c.set_transition_cost(cost); },
-          "continuation bias of the next matches (finite, >= 0)")
+          "transition cost of the next matches (finite, >= 0)")
       .def_property_readonly("frames_per_step", [](const Character& c) { return c.options().frames_per_step; })
       .def_property_readonly("root",
                              [](const Character& c) { return py::make_tuple(c.root().x, c.root().z, c.root().yaw); })

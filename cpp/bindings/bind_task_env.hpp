@@ -167,7 +167,7 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
           "last_step_transition_cost",
           [](const Wrapper& s, int i) { return s.env.state(checked_env_index(s, i)).last_step_transition_cost; },
           py::arg("index"),
-          "The continuation bias env i's last step matched with (the config's transition_cost, or what the task "
+          "The transition cost env i's last step matched with (the config's transition_cost, or what the task "
           "made of it for that decision). Kept through the autoreset; 0 after reset.")
       .def(
           "pop_match_stats",

@@ -311,7 +311,7 @@ void RuntimeCharacter::decide() {
   decision_.target_z = target_z_;
   observe();
   c.policy().act(obs_.data(), action_.data(), scratch_);
-  // The training env's own decision (continuation bias, bias_yields, candidate filters); the
+  // The training env's own decision (transition cost, bias_yields, candidate filters); the
   // character plays it.
   const int64_t j = plane_ ? plane_->decide(0, action_.data()) : obstacles_->decide(0, action_.data());
   const float cost = plane_ ? plane_->state(0).last_cost : obstacles_->state(0).last_cost;

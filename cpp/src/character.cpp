@@ -268,7 +268,7 @@ void Character::lock_feet(int64_t f, bool decay) {
 }
 
 int64_t Character::decide(const float* trajectory, float* cost) const {
-  return controller_decide(db_, matcher_, frame_, trajectory, low_, high_, cost, options_.transition_cost,
+  return decision_for_action(db_, matcher_, frame_, trajectory, low_, high_, cost, options_.transition_cost,
                            clip_filter_.get());
 }
 

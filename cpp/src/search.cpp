@@ -59,12 +59,12 @@ MMRL_MULTIVERSION int brute_force_knn(const float* points, int64_t num_points, i
 
 MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                           const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
-                          float* out_cost, float bound_margin, const CandidateFilter* candidates) {
+                          float* out_cost, float transition_cost, const CandidateFilter* candidates) {
   check_points(points, num_points, dim, "brute_force_match");
   if (query == nullptr) throw std::invalid_argument("brute_force_match: null query");
   if (bound_index >= num_points) throw std::out_of_range("brute_force_match: bound_index out of range");
-  if (!(bound_margin >= 0.0f) || !std::isfinite(bound_margin))
-    throw std::invalid_argument("brute_force_match: bound_margin must be finite and >= 0");
+  if (!(transition_cost >= 0.0f) || !std::isfinite(transition_cost))
+    throw std::invalid_argument("brute_force_match: transition_cost must be finite and >= 0");
   int64_t best = -1;
   float best_cost = std::numeric_limits<float>::infinity();
   float bound_cost = best_cost;
@@ -72,7 +72,7 @@ MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_poi
     bound_cost = filtered_cost(sqdist_row(query, points + bound_index * dim, dim), candidates, bound_index);
     if (bound_cost < std::numeric_limits<float>::infinity()) {  // else the filter refused the bound
       best = bound_index;
-      best_cost = bound_cost - bound_margin;  // another row must beat the bound by the margin
+      best_cost = bound_cost - transition_cost;  // another row must beat the bound by the margin
     }
   }
   float dist[kLanes];
@@ -108,12 +108,12 @@ Matcher::Matcher(const float* rows, int64_t num_rows, int dim, const uint8_t* va
       }()) {}
 
 MMRL_MULTIVERSION int64_t Matcher::match(const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
-                       float* out_cost, float bound_margin, const CandidateFilter* candidates) const {
+                       float* out_cost, float transition_cost, const CandidateFilter* candidates) const {
   SearchFilter filter;
   filter.exclude_lo = exclude_lo;
   filter.exclude_hi = exclude_hi;
   filter.candidates = candidates;
-  return tree_.nearest_with_bound(query, bound_index, out_cost, filter, bound_margin);
+  return tree_.nearest_with_bound(query, bound_index, out_cost, filter, transition_cost);
 }
 
 namespace {

@@ -144,7 +144,7 @@ TEST(PlaneVecEnv, ContinuingStepEqualsHandComputation) {
     buf.step(env, act);
     for (int i = 0; i < n; ++i) {
       const TargetEnvState& s0 = before[i];
-      const int64_t j = controller_decide(db, matcher(), s0.frame, &act[i * kTrajectoryDim], env.action_low(),
+      const int64_t j = decision_for_action(db, matcher(), s0.frame, &act[i * kTrajectoryDim], env.action_low(),
                                           env.action_high());
       const HandPath p = play_by_hand(s0.root, j, cfg.frames_per_step);
       const double x = p.x.back(), z = p.z.back(), yaw = p.yaw.back();
@@ -198,7 +198,7 @@ TEST(PlaneVecEnv, AutoresetWritesFinalObsAndResetsFromTheEnvsOwnStream) {
   std::mt19937 gen(3);
   const std::vector<float> act = random_actions(gen, n);
   const TargetEnvState s0 = env.state(1);
-  const int64_t j = controller_decide(db, matcher(), s0.frame, &act[kTrajectoryDim], env.action_low(), env.action_high());
+  const int64_t j = decision_for_action(db, matcher(), s0.frame, &act[kTrajectoryDim], env.action_low(), env.action_high());
   const HandPath p = play_by_hand(s0.root, j, cfg.frames_per_step);
   // Put env 1's target beside the end of its path, so that the path enters the success
   // disc part-way; pick an offset whose frame distances are all clear of the radius.

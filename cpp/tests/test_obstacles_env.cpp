@@ -100,7 +100,7 @@ TEST(ObstacleVecEnv, LastStepFramesEqualsBruteForceResimulation) {
     buf.step(env, act);
     env.last_step_frames(played.data());
     for (int i = 0; i < n; ++i) {
-      const int64_t j = controller_decide(db, matcher(), s0[i].frame, &act[i * kTrajectoryDim], env.action_low(),
+      const int64_t j = decision_for_action(db, matcher(), s0[i].frame, &act[i * kTrajectoryDim], env.action_low(),
                                           env.action_high());
       RootState root = s0[i].root;
       int expected = cfg.frames_per_step;

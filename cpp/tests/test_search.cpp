@@ -117,7 +117,7 @@ TEST(Matcher, BoundWinsTiesAndNothingValid) {
   EXPECT_EQ(m.match(q, 0, 4, -1, &cost), -1);  // window excludes everything
 }
 
-// The continuation bias: with a margin, another row replaces the bound only when it is closer
+// The transition cost: with a margin, another row replaces the bound only when it is closer
 // by more than the margin; the tree answers exactly like a brute-force scan with the same rule.
 TEST(Matcher, BoundMarginEqualsBruteForceAndHandComputedCases) {
   const int dim = 3;

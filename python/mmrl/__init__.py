@@ -22,7 +22,7 @@ from .motion.database import Database, DatabaseFileError
 from .errors import InputError
 from .motion.search import KDTree
 from .rl.ppo import CheckpointError, NonFiniteError, PPOConfig, TrainResult, load_policy, train
-from .controller import Controller, StepResult
+from .character import Character, StepResult
 from .motion.sources import default_database
 from .tasks import Task, get_task, register_task, task_names  # registers mmrl/Plane-v0, mmrl/MovingObstacles-v0
 from .runs import RunDir
@@ -42,5 +42,5 @@ except PackageNotFoundError:  # running from a source tree without installing
 
 __all__ = ["__version__", "BVHError", "JointRoleError", "Motion", "load_bvh", "parse_bvh", "Database",
            "DatabaseFileError", "InputError", "KDTree", "PPOConfig", "TrainResult", "train", "load_policy",
-           "CheckpointError", "NonFiniteError", "Controller", "StepResult", "default_database", "Task", "get_task",
+           "CheckpointError", "NonFiniteError", "Character", "StepResult", "default_database", "Task", "get_task",
            "register_task", "task_names", "RunDir", "metrics", "policies", "rollout"]

@@ -25,7 +25,11 @@ MOVED = {
     **{f"mmrl.{m}": f"mmrl.export.{m}" for m in ("runtime_export", "runtime_file")},
     "mmrl.integrations.onnx_export": "mmrl.export.onnx_export",
     **{f"mmrl.{m}": f"mmrl.viz.{m}" for m in ("camera", "plots", "render")},
+    "mmrl.controller": "mmrl.character",  # mmrl.Controller is mmrl.Character (one name per concept)
 }
+
+#: Old public names -> (module, new name): ``mmrl.Controller`` is ``mmrl.Character``.
+RENAMED = {"Controller": ("mmrl.character", "Character")}
 
 
 def _warn(old: str, new: str, stacklevel: int) -> None:
@@ -66,6 +70,10 @@ def install() -> None:
 
 def moved_attribute(name: str) -> ModuleType:
     """``mmrl.<name>`` for an old top-level module name (``mmrl.__getattr__``); AttributeError otherwise."""
+    if name in RENAMED:
+        module, new_name = RENAMED[name]
+        _warn(f"mmrl.{name}", f"{module}.{new_name} (mmrl.{new_name})", 3)
+        return getattr(importlib.import_module(module), new_name)
     new = MOVED.get(f"mmrl.{name}")
     if new is None:
         raise AttributeError(f"module 'mmrl' has no attribute {name!r}")

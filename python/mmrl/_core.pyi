@@ -310,7 +310,7 @@ class PlaneVecEnv:
         """
     def last_step_transition_cost(self, index: typing.SupportsInt | typing.SupportsIndex) -> float:
         """
-        The continuation bias env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
+        The transition cost env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
         """
     def observe(self, index: typing.SupportsInt | typing.SupportsIndex, out: typing.Any) -> None:
         """
@@ -416,7 +416,7 @@ class CharacterOptions:
         ...
 class Character:
     """
-    A motion-matching character (C++ core of mmrl.Controller).
+    A motion-matching character (C++ core of mmrl.Character).
     """
     def __init__(self, db: Database, matcher: Matcher, options: CharacterOptions) -> None:
         ...
@@ -484,7 +484,7 @@ class Character:
     @property
     def transition_cost(self) -> float:
         """
-        continuation bias of the next matches (finite, >= 0)
+        transition cost of the next matches (finite, >= 0)
         """
     @transition_cost.setter
     def transition_cost(self, arg1: typing.SupportsFloat | typing.SupportsIndex) -> None:
@@ -688,7 +688,7 @@ class ObstacleVecEnv:
         """
     def last_step_transition_cost(self, index: typing.SupportsInt | typing.SupportsIndex) -> float:
         """
-        The continuation bias env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
+        The transition cost env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
         """
     def observe(self, index: typing.SupportsInt | typing.SupportsIndex, out: typing.Any) -> None:
         """

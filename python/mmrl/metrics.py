@@ -233,7 +233,7 @@ def feet(db) -> List[int]:
 class QualityAccumulator:
     """Pools the samples of several recordings (episodes) into one summary (module docstring keys).
 
-    ``add(db, recording)`` takes a controller recording (``Controller.recording``, full path;
+    ``add(db, recording)`` takes a controller recording (``Character.recording``, full path;
     trimmed to the frames shown) and returns that episode's own summary.
     """
 
@@ -248,7 +248,7 @@ class QualityAccumulator:
         rec = recording
         missing = [k for k in ("positions", "roots", "frames", "contacts", "transitions") if k not in rec]
         if missing:
-            raise ValueError(f"recording: missing {', '.join(missing)} (a full-path Controller recording)")
+            raise ValueError(f"recording: missing {', '.join(missing)} (a full-path Character recording)")
         contacts = np.asarray(rec["contacts"])
         out = {"sliding": foot_contact_speeds(rec["positions"], contacts, feet(db), db.fps),
                "jumps": pose_jumps(rec["positions"], rec["roots"], rec["frames"], db),
@@ -299,7 +299,7 @@ def _summary(samples: Dict[str, List[np.ndarray]], transitions: int, frames: int
 
 def quality(db, recording) -> Dict[str, Any]:
     """The motion-quality summary (module docstring keys) of one controller recording
-    (``Controller.recording``, full path)."""
+    (``Character.recording``, full path)."""
     return QualityAccumulator().add(db, recording)
 
 

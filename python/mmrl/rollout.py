@@ -4,9 +4,9 @@
   episode per environment; success, outcomes and time to target. What training sees.
 - **Full path** (:class:`FullPath`, :func:`evaluate_full_path`, :func:`follow`): a 1-env
   vector env (the task: starts, targets, obstacles, success, termination) and a full-path
-  :class:`~mmrl.controller.Controller` (poses, inertialization, foot locking, IK) stepped
+  :class:`~mmrl.character.Character` (poses, inertialization, foot locking, IK) stepped
   side by side with the same start, root and actions. Both take the same decisions
-  (``controller.hpp``), so their roots agree and the env's scene is exactly the one the
+  (``decision.hpp``), so their roots agree and the env's scene is exactly the one the
   character moves through.
 
 A *policy* is anything with ``act(obs[N, D], deterministic=True) -> actions[N, A]``:
@@ -25,7 +25,7 @@ from typing import Any, Dict, List, Optional
 import numpy as np
 
 from . import metrics
-from .controller import Controller
+from .character import Character
 from .motion.database import POSE_DIM, Database
 from .tasks import Task
 
@@ -148,7 +148,7 @@ class FullPath:
         scene: also record the task's scene (obstacles, sensor maps, hit points) per step;
         continuous: at an episode's end keep the character where it is (the caller then
             calls :meth:`continue_from_character`) instead of moving it to the env's new start;
-        the rest: :class:`~mmrl.controller.Controller` options.
+        the rest: :class:`~mmrl.character.Character` options.
     """
 
     def __init__(self, task: Task, db: Database, *, config=None, stage: Optional[int] = None, seed: int = 0,
@@ -159,7 +159,7 @@ class FullPath:
         self.env = task.make_vector_env(1, db=db, config=config, num_threads=1)
         self.config = self.env.config
         self.stage = apply_stage(task, self.env, stage)
-        self.ctrl = Controller(db, frames_per_step=self.config.frames_per_step,
+        self.ctrl = Character(db, frames_per_step=self.config.frames_per_step,
                                inertialization_halflife=inertialization_halflife, ik=ik, foot_locking=foot_locking,
                                fast=fast, action_limit_std=self.config.action_limit_std, record=record,
                                transition_cost=self.config.transition_cost)

@@ -1,8 +1,8 @@
-// A motion-matching character: the decision rule and root playback of controller.hpp, plus
+// A motion-matching character: the decision rule and root playback of decision.hpp, plus
 // (on the full path) world-space poses with inertialization, foot locking and leg IK.
 //
-// Decisions and root motion are exactly those of controller.hpp (controller_query,
-// controller_match, root_advance), so the fast path (poses = false, used for training) and
+// Decisions and root motion are exactly those of decision.hpp (decision_query,
+// decision_match, root_advance), so the fast path (poses = false, used for training) and
 // the full path produce the same matches and the same root trajectory for the same queries.
 //
 // Poses. The database frame f is stored in the database's world, where its character frame
@@ -31,7 +31,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "mmrl/controller.hpp"
+#include "mmrl/decision.hpp"
 #include "mmrl/ik.hpp"
 #include "mmrl/stitch.hpp"
 
@@ -47,8 +47,8 @@ struct CharacterOptions {
   float lock_release_distance = 0.5f;    // meters between locked and animated ankle
   float lock_blend_time = 0.2f;          // seconds to blend a lock out (locking is immediate)
   float action_limit_std = 3.0f;         // trajectory clipped like PlaneVecEnv; <= 0: not clipped
-  float transition_cost = 0.0f;          // continuation bias (controller.hpp); 0: the paper's rule
-  std::vector<float> clip_costs;         // per clip, added to its frames' match cost (controller.hpp's ClipCostFilter)
+  float transition_cost = 0.0f;          // transition cost (decision.hpp); 0: the paper's rule
+  std::vector<float> clip_costs;         // per clip, added to its frames' match cost (decision.hpp's ClipCostFilter)
 };
 
 // Global positions (J x 3, meters) of database frame f in the database's world.
@@ -61,7 +61,7 @@ class Character {
   Character(const Database& db, const Matcher& matcher, const CharacterOptions& options);
 
   const CharacterOptions& options() const { return options_; }
-  // Changes the continuation bias of the next matches (finite, >= 0; else std::invalid_argument):
+  // Changes the transition cost of the next matches (finite, >= 0; else std::invalid_argument):
   // a task may vary it per decision (the obstacles task's bias_yields).
   void set_transition_cost(float cost);
   int num_joints() const { return J_; }
@@ -72,7 +72,7 @@ class Character {
 
   // One step with a 12-d normalized trajectory (finite; checked by the caller): decide, then play.
   void step(const float* trajectory);
-  // The decision alone (controller.hpp's controller_decide with this character's options):
+  // The decision alone (decision.hpp's decision_for_action with this character's options):
   // the frame to play from, and its cost. Changes nothing.
   int64_t decide(const float* trajectory, float* cost = nullptr) const;
   // Plays a decision made elsewhere (the batched env's, so the full path never decides again):

@@ -190,18 +190,18 @@ class KDTree {
   }
 
   // Nearest row, starting from a known candidate: bound_index's distance (any row of the
-  // borrowed array, -1 for none) minus bound_margin (>= 0) is the starting best, and only an
+  // borrowed array, -1 for none) minus transition_cost (>= 0) is the starting best, and only an
   // allowed row strictly closer than that replaces it (ties keep the bound): with a margin,
   // another row must beat the bound by more than the margin. Returns the index (-1 if none)
   // and its own cost (the bound's true distance when it is kept).
   int64_t nearest_with_bound(const float* query, int64_t bound_index, float* out_cost,
-                             const SearchFilter& filter = {}, float bound_margin = 0.0f) const {
+                             const SearchFilter& filter = {}, float transition_cost = 0.0f) const {
     if (query == nullptr) throw std::invalid_argument("KDTree::nearest_with_bound: null query");
     if (bound_index < -1 || bound_index >= n_)
       throw std::out_of_range("KDTree::nearest_with_bound: bound_index " + std::to_string(bound_index) +
                               " is outside [-1, " + std::to_string(n_) + ")");
-    if (!(bound_margin >= 0.0f) || !std::isfinite(bound_margin))
-      throw std::invalid_argument("KDTree::nearest_with_bound: bound_margin must be finite and >= 0");
+    if (!(transition_cost >= 0.0f) || !std::isfinite(transition_cost))
+      throw std::invalid_argument("KDTree::nearest_with_bound: transition_cost must be finite and >= 0");
     int64_t idx = -1;
     float cost = std::numeric_limits<float>::infinity();
     float bound_cost = cost;
@@ -212,7 +212,7 @@ class KDTree {
       bound_cost = filtered_cost(sqdist_row(query, points_ + bound_index * dim_, dim_), filter.candidates, bound_index);
       if (bound_cost < std::numeric_limits<float>::infinity()) {
         idx = bound_index;
-        cost = bound_cost - bound_margin;
+        cost = bound_cost - transition_cost;
         bound_set = true;
       }
     }

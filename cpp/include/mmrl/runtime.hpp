@@ -33,7 +33,7 @@
 
 namespace mmrl {
 
-// The controller file's task. The decision itself (observation, continuation bias, candidate
+// The controller file's task. The decision itself (observation, transition cost, candidate
 // filters, match) is the training env's own: each character runs a one-env env of the task's
 // core (tasks/plane.hpp or tasks/obstacles.hpp) with this config, fed the character's state.
 struct RuntimeTask {

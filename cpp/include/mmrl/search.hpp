@@ -42,7 +42,7 @@ int brute_force_knn(const float* points, int64_t num_points, int dim, const floa
 // there is no bound) and writes its cost.
 int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                           const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
-                          float* out_cost, float bound_margin = 0.0f, const CandidateFilter* candidates = nullptr);
+                          float* out_cost, float transition_cost = 0.0f, const CandidateFilter* candidates = nullptr);
 
 struct MatcherOptions {
   int leaf_size = 16;                // rows per KD-tree leaf (a sweep in bench/ picks this)
@@ -63,7 +63,7 @@ class Matcher {
   // One query (dim floats). See brute_force_match for the semantics; exclude window and
   // bound_index are in original row numbers. out_cost may be null.
   int64_t match(const float* query, int64_t exclude_lo = 0, int64_t exclude_hi = 0, int64_t bound_index = -1,
-                float* out_cost = nullptr, float bound_margin = 0.0f,
+                float* out_cost = nullptr, float transition_cost = 0.0f,
                 const CandidateFilter* candidates = nullptr) const;
 
   // M queries (M x dim row-major) across the pool. Per-query exclude windows and bound

@@ -33,7 +33,7 @@
 #include <stdexcept>
 #include <vector>
 
-#include "mmrl/controller.hpp"
+#include "mmrl/decision.hpp"
 #include "mmrl/rng.hpp"
 #include "mmrl/tasks/task_config.hpp"
 #include "mmrl/threadpool.hpp"
@@ -58,7 +58,7 @@ struct TargetEnvState {
   int64_t last_match = -1;  // frame chosen by the last match
   bool last_transition = false;
   float last_cost = 0;  // squared distance of the last match (normalized, weighted feature space)
-  float last_transition_cost = 0;  // the continuation bias the last match used
+  float last_transition_cost = 0;  // the transition cost the last match used
   // Squared normalized, weighted distance between the pose features (kPoseDim) of the
   // continuation and of the last match's frame; 0 without a transition.
   float last_pose_jump = 0;
@@ -72,7 +72,7 @@ struct TargetEnvState {
   bool last_step_transition = false;
   float last_step_cost = 0;
   int64_t last_step_match = -1;  // the frame the last step's match chose, kept like last_step_frames
-  // The continuation bias the last step's match used (the config's transition_cost, or what
+  // The transition cost the last step's match used (the config's transition_cost, or what
   // the task's decision_transition_cost made of it); kept like last_step_frames.
   float last_step_transition_cost = 0;
   // NEXT_STEP autoreset: the episode ended on the last step and the next step resets it.
@@ -199,14 +199,14 @@ class TargetVecEnv {
   }
 
   // The decision of env i now for `action` (12 normalized floats, finite): the task's
-  // continuation bias and candidate filter (decision_transition_cost, candidate_filter),
-  // controller_decide, and the frame to play from. Records last_match, last_transition,
+  // transition cost and candidate filter (decision_transition_cost, candidate_filter),
+  // decision_for_action, and the frame to play from. Records last_match, last_transition,
   // last_cost, last_transition_cost and last_pose_jump; changes nothing else. A step calls it
   // first; the engine runtime calls it on a one-env env to decide as training did.
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
     s.last_transition_cost = task().decision_transition_cost(i);
-    const int64_t j = controller_decide(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost,
+    const int64_t j = decision_for_action(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost,
                                         task().candidate_filter(i));
     s.last_transition = (j != s.frame);
     s.last_match = j;
@@ -346,12 +346,12 @@ class TargetVecEnv {
   // Hook of set_state for tasks whose state depends on the root (a task hides it).
   void on_state_set(int) {}
 
-  // The continuation bias of env i's next match (a task hides it to make the bias depend on
+  // The transition cost of env i's next match (a task hides it to make the bias depend on
   // its state): the config's transition_cost.
   float decision_transition_cost(int) const { return config_.transition_cost; }
 
   // The candidate filter of env i's next match (a task hides it to add its own rules): the
-  // config's clip costs (controller.hpp's ClipCostFilter), or none.
+  // config's clip costs (decision.hpp's ClipCostFilter), or none.
   const CandidateFilter* candidate_filter(int) const { return clip_filter_.get(); }
 
   // Distance (meters) from env i's root to its target.

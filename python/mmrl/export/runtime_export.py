@@ -143,7 +143,7 @@ def controller_sections(db, policy, task_name: str, task_config,
     out.update(_numbers("task", numbers))
     clip_costs = getattr(task_config, "clip_costs", "")
     if clip_costs:  # the decision's clip-cost filter, one cost per clip (docs/runtime.md)
-        from ..controller import clip_cost_array
+        from ..character import clip_cost_array
 
         out["task.clip_costs"] = clip_cost_array(clip_costs, db)
     out.update(_numbers("character", dict(CHARACTER_DEFAULTS, **(character or {}))))

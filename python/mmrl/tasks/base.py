@@ -33,7 +33,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..controller import clip_cost_array
+from ..character import clip_cost_array
 from ..motion.database import Database
 from ..motion.sources import resolve_database
 
@@ -65,7 +65,7 @@ class TaskConfig:
     random_heading: bool = True
     """Start with a uniformly random heading (else facing +Z)."""
     transition_cost: float = 0.0
-    """Continuation bias of the match, in squared normalized feature distance: another frame
+    """Transition cost of the match, in squared normalized feature distance: another frame
     replaces the current clip's continuation only when its cost is lower by more than this.
     0 is the paper's rule (any strictly better frame wins)."""
     transition_pose_weight: float = 0.0
@@ -309,7 +309,7 @@ class TargetVectorEnv(VectorEnv):
         return int(match), float(cost)
 
     def last_step_transition_cost(self, i: int) -> float:
-        """The continuation bias env i's last step matched with (a task may vary it per decision)."""
+        """The transition cost env i's last step matched with (a task may vary it per decision)."""
         return float(self._core.last_step_transition_cost(int(i)))
 
     def env_state(self, i: int) -> dict:

@@ -64,7 +64,7 @@ class PlaneEnv(SingleEnv):
 
 #: ``mmrl train plane --preset NAME``. "paper" is the task as written. "quality" (what ``mmrl
 #: train plane`` uses unless told otherwise) keeps the motion clean (docs/quality.md): a
-#: continuation bias of 60 (a jump to another clip
+#: transition cost of 60 (a jump to another clip
 #: must beat the current clip's continuation by that squared normalized distance) and a
 #: discount of 0.97, which buys back the speed the bias costs. On all shared data after 1M
 #: steps (3 seeds): 2.51-2.54 s to target, foot sliding 26-27 cm/s with IK off and 1.6

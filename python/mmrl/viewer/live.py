@@ -26,7 +26,7 @@ from typing import Any, Dict, Optional
 import numpy as np
 
 from .. import metrics
-from ..controller import Controller
+from ..character import Character
 from ..motion.database import POSE_DIM
 from ..rl.policies import JoystickPolicy
 from ..rollout import FullPath, _world_query, policy_actions
@@ -85,7 +85,7 @@ class LiveSession:
 
     def set_options(self, *, ik: Optional[bool] = None, inertialization: Optional[bool] = None) -> None:
         """Switch IK (with foot locking) and inertialization; applied at the next decision by a
-        new Controller on the same frame and root (the C++ options are fixed per character)."""
+        new Character on the same frame and root (the C++ options are fixed per character)."""
         with self._lock:
             self._pending["options"] = (self.ik if ik is None else bool(ik),
                                         self.inertialization if inertialization is None else bool(inertialization))
@@ -176,7 +176,7 @@ class LiveSession:
     def _new_controller(self) -> None:
         old = self.run.ctrl
         frame, (x, z, yaw) = old.frame, old.root
-        self.run.ctrl = Controller(self.db, frames_per_step=self.F,
+        self.run.ctrl = Character(self.db, frames_per_step=self.F,
                                    inertialization_halflife=0.1 if self.inertialization else 0.0, ik=self.ik,
                                    foot_locking=self.ik, action_limit_std=self.config.action_limit_std,
                                    transition_cost=self.config.transition_cost, start_frame=frame,

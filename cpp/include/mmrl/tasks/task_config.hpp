@@ -15,7 +15,7 @@
 
 #include <vector>
 
-#include "mmrl/controller.hpp"
+#include "mmrl/decision.hpp"
 
 namespace mmrl {
 
@@ -28,13 +28,13 @@ struct TaskConfig {
   int max_steps = 100;               // truncation (20 s at 6 frames per step, 30 fps)
   float action_limit_std = 3.0f;     // action box half-width, in standard deviations
   bool random_heading = true;        // start heading uniform in [-pi, pi)
-  float transition_cost = 0.0f;      // continuation bias of the match (controller.hpp); 0: the paper's rule
+  float transition_cost = 0.0f;      // transition cost of the match (decision.hpp); 0: the paper's rule
   // Reward - transition_pose_weight * (the squared normalized, weighted distance between the pose
   // features of the continuation and of the matched frame: what a transition asks the blend
   // to hide; 0 without a transition). 0: the paper's reward.
   float transition_pose_weight = 0.0f;
   // Per clip, added to the match cost of its frames (+inf: never played); empty: none. The
-  // candidate filter of controller.hpp's ClipCostFilter.
+  // candidate filter of decision.hpp's ClipCostFilter.
   std::vector<float> clip_costs;
 };
 

@@ -1,6 +1,6 @@
-"""The motion-matching character controller (C++ ``Character``, see cpp/include/mmrl/character.hpp).
+"""The motion-matching character (C++ ``Character``, see cpp/include/mmrl/character.hpp).
 
-Each :meth:`Controller.step` takes the 12-d trajectory half of a query (the same normalized
+Each :meth:`Character.step` takes the 12-d trajectory half of a query (the same normalized
 units as the plane task's action), forms the full query from the current frame's pose
 features, matches and plays ``frames_per_step`` frames:
 
@@ -32,7 +32,7 @@ def clip_cost_array(spec: str, db: Database, option: str = "clip_costs") -> np.n
     (``fnmatch``), each COST >= 0 in squared normalized feature distance, or ``inf`` (never
     play those clips). Costs of patterns that match the same clip add up. A malformed item, or
     a pattern that matches no clip, raises ValueError naming ``option``. The C++ rule that
-    applies them is ``ClipCostFilter`` (cpp/include/mmrl/controller.hpp)."""
+    applies them is ``ClipCostFilter`` (cpp/include/mmrl/decision.hpp)."""
     if not isinstance(db, Database):
         raise ValueError(f"{option}: needs the database to resolve clip names")
     names = list(db.clip_names)
@@ -87,7 +87,7 @@ class StepResult:
     the fast path): the ankles of the same run with IK off, since IK changes nothing later."""
 
 
-class Controller:
+class Character:
     """A character driven by motion matching.
 
     Args:
@@ -100,7 +100,7 @@ class Controller:
         fast: root motion only (no poses), the training path.
         action_limit_std: trajectories are clipped to mean +- this many std per dimension,
             like the env's action box (0 or None: no clipping).
-        transition_cost: continuation bias of the match (squared normalized distance; 0 is
+        transition_cost: transition cost of the match (squared normalized distance; 0 is
             the paper's rule), like the task option of the same name.
         clip_costs: the decision's clip-cost filter, like the task option of the same name
             (``"PATTERN=COST;..."``, see :func:`clip_cost_array`).
@@ -144,7 +144,7 @@ class Controller:
 
     @property
     def transition_cost(self) -> float:
-        """The continuation bias of the next matches; settable between steps (a task may vary
+        """The transition cost of the next matches; settable between steps (a task may vary
         it per decision, as the obstacles task's ``bias_yields`` does)."""
         return float(self._core.transition_cost)
 
@@ -293,3 +293,13 @@ class Controller:
         out["fps"] = np.float32(self.db.fps)
         out["frames_per_step"] = np.int32(self.frames_per_step)
         return out
+
+
+def __getattr__(name: str):  # mmrl.character.Controller: the old name, deprecated for one release
+    if name == "Controller":
+        import warnings
+
+        warnings.warn("Controller is deprecated and will be removed in the next release; use mmrl.Character",
+                      DeprecationWarning, stacklevel=2)
+        return Character
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,4 +1,4 @@
-#include "mmrl/controller.hpp"
+#include "mmrl/decision.hpp"
 
 #include <cmath>
 #include <stdexcept>

@@ -1,0 +1,128 @@
+// The motion-matching decision and root-motion playback shared by every runtime path.
+//
+// A character is a world-space root (x, z in meters, yaw in radians) and a current
+// database frame: the frame whose pose is shown now. One controller step:
+//   1. query = [normalized pose part of the current frame (15), trajectory part (12)];
+//   2. match: the nearest valid frame j outside a window of kMatchExcludeWindow frames on
+//      either side of the current frame (in its clip). The current frame itself is the
+//      starting best when it is a valid match, so playback continues unless another frame
+//      is strictly better (the continuation rule), or with a transition cost m > 0 better by
+//      more than m (squared normalized distance): the transition cost that keeps a clip
+//      playing unless a jump buys a clearly better match. The window stops the search from
+//      jumping a few frames back or ahead in the same clip, which can trap a character in
+//      a loop of one step's frames;
+//      A candidate filter (kdtree.hpp's CandidateFilter: the decision's one extension
+//      point) may refuse candidates or add to their cost, the continuation's included; the
+//      match is the least filtered cost. When a filter refuses every candidate the match is
+//      made without it, so a character always has a frame to play;
+//   3. playback: frames j+1 .. j+n are shown; the root advances by the database root
+//      deltas of frames j .. j+n-1 (each expressed in its own character frame), and the
+//      current frame becomes j+n.
+// A valid j has j + 30 inside its clip, so playback of n <= 30 frames never leaves the clip.
+// The fast path (training) is exactly this; the full path adds poses on top of it.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <vector>
+
+#include "mmrl/database.hpp"
+#include "mmrl/search.hpp"
+
+namespace mmrl {
+
+struct RootState {
+  float x = 0.0f, z = 0.0f, yaw = 0.0f;
+};
+
+// Applies one frame of root motion: delta = (dx, dz, dyaw) in the character frame.
+inline void root_advance(RootState& r, const float* delta) {
+  const Vec2 w = local_to_world_xz(delta[0], delta[1], r.yaw);
+  r.x += w.x();
+  r.z += w.y();
+  r.yaw = wrap_angle(r.yaw + delta[2]);
+}
+
+// Writes the 27-d normalized query for the current frame and a normalized trajectory part.
+inline void decision_query(const Database& db, int64_t frame, const float* trajectory, float* query) {
+  const float* pose = &db.normalized[static_cast<size_t>(frame) * kFeatureDim];
+  for (int k = 0; k < kPoseDim; ++k) query[k] = pose[k];
+  for (int k = 0; k < kTrajectoryDim; ++k) query[kPoseDim + k] = trajectory[k];
+}
+
+// The most frames one decision may play: a valid match frame j has j + 30 inside its clip
+// (the trajectory's last horizon), so playback of up to this many frames never leaves it.
+constexpr int kMaxFramesPerStep = kTrajectoryOffsets[2];
+
+// Throws std::invalid_argument unless 1 <= frames_per_step <= kMaxFramesPerStep: the one
+// check of this number, for the envs, the Character and the runtime.
+void check_frames_per_step(int frames_per_step);
+
+// Frames on either side of the current one (within its clip) that a search skips.
+constexpr int kMatchExcludeWindow = 20;
+
+// The match with the continuation rule (see above). Returns the frame to play from.
+inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_t frame, const float* query,
+                                float* cost = nullptr, float transition_cost = 0.0f,
+                                const CandidateFilter* filter = nullptr) {
+  const int64_t bound = (frame >= 0 && db.valid[frame]) ? frame : -1;
+  int64_t lo = 0, hi = 0;
+  if (frame >= 0) {
+    const int c = db.frame_clip[frame];
+    lo = std::max<int64_t>(db.clip_ranges[c * 2], frame - kMatchExcludeWindow);
+    hi = std::min<int64_t>(db.clip_ranges[c * 2 + 1], frame + kMatchExcludeWindow + 1);
+  }
+  const int64_t j = matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
+  if (j >= 0 || filter == nullptr) return j;
+  return matcher.match(query, lo, hi, bound, cost, transition_cost);  // the filter refused everything
+}
+
+// One decision: clips the trajectory action to the box [low, high] (12 each), forms the
+// query for the current frame and matches it. Returns the frame to play from.
+inline int64_t decision_for_action(const Database& db, const Matcher& matcher, int64_t frame, const float* action,
+                                 const float* low, const float* high, float* cost = nullptr,
+                                 float transition_cost = 0.0f, const CandidateFilter* filter = nullptr) {
+  float query[kFeatureDim];
+  float traj[kTrajectoryDim];
+  for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high[k], std::max(low[k], action[k]));
+  decision_query(db, frame, traj, query);
+  return decision_match(db, matcher, frame, query, cost, transition_cost, filter);
+}
+
+// The clip-cost rule, a candidate filter that every decision path (the batched envs, the
+// full path, the engine runtime) builds from one option: costs[c] is added to the match cost
+// of every frame of clip c (squared normalized feature distance; +inf: clip c never plays,
+// unless the filter refuses every frame). No costs: the filter is off (active() is false).
+class ClipCostFilter final : public CandidateFilter {
+ public:
+  ClipCostFilter() = default;
+  // Throws std::invalid_argument unless costs is empty or has one entry per clip of db, each
+  // >= 0 (+inf allowed); the message names `option`.
+  ClipCostFilter(const Database& db, std::vector<float> costs, const char* option = "clip_costs");
+  bool active() const { return !costs_.empty(); }
+  // The filter to hand to decision_for_action: this one, or null when off.
+  const CandidateFilter* get() const { return active() ? this : nullptr; }
+  float extra_cost(int64_t row) const override { return costs_[static_cast<size_t>(frame_clip_[row])]; }
+
+ private:
+  const int32_t* frame_clip_ = nullptr;
+  std::vector<float> costs_;
+};
+
+// Normalized trajectory features <-> raw (meters, unit directions) in the character frame.
+inline void trajectory_denormalize(const Database& db, const float* normalized, float* raw) {
+  const auto scale = db.normalization.column_scale();
+  for (int k = 0; k < kTrajectoryDim; ++k)
+    raw[k] = normalized[k] * scale[kPoseDim + k] + db.normalization.mean[kPoseDim + k];
+}
+inline void trajectory_normalize(const Database& db, const float* raw, float* normalized) {
+  const auto scale = db.normalization.column_scale();
+  for (int k = 0; k < kTrajectoryDim; ++k)
+    normalized[k] = (raw[k] - db.normalization.mean[kPoseDim + k]) / scale[kPoseDim + k];
+}
+
+// Per-dimension box for trajectory actions in normalized units: mean +- limit_std * std
+// over the valid frames (low, high: 12 each).
+void trajectory_action_box(const Database& db, float limit_std, float* low, float* high);
+
+}  // namespace mmrl
