@@ -205,6 +205,16 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
           py::arg("index"), py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"),
           "Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.")
       .def(
+          "draw_target_around_root",
+          [](Wrapper& s, int i, float half_extent) {
+            const int e = checked_env_index(s, i);
+            s.env.draw_target_around_root(e, half_extent);
+            return py::make_tuple(s.env.state(e).target_x, s.env.state(e).target_z);
+          },
+          py::arg("index"), py::arg("half_extent"),
+          "Draws env i a new target by the episode start's rule around where it stands now (its own RNG); "
+          "returns it (world x, z).")
+      .def(
           "set_target",
           [](Wrapper& s, int i, float x, float z) { s.env.set_target(checked_env_index(s, i), x, z); },
           py::arg("index"), py::arg("x"), py::arg("z"), "Moves env i's target (world meters).");

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose']
+__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -295,6 +295,10 @@ class PlaneVecEnv:
     def current_frames(self, out: typing.Any) -> None:
         """
         Writes each environment's current database frame into out (int64, N).
+        """
+    def draw_target_around_root(self, index: typing.SupportsInt | typing.SupportsIndex, half_extent: typing.SupportsFloat | typing.SupportsIndex) -> tuple[float, float]:
+        """
+        Draws env i a new target by the episode start's rule around where it stands now (its own RNG); returns it (world x, z).
         """
     def last_step_decision(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[int, float]:
         """
@@ -674,6 +678,10 @@ class ObstacleVecEnv:
         """
         Writes each environment's current database frame into out (int64, N).
         """
+    def draw_target_around_root(self, index: typing.SupportsInt | typing.SupportsIndex, half_extent: typing.SupportsFloat | typing.SupportsIndex) -> tuple[float, float]:
+        """
+        Draws env i a new target by the episode start's rule around where it stands now (its own RNG); returns it (world x, z).
+        """
     def last_step_decision(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[int, float]:
         """
         (match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.
@@ -861,7 +869,12 @@ def motion_from_pose(db: Database, local_translations: typing.Any, local_rotatio
     """
 FEATURE_BLOCKS: list = [('foot_position', [0, 1, 2, 3, 4, 5], 0.75), ('foot_velocity', [6, 7, 8, 9, 10, 11], 1.0), ('hips_velocity', [12, 13, 14], 1.0), ('trajectory_position', [15, 16, 19, 20, 23, 24], 1.0), ('trajectory_direction', [17, 18, 21, 22, 25, 26], 1.5)]
 FEATURE_DIM: int = 27
+MATCH_EXCLUDE_WINDOW: int = 20
+MAX_FRAMES_PER_STEP: int = 30
 OBSTACLE_MAP_SIDE: int = 16
 POSE_DIM: int = 15
 TRAJECTORY_DIM: int = 12
+TRAJECTORY_DIRECTION_COLUMNS: tuple = (17, 21, 25)
+TRAJECTORY_OFFSETS: tuple = (10, 20, 30)
+TRAJECTORY_POSITION_COLUMNS: tuple = (15, 19, 23)
 TargetTaskConfig = PlaneTaskConfig

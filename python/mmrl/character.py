@@ -114,8 +114,9 @@ class Character:
                  clip_costs: str = ""):
         if not isinstance(db, Database):
             raise TypeError(f"db: expected an mmrl.Database, got {type(db).__name__}")
-        if not isinstance(frames_per_step, (int, np.integer)) or not 1 <= frames_per_step <= 30:
-            raise ValueError(f"frames_per_step must be an int between 1 and 30, got {frames_per_step!r}")
+        if not isinstance(frames_per_step, (int, np.integer)) or not 1 <= frames_per_step <= _core.MAX_FRAMES_PER_STEP:
+            raise ValueError(f"frames_per_step must be an int between 1 and {_core.MAX_FRAMES_PER_STEP}, "
+                             f"got {frames_per_step!r}")
         halflife = float(inertialization_halflife or 0.0)
         if not np.isfinite(halflife) or halflife < 0:
             raise ValueError(f"inertialization_halflife must be >= 0 seconds, got {inertialization_halflife!r}")

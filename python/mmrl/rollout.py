@@ -180,6 +180,14 @@ class FullPath:
         self.obs = self.env.set_target(0, x, z)
         self.target = np.array([x, z], np.float64)
 
+    def draw_target_around_character(self) -> np.ndarray:
+        """A new world target drawn by the task's episode-start rule (uniform in the square of
+        ``target_half_extent``, not too close) around where the character stands, from the
+        env's own random stream (the C++ rule, not a copy of it)."""
+        x, z, yaw = self.ctrl.root
+        self.env.set_state(0, self.ctrl.frame, x, z, yaw)
+        return np.array(self.env._core.draw_target_around_root(0, float(self.config.target_half_extent)), np.float64)
+
     def continue_from_character(self, target) -> None:
         """Start the next episode where the character stands (same frame and root) with a new
         world ``target``, instead of the env's fresh start: one continuous motion."""
@@ -354,7 +362,6 @@ def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int
                    inertialization_halflife=inertialization_halflife, record=True, scene=True,
                    continuous=continuous)
     low, high = run.env.single_action_space.low, run.env.single_action_space.high
-    rng = np.random.default_rng(seed)
     total = max(2, int(round(seconds * db.fps)))
     log = _FollowLog(run)
     while log.frames_so_far() < total:
@@ -365,19 +372,10 @@ def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int
         if out["done"]:
             log.end_episode(out)
             if continuous:
-                run.continue_from_character(_target_around(rng, run.config, run.ctrl.root))
+                run.continue_from_character(run.draw_target_around_character())
             elif log.frames_so_far() < total:
                 log.start_episode()
     return log.result()
-
-
-def _target_around(rng: np.random.Generator, config, root) -> np.ndarray:
-    """A target drawn like the task's (uniform in the square, not too close), around ``root``."""
-    h = config.target_half_extent
-    while True:
-        t = rng.uniform(-h, h, size=2)
-        if np.hypot(t[0], t[1]) >= config.min_target_distance:
-            return t + np.array(root[:2], np.float64)
 
 
 class _FollowLog:

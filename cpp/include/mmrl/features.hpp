@@ -22,6 +22,9 @@ constexpr int kFeatureDim = 27;
 constexpr int kPoseDim = 15;
 constexpr int kTrajectoryDim = 12;
 constexpr int kTrajectoryOffsets[3] = {10, 20, 30};
+// Columns of horizon k's root position (x, z) and facing direction (x, z) in a feature row.
+constexpr int trajectory_position_column(int k) { return kPoseDim + 4 * k; }
+constexpr int trajectory_direction_column(int k) { return kPoseDim + 4 * k + 2; }
 constexpr int kNumBlocks = 5;
 
 // A block shares one normalisation scale and one weight. Columns need not be contiguous

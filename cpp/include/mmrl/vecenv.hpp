@@ -113,16 +113,22 @@ struct TargetStepBuffers {
 // Draws an episode start shared by the target tasks: a uniformly random valid frame, the
 // root at the origin with a random (or zero) heading, and a target uniform in the square
 // [-half_extent, half_extent]^2, redrawn while closer than min_target_distance.
+// A target offset (meters) uniform in [-half_extent, half_extent]^2, redrawn while closer than
+// min_target_distance: the episode start's rule, also for a new target where a character stands.
+inline void draw_target_offset(Rng& rng, float half_extent, float min_target_distance, float* dx, float* dz) {
+  do {
+    *dx = rng.uniform(-half_extent, half_extent);
+    *dz = rng.uniform(-half_extent, half_extent);
+  } while (std::hypot(*dx, *dz) < min_target_distance);
+}
+
 inline void draw_episode_start(Rng& rng, const std::vector<int64_t>& valid_frames, bool random_heading,
                                float half_extent, float min_target_distance, int64_t* frame, RootState* root,
                                float* target_x, float* target_z) {
   *frame = valid_frames[rng.below(valid_frames.size())];
   *root = RootState{};
   root->yaw = random_heading ? rng.uniform(-kPi, kPi) : 0.0f;
-  do {
-    *target_x = rng.uniform(-half_extent, half_extent);
-    *target_z = rng.uniform(-half_extent, half_extent);
-  } while (std::hypot(*target_x, *target_z) < min_target_distance);
+  draw_target_offset(rng, half_extent, min_target_distance, target_x, target_z);
 }
 
 // The checks every target task makes (std::invalid_argument): num_envs >= 1, the config's
@@ -173,6 +179,18 @@ class TargetVecEnv {
     s.last_transition_cost = 0;
     s.last_pose_jump = 0;
     if (obs_row) task().observe(i, obs_row);
+  }
+
+  // A new target for env i by the episode start's rule, around where its character stands now
+  // (half_extent > min_target_distance, else std::invalid_argument), from env i's RNG; sets it.
+  void draw_target_around_root(int i, float half_extent) {
+    if (!(half_extent > config_.min_target_distance) || !std::isfinite(half_extent))
+      throw std::invalid_argument("half_extent must be finite and larger than min_target_distance");
+    State& s = envs_[i];
+    float dx = 0, dz = 0;
+    draw_target_offset(s.rng, half_extent, config_.min_target_distance, &dx, &dz);
+    s.target_x = s.root.x + dx;
+    s.target_z = s.root.z + dz;
   }
 
   // Moves env i's target (world meters; finite, else std::invalid_argument).

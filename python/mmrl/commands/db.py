@@ -6,6 +6,8 @@ import time
 
 import numpy as np
 
+from .. import _core
+
 from ..motion.database import DEFAULT_FPS
 from ..errors import InputError
 from ..motion.sources import load_any
@@ -104,8 +106,9 @@ def cmd_info(args: argparse.Namespace) -> int:
           f"{floor['foot_sliding_cm_per_s']:.2f} cm/s (p95 {floor['foot_sliding_p95_cm_per_s']:.2f}) over contact "
           f"frames, pose jump p99 {floor['pose_jump_p99_cm']:.2f} cm (mmrl.metrics)")
     f = db.features[db.valid_mask]
-    speed = np.hypot(f[:, 23], f[:, 24])
-    turn = np.degrees(np.arctan2(f[:, 25], f[:, 26]))
+    p, d = _core.TRAJECTORY_POSITION_COLUMNS[2], _core.TRAJECTORY_DIRECTION_COLUMNS[2]  # the +30-frame sample
+    speed = np.hypot(f[:, p], f[:, p + 1])
+    turn = np.degrees(np.arctan2(f[:, d], f[:, d + 1]))
     print(f"speed +1 s   median {np.median(speed):.2f} m/s, 5-95% {np.percentile(speed, 5):.2f}-"
           f"{np.percentile(speed, 95):.2f} m/s")
     print(f"turn +1 s    5-95% {np.percentile(turn, 5):.0f} to {np.percentile(turn, 95):.0f} deg")

@@ -404,7 +404,7 @@ class Database:
             q = self.normalize(q)
         return self.matcher.match(np.ascontiguousarray(q), bound_indices, exclude)
 
-    def controller_windows(self, frames: np.ndarray, radius: int = 20) -> np.ndarray:
+    def controller_windows(self, frames: np.ndarray, radius: int = _core.MATCH_EXCLUDE_WINDOW) -> np.ndarray:
         """The rows a controller at ``frames`` skips: ``radius`` frames either side, within
         each frame's clip ((M, 2) int64 [lo, hi)), as in the runtime's match rule."""
         frames = index_array(frames, "frames", (None,), high=self.num_frames, what="the database's frames")

@@ -16,8 +16,9 @@ from ..motion.database import POSE_DIM, TRAJECTORY_DIM, Database
 
 #: Observation sizes the scripted policies read: the plane task's and the moving-obstacles task's.
 OBSERVATION_DIMS = (POSE_DIM + 2, int(_core.ObstacleVecEnv.obs_dim))
-#: Seconds ahead of the three trajectory samples (+10, +20, +30 frames at 30 fps).
-TRAJECTORY_FRAMES = (10, 20, 30)
+#: Frames ahead of the three trajectory samples (+10, +20, +30), from the C++ feature layout.
+TRAJECTORY_FRAMES = tuple(_core.TRAJECTORY_OFFSETS)
+_LAST_POSITION = _core.TRAJECTORY_POSITION_COLUMNS[2]  # x of the +30-frame position (z next)
 
 
 def database_speeds(db: Database) -> Tuple[float, float]:
@@ -28,7 +29,7 @@ def database_speeds(db: Database) -> Tuple[float, float]:
     of its group: for the Bandai data about 1.1-1.2 m/s and 2.7-2.8 m/s.
     """
     f = db.features[db.valid_mask]
-    speed = np.hypot(f[:, 23], f[:, 24]) * db.fps / TRAJECTORY_FRAMES[2]
+    speed = np.hypot(f[:, _LAST_POSITION], f[:, _LAST_POSITION + 1]) * db.fps / TRAJECTORY_FRAMES[2]
     lo, hi = np.percentile(speed, 10), np.percentile(speed, 90)
     for _ in range(20):
         split = 0.5 * (lo + hi)
