@@ -204,3 +204,17 @@ def test_bad_specs_name_the_option(db, tmp_path):
         write_sections(path, dict(sections, **{"task.clip_costs": bad}))
         with pytest.raises(ValueError, match=fragment):
             _core.RuntimeController.load(str(path))
+
+
+def test_patterns_match_a_clip_by_its_name_file_name_or_stem(db):
+    import os
+
+    name = db.clip_names[3]
+    stem = os.path.splitext(os.path.basename(name))[0]
+    want = clip_cost_array(f"{name}=2", db)
+    assert np.count_nonzero(want) >= 1
+    for pattern in (os.path.basename(name), stem, f"*{stem[-6:]}"):
+        got = clip_cost_array(f"{pattern}=2", db)
+        assert np.all(got[want > 0] == 2.0), pattern
+    both = clip_cost_array(f"{stem}=2;{stem}=inf", db)  # costs of patterns add up
+    assert np.all(np.isinf(both[want > 0]))

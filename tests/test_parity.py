@@ -14,27 +14,12 @@ The configs switch on every rule that changes a match: a transition cost, the ob
 bias_yields with a look-ahead and a hit disc, and a clip-cost filter."""
 import numpy as np
 import pytest
-import torch
 
 import mmrl
 from mmrl import _core
 from mmrl.export.runtime_export import write_controller
-from mmrl.rl.networks import PlaneActorCritic
-from mmrl.rl.normalizers import ObsNormalizer
-from mmrl.rl.trained_policy import Policy
 from mmrl.rollout import FullPath, apply_stage
-from test_runtime import random_obstacle_policy
-
-
-def random_plane_policy(seed):
-    torch.manual_seed(seed)
-    model = PlaneActorCritic(17, 12)
-    with torch.no_grad():
-        model.actor[-1].weight.normal_(0, 0.5)
-    norm = ObsNormalizer(17, True, None, 10.0, torch.device("cpu"))
-    norm.rms.var = np.full(17, 4.0)
-    norm.refresh()
-    return Policy(model, norm, torch.device("cpu"))
+from test_runtime import random_obstacle_policy, random_plane_policy
 
 
 def configs(db):

@@ -77,8 +77,8 @@ class TaskConfig:
     """Costs added to the match cost of chosen clips, the decision's candidate filter (one C++
     rule, ClipCostFilter, honoured by the training env, the full path, ``mmrl play`` and the
     engine runtime): ``"PATTERN=COST;PATTERN=COST"``, each PATTERN a shell-style pattern of clip
-    names (``fnmatch``), each COST >= 0 in squared normalized feature distance or ``inf`` (never
-    play those clips). Costs of patterns matching the same clip add up; a pattern that matches
+    names (``fnmatch``; a clip's file name, with or without its extension, matches too), each
+    COST >= 0 in squared normalized feature distance or ``inf`` (never play those clips). Costs of patterns matching the same clip add up; a pattern that matches
     no clip is an error. Empty: no filter."""
 
     def replace(self, **overrides) -> "TaskConfig":
