@@ -118,6 +118,31 @@ std::vector<std::string> borrowed_array_names(const Database& db) {
 
 }  // namespace
 
+// The feature layout and the constants Python needs, from the C++ that defines them
+// (features.hpp, decision.hpp).
+void bind_layout_constants(py::module_& m) {
+  m.attr("FEATURE_DIM") = kFeatureDim;
+  m.attr("POSE_DIM") = kPoseDim;
+  m.attr("TRAJECTORY_DIM") = kTrajectoryDim;
+  py::list blocks;
+  for (const auto& b : feature_blocks()) {
+    std::vector<int> cols(b.columns.begin(), b.columns.begin() + b.size);
+    blocks.append(py::make_tuple(b.name, cols, b.default_weight));
+  }
+  m.attr("FEATURE_BLOCKS") = blocks;
+  py::list offsets, positions, directions;
+  for (int k = 0; k < 3; ++k) {
+    offsets.append(kTrajectoryOffsets[k]);
+    positions.append(trajectory_position_column(k));
+    directions.append(trajectory_direction_column(k));
+  }
+  m.attr("TRAJECTORY_OFFSETS") = py::tuple(offsets);               // frames ahead of the three samples
+  m.attr("TRAJECTORY_POSITION_COLUMNS") = py::tuple(positions);    // x column of each sample's position (z next)
+  m.attr("TRAJECTORY_DIRECTION_COLUMNS") = py::tuple(directions);  // x column of each sample's direction (z next)
+  m.attr("MATCH_EXCLUDE_WINDOW") = kMatchExcludeWindow;
+  m.attr("MAX_FRAMES_PER_STEP") = kMaxFramesPerStep;
+}
+
 void bind_database(py::module_& m) {
   py::class_<Database>(m, "Database", "Flat per-frame arrays of a motion database (see mmrl.Database).")
       .def_static(
@@ -188,27 +213,7 @@ void bind_database(py::module_& m) {
             return out;
           },
           py::arg("weights"), "A new Database with other block weights (same mean and block scales).");
-  m.attr("FEATURE_DIM") = kFeatureDim;
-  m.attr("POSE_DIM") = kPoseDim;
-  m.attr("TRAJECTORY_DIM") = kTrajectoryDim;
-  // The constants Python needs, from the C++ that defines them (features.hpp, decision.hpp).
-  py::list offsets, positions, directions;
-  for (int k = 0; k < 3; ++k) {
-    offsets.append(kTrajectoryOffsets[k]);
-    positions.append(trajectory_position_column(k));
-    directions.append(trajectory_direction_column(k));
-  }
-  m.attr("TRAJECTORY_OFFSETS") = py::tuple(offsets);               // frames ahead of the three samples
-  m.attr("TRAJECTORY_POSITION_COLUMNS") = py::tuple(positions);    // x column of each sample's position (z next)
-  m.attr("TRAJECTORY_DIRECTION_COLUMNS") = py::tuple(directions);  // x column of each sample's direction (z next)
-  m.attr("MATCH_EXCLUDE_WINDOW") = kMatchExcludeWindow;
-  m.attr("MAX_FRAMES_PER_STEP") = kMaxFramesPerStep;
-  py::list blocks;
-  for (const auto& b : feature_blocks()) {
-    std::vector<int> cols(b.columns.begin(), b.columns.begin() + b.size);
-    blocks.append(py::make_tuple(b.name, cols, b.default_weight));
-  }
-  m.attr("FEATURE_BLOCKS") = blocks;
+  bind_layout_constants(m);
 }
 
 }  // namespace mmrl

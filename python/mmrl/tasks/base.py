@@ -250,8 +250,9 @@ class TargetVectorEnv(VectorEnv):
         """:meth:`step` with the observations written straight into ``obs_out`` (float32, C-contiguous,
         (num_envs, obs_dim); a trainer's rollout row, say) and returned as they are: no copy.
         Non-finite actions raise ValueError from the C++ step, the one place they are checked.
-        A subclass that overrides :meth:`step` gets its own step called (and one copy)."""
-        if type(self).step is not TargetVectorEnv.step:
+        A subclass, or an instance, that overrides :meth:`step` (a wrapper that logs or slows
+        steps) gets its own step called (and one copy)."""
+        if type(self).step is not TargetVectorEnv.step or "step" in vars(self):
             obs, *rest = self.step(actions)
             obs_out[...] = obs
             return (obs_out, *rest)
