@@ -2,21 +2,22 @@
 
 #include <algorithm>
 #include <chrono>
+#include <thread>
 
 namespace mmrl {
 
 namespace {
 
-// Spins until done() or kSpinMicros have passed; true if done() came true.
+// Spins until done() or `micros` have passed; true if done() came true. Each turn yields the
+// core (sched_yield): a spinning thread takes no time from another runnable thread (a second
+// training on the same cores, torch's threads), and costs nothing when the core is idle.
 template <class Done>
 bool spin_until(Done&& done, int micros) {
   const auto until = std::chrono::steady_clock::now() + std::chrono::microseconds(micros);
   for (int k = 0;; ++k) {
     if (done()) return true;
-    if ((k & 63) == 63 && std::chrono::steady_clock::now() >= until) return false;
-#if defined(__x86_64__) || defined(__i386__)
-    __builtin_ia32_pause();
-#endif
+    if ((k & 7) == 7 && std::chrono::steady_clock::now() >= until) return false;
+    std::this_thread::yield();
   }
 }
 

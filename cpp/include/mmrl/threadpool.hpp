@@ -41,9 +41,10 @@ class ThreadPool {
   std::condition_variable start_cv_, done_cv_;
   // Jobs come in bursts (a batched env steps every few hundred microseconds, with 35-45 us of
   // Python between steps): a worker that finished one, and the caller waiting for the workers,
-  // spin for up to kSpinMicros before sleeping on the condition variables, which saves a
-  // wake-up (tens of microseconds on a loaded machine) per job; 50 us was too short to catch
-  // most steps (bench/README.md). Written under mutex_; read without it while spinning.
+  // wait for up to kSpinMicros, yielding the core each turn, before sleeping on the condition
+  // variables, which saves a wake-up (tens of microseconds on a loaded machine) per job; 50 us
+  // was too short to catch most steps (bench/README.md). Written under mutex_; read without it
+  // while waiting.
   static constexpr int kSpinMicros = 200;
   std::atomic<uint64_t> generation_{0};
   std::atomic<int> pending_{0};
