@@ -180,19 +180,16 @@ class FullPath:
         self.obs = self.env.set_target(0, x, z)
         self.target = np.array([x, z], np.float64)
 
-    def draw_target_around_character(self) -> np.ndarray:
-        """A new world target drawn by the task's episode-start rule (uniform in the square of
-        ``target_half_extent``, not too close) around where the character stands, from the
-        env's own random stream (the C++ rule, not a copy of it)."""
-        x, z, yaw = self.ctrl.root
-        self.env.set_state(0, self.ctrl.frame, x, z, yaw)
-        return np.array(self.env._core.draw_target_around_root(0, float(self.config.target_half_extent)), np.float64)
-
-    def continue_from_character(self, target) -> None:
+    def continue_from_character(self, target=None) -> None:
         """Start the next episode where the character stands (same frame and root) with a new
-        world ``target``, instead of the env's fresh start: one continuous motion."""
+        world ``target``, instead of the env's fresh start: one continuous motion. Without a
+        target, one is drawn by the task's episode-start rule (uniform in the square of
+        ``target_half_extent``, not too close) around the character, from the env's own random
+        stream (the C++ rule, not a copy of it)."""
         x, z, yaw = self.ctrl.root
         self.env.set_state(0, self.ctrl.frame, x, z, yaw)
+        if target is None:
+            target = self.env._core.draw_target_around_root(0, float(self.config.target_half_extent))
         self.set_target(float(target[0]), float(target[1]))
         self.episode_steps = 0
 
@@ -372,7 +369,7 @@ def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int
         if out["done"]:
             log.end_episode(out)
             if continuous:
-                run.continue_from_character(run.draw_target_around_character())
+                run.continue_from_character()
             elif log.frames_so_far() < total:
                 log.start_episode()
     return log.result()
