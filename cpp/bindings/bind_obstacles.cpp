@@ -177,6 +177,19 @@ void bind_obstacles(py::module_& m) {
           py::arg("index"), py::arg("action"),
           "(hits, world points (3,2), inside flags) of a normalized action for env i's current state.")
       .def(
+          "path_hits",
+          [](PyObstacleVecEnv& s, int i, const py::handle& rows) {
+            checked_index(s, i);
+            auto r = check_array<int64_t>(rows, "rows", {-1});
+            py::array_t<int32_t> out(r.shape(0));
+            s.env.path_hits(i, r.data(), static_cast<int>(r.shape(0)), out.mutable_data());
+            return out;
+          },
+          py::arg("index"), py::arg("rows"),
+          "For env i's current state, each database row's collision-aware path test "
+          "(tasks/path_filter.hpp, this env's path options): the frames ahead of its path's first hit, "
+          "0 when clear.")
+      .def(
           "collides",
           [](const PyObstacleVecEnv& s, int i, float x, float z) {
             return s.env.collides(checked_index(s, i), x, z);

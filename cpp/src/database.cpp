@@ -43,6 +43,9 @@ Motion motion_mirror(const Motion& m, const std::vector<int>& mirror_map) {
   return out;
 }
 
+static_assert(kPathSampleFrames[kPathSamples - 1] == kTrajectoryOffsets[2],
+              "path samples end at the trajectory's last horizon, the frames a valid frame has left");
+
 void Database::index_clips() {
   valid.assign(num_frames, 0);
   frame_clip.assign(num_frames, -1);
@@ -57,6 +60,23 @@ void Database::index_clips() {
   valid_frames.clear();
   for (int64_t i = 0; i < num_frames; ++i)
     if (valid[i]) valid_frames.push_back(i);
+  path_samples.assign(static_cast<size_t>(num_frames) * kPathSamples * 2, 0.0f);
+  path_reach.fill(0.0f);
+  if (root_positions.size() != static_cast<size_t>(num_frames) * 3 || root_yaws.size() != static_cast<size_t>(num_frames))
+    return;  // validate() reports the sizes
+  const float* rp = root_positions.data();
+  const float* ry = root_yaws.data();
+  for (int64_t i = 0; i < num_frames; ++i) {
+    if (!valid[i]) continue;
+    float* out = &path_samples[static_cast<size_t>(i) * kPathSamples * 2];
+    for (int s = 0; s < kPathSamples; ++s) {
+      const int64_t j = i + kPathSampleFrames[s];
+      const Vec2 p = world_to_local_xz(rp[j * 3] - rp[i * 3], rp[j * 3 + 2] - rp[i * 3 + 2], ry[i]);
+      out[2 * s] = p.x();
+      out[2 * s + 1] = p.y();
+      path_reach[s] = std::max(path_reach[s], std::hypot(p.x(), p.y()));
+    }
+  }
 }
 
 void Database::check_weights(const std::array<float, kNumBlocks>& w) {

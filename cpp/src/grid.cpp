@@ -183,6 +183,18 @@ void ObstacleField::moved(int env, int frames, float dt, float* centres, float* 
   }
 }
 
+void ObstacleField::path(int env, int k, int frames, float dt, float* xs, float* zs) const {
+  const float h = config_.square_half;
+  const size_t a = at(env, k);
+  float x = cx_[a], z = cz_[a], vx = vx_[a], vz = vz_[a];
+  for (int f = 0; f < frames; ++f) {
+    bounce_step(x, vx, dt, h);
+    bounce_step(z, vz, dt, h);
+    xs[f] = x;
+    zs[f] = z;
+  }
+}
+
 void ObstacleField::cell_range(float a, float b, int* lo, int* hi) const {
   const float inv = 1.0f / config_.cell_size;
   *lo = std::max(0, static_cast<int>(std::floor((a + grid_half_) * inv)));

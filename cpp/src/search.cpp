@@ -92,6 +92,69 @@ MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_poi
   return best;
 }
 
+namespace {
+
+void check_shortlist(int shortlist, float transition_cost, const char* who) {
+  if (shortlist < 1 || shortlist > kMaxShortlist)
+    throw std::invalid_argument(std::string(who) + ": shortlist must be between 1 and " + std::to_string(kMaxShortlist) +
+                                ", got " + std::to_string(shortlist));
+  if (!(transition_cost >= 0.0f) || !std::isfinite(transition_cost))
+    throw std::invalid_argument(std::string(who) + ": transition_cost must be finite and >= 0");
+}
+
+// The re-ranking of a shortlist (found rows, ordered as k-NN orders them) with the
+// continuation rule; shared by the tree and the brute force so both decide alike.
+int64_t rerank_shortlist(const float* points, int dim, const float* query, const int64_t* rows, const float* sqdist,
+                         int found, int64_t bound_index, float* out_cost, float transition_cost,
+                         const CandidateFilter* candidates) {
+  int64_t best = -1;
+  float best_cost = std::numeric_limits<float>::infinity();
+  float bound_cost = best_cost;
+  if (bound_index >= 0) {
+    bound_cost = filtered_cost(sqdist_row(query, points + bound_index * dim, dim), candidates, bound_index);
+    if (bound_cost < std::numeric_limits<float>::infinity()) {
+      best = bound_index;
+      best_cost = bound_cost - transition_cost;
+    }
+  }
+  for (int r = 0; r < found; ++r) {
+    // Rows come by plain distance and extra costs are >= 0: once a row's distance reaches the
+    // best filtered cost, no later row can beat it (a replacement must be strictly lower).
+    if (sqdist[r] >= best_cost) break;
+    const int64_t i = rows[r];
+    if (i == bound_index) continue;  // (the window excludes it anyway)
+    const float c = filtered_cost(sqdist[r], candidates, i);
+    if (c == std::numeric_limits<float>::infinity()) continue;
+    if (c < best_cost || (best < 0 && c == best_cost)) {
+      best_cost = c;
+      best = i;
+    }
+  }
+  if (best == bound_index) best_cost = bound_cost;
+  if (out_cost) *out_cost = best_cost;
+  return best;
+}
+
+}  // namespace
+
+int64_t brute_force_match_shortlist(const float* points, int64_t num_points, int dim, const uint8_t* valid,
+                                    const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
+                                    int64_t bound_index, float* out_cost, float transition_cost,
+                                    const CandidateFilter* candidates) {
+  check_points(points, num_points, dim, "brute_force_match_shortlist");
+  if (query == nullptr) throw std::invalid_argument("brute_force_match_shortlist: null query");
+  if (bound_index >= num_points) throw std::out_of_range("brute_force_match_shortlist: bound_index out of range");
+  check_shortlist(shortlist, transition_cost, "brute_force_match_shortlist");
+  int64_t rows[kMaxShortlist];
+  float sqdist[kMaxShortlist];
+  SearchFilter filter;
+  filter.allowed = valid;
+  filter.exclude_lo = exclude_lo;
+  filter.exclude_hi = exclude_hi;
+  const int found = brute_force_knn(points, num_points, dim, query, shortlist, rows, sqdist, filter);
+  return rerank_shortlist(points, dim, query, rows, sqdist, found, bound_index, out_cost, transition_cost, candidates);
+}
+
 Matcher::Matcher(const float* rows, int64_t num_rows, int dim, const uint8_t* valid, const MatcherOptions& options)
     : rows_(rows),
       valid_(valid),
@@ -114,6 +177,21 @@ MMRL_MULTIVERSION int64_t Matcher::match(const float* query, int64_t exclude_lo,
   filter.exclude_hi = exclude_hi;
   filter.candidates = candidates;
   return tree_.nearest_with_bound(query, bound_index, out_cost, filter, transition_cost);
+}
+
+int64_t Matcher::match_shortlist(const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
+                                 int64_t bound_index, float* out_cost, float transition_cost,
+                                 const CandidateFilter* candidates) const {
+  check_shortlist(shortlist, transition_cost, "Matcher::match_shortlist");
+  if (bound_index >= tree_.size()) throw std::out_of_range("Matcher::match_shortlist: bound_index out of range");
+  int64_t rows[kMaxShortlist];
+  float sqdist[kMaxShortlist];
+  SearchFilter filter;
+  filter.exclude_lo = exclude_lo;
+  filter.exclude_hi = exclude_hi;
+  const int found = kdtree_knn(tree_, query, shortlist, rows, sqdist, filter);
+  return rerank_shortlist(rows_, tree_.dim(), query, rows, sqdist, found, bound_index, out_cost, transition_cost,
+                          candidates);
 }
 
 namespace {

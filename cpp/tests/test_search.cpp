@@ -258,6 +258,69 @@ TEST(Matcher, CandidateFilterHandComputedCases) {
   EXPECT_EQ(matcher.match(&q, 0, 0, 1, &cost, 0.0f, &all), -1);
 }
 
+TEST(Matcher, ShortlistEqualsBruteForceWithTheSameFilter) {
+  // The shortlist rule (k nearest by plain distance, re-ranked by filtered cost, the continuation
+  // rule on top): the tree's k-NN and the brute-force scan give the same row and cost, bit for bit.
+  for (int64_t n : {int64_t{300}, int64_t{5000}}) {
+    const int dim = 27;
+    const auto rows = walk_rows(n, dim, 11);
+    std::vector<uint8_t> valid(static_cast<size_t>(n), 1);
+    for (int64_t i = 0; i < n; i += 7) valid[i] = 0;
+    mmrl::Matcher matcher(rows.data(), n, dim, valid.data());
+    for (float refused : {0.0f, 0.5f, 0.95f}) {
+      const RowCosts filter(random_row_costs(n, refused, static_cast<uint32_t>(n) + 17));
+      Case c = make_queries(rows, n, dim, 200, 0.5f, 31);
+      int differs_from_exact = 0;
+      for (int q = 0; q < 200; ++q)
+        for (int k : {1, 8, 64, mmrl::kMaxShortlist})
+          for (float margin : {0.0f, 0.5f}) {
+            const float* query = &c.queries[static_cast<size_t>(q) * dim];
+            const int64_t bound = c.bound[q] >= 0 && valid[c.bound[q]] ? c.bound[q] : -1;
+            float tree_cost = -1, brute_cost = -2, exact_cost = 0;
+            const int64_t t = matcher.match_shortlist(query, k, c.lo[q], c.hi[q], bound, &tree_cost, margin, &filter);
+            const int64_t b = mmrl::brute_force_match_shortlist(rows.data(), n, dim, valid.data(), query, k, c.lo[q],
+                                                                c.hi[q], bound, &brute_cost, margin, &filter);
+            ASSERT_EQ(t, b) << "n " << n << " k " << k << " query " << q;
+            ASSERT_EQ(tree_cost, brute_cost);
+            if (t >= 0) ASSERT_TRUE(filter.extra_cost(t) < INFINITY);
+            // The exact filtered match is never dearer than the shortlist's choice.
+            const int64_t e = matcher.match(query, c.lo[q], c.hi[q], bound, &exact_cost, margin, &filter);
+            if (t >= 0) {
+              ASSERT_GE(e, 0);
+              ASSERT_LE(exact_cost, tree_cost);
+            }
+            differs_from_exact += (t != e);
+          }
+      if (refused > 0) EXPECT_GT(differs_from_exact, 0) << "the shortlist never mattered: the test tests nothing";
+    }
+  }
+}
+
+TEST(Matcher, ShortlistHandComputedCases) {
+  // Rows on a line: 0, 1, 2, 3, 4; the query at 1.1. Plain order: 1, 2, 0, 3, 4.
+  const std::vector<float> rows = {0.0f, 1.0f, 2.0f, 3.0f, 4.0f};
+  mmrl::Matcher matcher(rows.data(), 5, 1, nullptr);
+  const float q = 1.1f;
+  float cost = 0;
+  const RowCosts ban12({0, INFINITY, INFINITY, 0, 0});
+  EXPECT_EQ(matcher.match_shortlist(&q, 2, 0, 0, -1, &cost, 0.0f, &ban12), -1);  // both shortlisted refused
+  EXPECT_EQ(matcher.match_shortlist(&q, 3, 0, 0, -1, &cost, 0.0f, &ban12), 0);
+  EXPECT_FLOAT_EQ(cost, 1.21f);
+  const RowCosts dear1({0, 2.0f, 0, 0, 0});
+  EXPECT_EQ(matcher.match_shortlist(&q, 1, 0, 0, -1, &cost, 0.0f, &dear1), 1);  // alone on the list
+  EXPECT_FLOAT_EQ(cost, 2.01f);
+  EXPECT_EQ(matcher.match_shortlist(&q, 2, 0, 0, -1, &cost, 0.0f, &dear1), 2);  // 0.81 < 2.01
+  // The continuation (bound 4, distance 8.41, outside a window that holds only itself) is
+  // kept against a shortlist that cannot beat it by the margin.
+  const RowCosts none({0, 0, 0, 0, 0});
+  EXPECT_EQ(matcher.match_shortlist(&q, 2, 4, 5, 4, &cost, 8.5f, &none), 4);
+  EXPECT_FLOAT_EQ(cost, 8.41f);
+  EXPECT_EQ(matcher.match_shortlist(&q, 2, 4, 5, 4, &cost, 8.0f, &none), 1);
+  EXPECT_THROW(matcher.match_shortlist(&q, 0, 0, 0, -1, &cost, 0.0f, &none), std::invalid_argument);
+  EXPECT_THROW(matcher.match_shortlist(&q, mmrl::kMaxShortlist + 1, 0, 0, -1, &cost, 0.0f, &none),
+               std::invalid_argument);
+}
+
 TEST(Matcher, RefusesBadInput) {
   std::vector<float> rows(30, 0.0f);
   EXPECT_THROW(mmrl::Matcher(nullptr, 10, 3, nullptr), std::invalid_argument);

@@ -27,6 +27,13 @@ struct DatabaseOptions {
   std::array<float, kNumBlocks> weights = {0.75f, 1.0f, 1.0f, 1.0f, 1.5f};
 };
 
+// Frames ahead at which Database::path_samples records where the frames played from a frame
+// take the root: every second frame of a default step (6 frames), then every 5 frames up to
+// the trajectory's last horizon (a valid frame has that many frames left in its clip). The
+// collision-aware search (tasks/path_filter.hpp) tests a candidate's path at these times.
+constexpr int kPathSamples = 9;
+constexpr int kPathSampleFrames[kPathSamples] = {2, 4, 6, 8, 10, 15, 20, 25, 30};
+
 struct Database {
   // Skeleton shared by all clips.
   Skeleton skeleton;
@@ -64,6 +71,12 @@ struct Database {
   std::vector<int32_t> frame_clip;
   // The frames with valid[i] set, ascending (episode starts are drawn from them).
   std::vector<int64_t> valid_frames;
+  // Per frame i, the root's (x, z) in frame i's character frame kPathSampleFrames[s] frames
+  // later, for valid frames (N x kPathSamples x 2, meters; 0 for frames that are not valid):
+  // the path that playing from i takes. Derived from the character frames by index_clips.
+  std::vector<float> path_samples;
+  // Per sample s, the largest distance (meters) of path_samples[.][s] from the root.
+  std::array<float, kPathSamples> path_reach{};
   // Foot contacts (N x 2: left, right; 1 = planted), see database_compute_contacts.
   std::vector<uint8_t> contacts;
 
@@ -75,8 +88,8 @@ struct Database {
   static void check_weights(const std::array<float, kNumBlocks>& weights);
   // Recomputes normalization (mean, block scales) from the features and current weights.
   void refit_normalization();
-  // Fills the derived per-frame arrays (valid, frame_clip, valid_frames) from clip_ranges. Called by
-  // build and after loading.
+  // Fills the derived per-frame arrays (valid, frame_clip, valid_frames, path_samples,
+  // path_reach) from clip_ranges and the character frames. Called by build and after loading.
   void index_clips();
   // Throws std::invalid_argument if array sizes disagree or values are not finite.
   void validate() const;

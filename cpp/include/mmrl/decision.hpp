@@ -13,8 +13,11 @@
 //      a loop of one step's frames;
 //      A candidate filter (kdtree.hpp's CandidateFilter: the decision's one extension
 //      point) may refuse candidates or add to their cost, the continuation's included; the
-//      match is the least filtered cost. When a filter refuses every candidate the match is
-//      made without it, so a character always has a frame to play;
+//      match is the least filtered cost. With a shortlist of k > 0 (a costly filter, such as
+//      the obstacles task's collision-aware path test) the filter re-ranks only the k nearest
+//      candidates by plain distance, plus the continuation (search.hpp's
+//      brute_force_match_shortlist is the rule). When a filter refuses every candidate the
+//      match is made without it, so a character always has a frame to play;
 //   3. playback: frames j+1 .. j+n are shown; the root advances by the database root
 //      deltas of frames j .. j+n-1 (each expressed in its own character frame), and the
 //      current frame becomes j+n.
@@ -64,7 +67,7 @@ constexpr int kMatchExcludeWindow = 20;
 // The match with the continuation rule (see above). Returns the frame to play from.
 inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_t frame, const float* query,
                                 float* cost = nullptr, float transition_cost = 0.0f,
-                                const CandidateFilter* filter = nullptr) {
+                                const CandidateFilter* filter = nullptr, int shortlist = 0) {
   const int64_t bound = (frame >= 0 && db.valid[frame]) ? frame : -1;
   int64_t lo = 0, hi = 0;
   if (frame >= 0) {
@@ -72,7 +75,9 @@ inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_
     lo = std::max<int64_t>(db.clip_ranges[c * 2], frame - kMatchExcludeWindow);
     hi = std::min<int64_t>(db.clip_ranges[c * 2 + 1], frame + kMatchExcludeWindow + 1);
   }
-  const int64_t j = matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
+  const int64_t j = (shortlist > 0 && filter != nullptr)
+                        ? matcher.match_shortlist(query, shortlist, lo, hi, bound, cost, transition_cost, filter)
+                        : matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
   if (j >= 0 || filter == nullptr) return j;
   return matcher.match(query, lo, hi, bound, cost, transition_cost);  // the filter refused everything
 }
@@ -81,12 +86,13 @@ inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_
 // query for the current frame and matches it. Returns the frame to play from.
 inline int64_t decision_for_action(const Database& db, const Matcher& matcher, int64_t frame, const float* action,
                                  const float* low, const float* high, float* cost = nullptr,
-                                 float transition_cost = 0.0f, const CandidateFilter* filter = nullptr) {
+                                 float transition_cost = 0.0f, const CandidateFilter* filter = nullptr,
+                                 int shortlist = 0) {
   float query[kFeatureDim];
   float traj[kTrajectoryDim];
   for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high[k], std::max(low[k], action[k]));
   decision_query(db, frame, traj, query);
-  return decision_match(db, matcher, frame, query, cost, transition_cost, filter);
+  return decision_match(db, matcher, frame, query, cost, transition_cost, filter, shortlist);
 }
 
 // The clip-cost rule, a candidate filter that every decision path (the batched envs, the

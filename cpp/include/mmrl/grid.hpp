@@ -88,6 +88,9 @@ class ObstacleField {
   // Env's centres and velocities (count(env) x 2 each, either may be null) after `frames`
   // calls of move(env, dt), without moving anything: the same arithmetic, bit for bit.
   void moved(int env, int frames, float dt, float* centres, float* velocities) const;
+  // Obstacle k of env's centre after each of the next `frames` calls of move(env, dt), without
+  // moving anything (the same arithmetic): x[f], z[f] after f + 1 moves, f < frames.
+  void path(int env, int k, int frames, float dt, float* x, float* z) const;
   // Rebuilds env's grid with the given margin (meters, <= config.max_margin).
   void rebuild(int env, float margin);
 
@@ -113,6 +116,9 @@ class ObstacleField {
   Vec2 half_size(int env, int k) const { return Vec2(hx_[at(env, k)], hz_[at(env, k)]); }
   float angle(int env, int k) const { return angle_[at(env, k)]; }
   Vec2 velocity(int env, int k) const { return Vec2(vx_[at(env, k)], vz_[at(env, k)]); }
+  // (cos, sin) of obstacle k's angle: a world offset d is (cos d.x - sin d.z, sin d.x + cos d.z)
+  // in its frame (contains, distance).
+  Vec2 rotation(int env, int k) const { return Vec2(cos_[at(env, k)], sin_[at(env, k)]); }
 
  private:
   size_t at(int env, int k) const { return static_cast<size_t>(env) * config_.num_obstacles + k; }

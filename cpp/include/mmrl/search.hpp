@@ -49,6 +49,22 @@ struct MatcherOptions {
   int64_t brute_force_below = 512;   // fewer valid rows than this: one leaf, i.e. a blocked scan
 };
 
+// The most candidates a shortlist match (Matcher::match_shortlist) re-ranks.
+constexpr int kMaxShortlist = 256;
+
+// The shortlist rule, by brute force (the reference): the `shortlist` nearest valid rows
+// outside [exclude_lo, exclude_hi) by plain squared distance (brute_force_knn: ordered by
+// distance, then index), re-ranked by filtered cost (kdtree.hpp's filtered_cost), with the
+// continuation rule of brute_force_match for bound_index: the bound's filtered cost less
+// transition_cost is the starting best, and a shortlisted row replaces the best only when its
+// filtered cost is strictly lower (the first of equal costs in shortlist order wins between
+// rows). Returns -1 when the filter refuses every shortlisted row and the bound.
+// 1 <= shortlist <= kMaxShortlist.
+int64_t brute_force_match_shortlist(const float* points, int64_t num_points, int dim, const uint8_t* valid,
+                                    const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
+                                    int64_t bound_index, float* out_cost, float transition_cost,
+                                    const CandidateFilter* candidates);
+
 class Matcher {
  public:
   // rows: n x dim normalized features, row-major, borrowed: must outlive the Matcher.
@@ -65,6 +81,13 @@ class Matcher {
   int64_t match(const float* query, int64_t exclude_lo = 0, int64_t exclude_hi = 0, int64_t bound_index = -1,
                 float* out_cost = nullptr, float transition_cost = 0.0f,
                 const CandidateFilter* candidates = nullptr) const;
+
+  // The shortlist rule (brute_force_match_shortlist) through the tree's exact k-NN: the same
+  // result, bit for bit. A costly filter then runs on at most shortlist + 1 rows, however
+  // many rows it makes dearer. Allocates nothing.
+  int64_t match_shortlist(const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
+                          int64_t bound_index, float* out_cost, float transition_cost,
+                          const CandidateFilter* candidates) const;
 
   // M queries (M x dim row-major) across the pool. Per-query exclude windows and bound
   // indices are optional arrays of M entries (null = none). Allocates nothing.

@@ -224,8 +224,9 @@ class TargetVecEnv {
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
     s.last_transition_cost = task().decision_transition_cost(i);
+    const CandidateFilter* filter = task().candidate_filter(i);
     const int64_t j = decision_for_action(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost,
-                                        task().candidate_filter(i));
+                                        filter, task().candidate_shortlist());
     s.last_transition = (j != s.frame);
     s.last_match = j;
     s.last_pose_jump = 0;
@@ -371,6 +372,9 @@ class TargetVecEnv {
   // The candidate filter of env i's next match (a task hides it to add its own rules): the
   // config's clip costs (decision.hpp's ClipCostFilter), or none.
   const CandidateFilter* candidate_filter(int) const { return clip_filter_.get(); }
+  // How many nearest candidates the filter re-ranks (decision.hpp; 0: the whole database, the
+  // clip costs' rule). A task with a costly filter hides it.
+  int candidate_shortlist() const { return 0; }
 
   // Distance (meters) from env i's root to its target.
   float target_distance(const State& s) const { return std::hypot(s.target_x - s.root.x, s.target_z - s.root.z); }

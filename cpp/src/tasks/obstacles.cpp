@@ -27,6 +27,20 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
       !finite(c.start_clearance) || !finite(c.target_clearance))
     throw std::invalid_argument("body_radius, start_clearance and target_clearance must be finite and >= 0");
   if (!(db.fps > 0)) throw std::invalid_argument("database fps must be positive");
+  if (c.path_candidates < 1 || c.path_candidates > kMaxShortlist)
+    throw std::invalid_argument("path_candidates must be between 1 and " + std::to_string(kMaxShortlist) + ", got " +
+                                std::to_string(c.path_candidates));
+  if (!(c.path_margin >= 0) || !finite(c.path_margin)) throw std::invalid_argument("path_margin must be finite and >= 0");
+  if (std::isnan(c.path_cost) || !(c.path_cost >= 0))
+    throw std::invalid_argument("path_cost must be >= 0 (inf: never play a path that hits)");
+  // A body that does not fit in the sensor map's half or the obstacle square cannot be steered
+  // by what it senses: refuse such a task rather than train on it.
+  const float body = c.body_radius + (c.path_filter ? c.path_margin : 0.0f);
+  if (!(body < 0.5f * c.sensor_size) || !(body < c.obstacle_square_half))
+    throw std::invalid_argument(std::string(c.path_filter ? "body_radius + path_margin" : "body_radius") + " (" +
+                                std::to_string(body) + " m) must be smaller than half the sensor map (sensor_size / 2 = " +
+                                std::to_string(0.5f * c.sensor_size) + " m) and the obstacle square (" +
+                                "obstacle_square_half = " + std::to_string(c.obstacle_square_half) + " m)");
   ObstacleFieldConfig f;
   f.num_obstacles = c.num_obstacles;
   f.square_half = c.obstacle_square_half;
@@ -50,7 +64,34 @@ ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int n
       maps_(static_cast<size_t>(num_envs) * (config.previous_map_lag + 1) * kMapCells, 0),
       stage_max_speed_(config.obstacle_max_speed),
       stage_half_extent_(config.target_half_extent),
-      frame_dt_(1.0f / db.fps) {}
+      frame_dt_(1.0f / db.fps) {
+  PathFilterConfig pc;
+  pc.radius = config.body_radius + config.path_margin;
+  pc.cost = config.path_cost;
+  pc.horizon = config.path_horizon;
+  path_filters_.resize(static_cast<size_t>(num_envs));
+  for (ObstaclePathFilter& f : path_filters_) f.init(db, config.num_obstacles, pc, clip_filter_.get());
+}
+
+const CandidateFilter* ObstacleVecEnv::candidate_filter(int i) {
+  if (!config_.path_filter) return clip_filter_.get();
+  const ObstacleEnvState& s = envs_[i];
+  path_filters_[i].prepare(field_, i, s.root, s.max_speed > 0, frame_dt_);
+  return &path_filters_[i];
+}
+
+void ObstacleVecEnv::path_hits(int i, const int64_t* rows, int n, int32_t* first_hit_frames) {
+  for (int k = 0; k < n; ++k)
+    if (rows[k] < 0 || rows[k] >= db_.num_frames || !db_.valid[rows[k]])
+      throw std::invalid_argument("rows: " + std::to_string(rows[k]) + " is not a valid database frame");
+  const ObstacleEnvState& s = envs_[i];
+  ObstaclePathFilter& f = path_filters_[i];
+  f.prepare(field_, i, s.root, s.max_speed > 0, frame_dt_);
+  for (int k = 0; k < n; ++k) {
+    const int hit = f.first_hit(rows[k]);
+    first_hit_frames[k] = hit < 0 ? 0 : kPathSampleFrames[hit];
+  }
+}
 
 void ObstacleVecEnv::set_stage(float max_speed, float target_half_extent) {
   if (!(max_speed >= 0) || !(max_speed <= config_.speed_cap))

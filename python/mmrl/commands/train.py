@@ -137,7 +137,7 @@ def cmd_train(args: argparse.Namespace) -> int:
         raise InputError(f"{task.name} options: {e}") from e
     callbacks = list(task.callbacks(envs, options)) if task.callbacks else []
     callbacks.append(MatchQualityLog(envs))  # last: the task's callbacks keep their checkpoint indices
-    policy_factory = task.policy_factory(envs) if task.policy_factory else None
+    policy_factory = _policy_factory(task, envs, cfg.network)
     # config.json always holds the options the run trains with now, so eval and render read them.
     RunDir.create(out, task=task, data=data, num_envs=num_envs, task_config=task_cfg, ppo_config=cfg,
                   callback_options=options, database=db)
@@ -154,6 +154,20 @@ def cmd_train(args: argparse.Namespace) -> int:
     report_training(result.global_step, result.wall_s, result.stopped_by, result.last_stats, result.checkpoint,
                     callbacks)
     return 0
+
+
+def _policy_factory(task: Task, envs, network: str):
+    """The task's network factory for ``--set network=NAME`` ("default": the task's own choice)."""
+    if task.policy_factory is None:
+        if network != "default":
+            raise InputError(f"--set network={network}: the {task.name} task has one network (default)")
+        return None
+    if network == "default":
+        return task.policy_factory(envs)
+    try:
+        return task.policy_factory(envs, network=network)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"--set network={network}: {e}") from e
 
 
 def cmd_plot(args: argparse.Namespace) -> int:

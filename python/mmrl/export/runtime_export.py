@@ -55,9 +55,9 @@ def _network_layers(model) -> Tuple[list, list, list]:
     """(header fields, conv layers, dense layers) of a registered network."""
     from torch import nn
 
-    from ..rl.networks import ObstacleActorCritic, PlaneActorCritic
+    from ..rl.networks import MLPActorCritic, ObstacleActorCritic, PlaneActorCritic
 
-    if isinstance(model, PlaneActorCritic):
+    if isinstance(model, (PlaneActorCritic, MLPActorCritic)):
         return [POLICY_MLP, 0, 0, 0, 0, 0, 0], [], _dense_layers(model.actor)
     if isinstance(model, ObstacleActorCritic):
         tower = model.actor
@@ -79,7 +79,7 @@ def _network_layers(model) -> Tuple[list, list, list]:
         dense = _dense_layers(tower.map_fc) + _dense_layers(tower.head)
         return header, [tuple(x) for x in convs], dense
     raise InputError(f"the runtime has no evaluator for the network {type(model).__name__} "
-                     "(PlaneActorCritic and ObstacleActorCritic are supported)")
+                     "(PlaneActorCritic, MLPActorCritic and ObstacleActorCritic are supported)")
 
 
 def policy_sections(policy) -> Dict[str, Section]:

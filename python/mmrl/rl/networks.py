@@ -29,7 +29,7 @@ from typing import Optional, TypeVar
 import torch
 from torch import nn
 
-__all__ = ["PlaneActorCritic", "ObstacleActorCritic", "OBSTACLE_DEFAULT_LAYOUT", "register_network",
+__all__ = ["PlaneActorCritic", "MLPActorCritic", "ObstacleActorCritic", "OBSTACLE_DEFAULT_LAYOUT", "register_network",
            "registered_networks", "network_class", "network_name"]
 
 # ----------------------------------------------------------------------------- registry
@@ -134,6 +134,38 @@ class PlaneActorCritic(nn.Module):
                                 init_log_std=init_log_std)
         self.actor = _mlp(obs_dim, tuple(hidden), act_dim, 0.01, nn.Tanh)
         self.critic = _mlp(obs_dim, tuple(hidden), 1, 1.0, nn.Tanh)
+        self.log_std = nn.Parameter(torch.full((act_dim,), float(init_log_std)))
+
+    def actor_mean(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.actor(obs)
+
+    def value(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.critic(obs).squeeze(-1)
+
+
+@register_network
+class MLPActorCritic(nn.Module):
+    """An actor and a critic MLP of their own sizes on the whole flat observation.
+
+    The actor is what gets exported (ONNX, the C++ runtime's dense evaluator), so it can stay
+    small; the critic is only used in training and may be wider. The moving-obstacles default
+    (``--preset mmrl``): actor 64 x 64, critic 128 x 128, ReLU, on the 529 observation floats
+    (the binary maps flattened): about 38k actor weights against the paper's CNN's 573k, and
+    an update some 15 times cheaper on a CPU (bench/bench_obstacles_learner.py).
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, actor_hidden: tuple[int, ...] = (64, 64),
+                 critic_hidden: tuple[int, ...] = (128, 128), activation: str = "relu",
+                 init_log_std: float = 0.0):
+        super().__init__()
+        acts = {"relu": nn.ReLU, "tanh": nn.Tanh}
+        if activation not in acts:
+            raise ValueError(f"MLPActorCritic: activation must be one of {sorted(acts)}, got {activation!r}")
+        self.init_kwargs = dict(obs_dim=obs_dim, act_dim=act_dim, actor_hidden=tuple(actor_hidden),
+                                critic_hidden=tuple(critic_hidden), activation=activation,
+                                init_log_std=init_log_std)
+        self.actor = _mlp(obs_dim, tuple(actor_hidden), act_dim, 0.01, acts[activation])
+        self.critic = _mlp(obs_dim, tuple(critic_hidden), 1, 1.0, acts[activation])
         self.log_std = nn.Parameter(torch.full((act_dim,), float(init_log_std)))
 
     def actor_mean(self, obs: torch.Tensor) -> torch.Tensor:

@@ -184,6 +184,11 @@ class PPOConfig:
     dimension) differ by 10x between dimensions; without this, exploration is far too wide
     in the narrow ones. Saved in checkpoints and applied by ``load_policy``."""
 
+    network: str = "default"
+    """The actor-critic the task's ``policy_factory`` builds: "default", or a name the task
+    knows (the obstacles task: "cnn", the paper's, and "mlp"). Ignored when ``ppo.train`` gets a
+    ``policy_factory`` of its own."""
+
     device: str = "auto"
     """"auto" = CUDA if available, else CPU; or any torch device string."""
 

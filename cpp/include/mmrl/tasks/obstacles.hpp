@@ -48,6 +48,7 @@
 #include <vector>
 
 #include "mmrl/grid.hpp"
+#include "mmrl/tasks/path_filter.hpp"
 #include "mmrl/vecenv.hpp"
 
 namespace mmrl {
@@ -71,6 +72,16 @@ struct ObstacleTaskConfig : TaskConfig {
   // frame's own future trajectory, tested as the hit reward tests a trajectory) matches with
   // the paper's rule (no bias), so a dodge is never held back by the clip being played.
   bool bias_yields = false;
+  // The collision-aware search (tasks/path_filter.hpp): every candidate's played path is tested
+  // against where the obstacles will be, up to path_horizon frames ahead, with a disc of
+  // body_radius + path_margin; a first hit at t frames adds path_cost * (2 - t / path_horizon)
+  // to its match cost (inf: never play a path that hits unless all do). The filter re-ranks the
+  // path_candidates nearest candidates (and the continuation) of each decision.
+  bool path_filter = false;
+  float path_cost = 100.0f;
+  int path_horizon = 30;
+  float path_margin = 0.05f;
+  int path_candidates = 16;  // the filter re-ranks this many nearest candidates (search.hpp's shortlist)
   int num_obstacles = 100;
   float obstacle_square_half = 10.0f;  // obstacle centres in a 20 x 20 m square around the start
   float obstacle_min_side = 0.25f;     // rectangle sides uniform in [min, max] meters
@@ -95,6 +106,11 @@ struct ObstacleTaskConfig : TaskConfig {
     v("hit_lookahead", &ObstacleTaskConfig::hit_lookahead);
     v("hit_played", &ObstacleTaskConfig::hit_played);
     v("bias_yields", &ObstacleTaskConfig::bias_yields);
+    v("path_filter", &ObstacleTaskConfig::path_filter);
+    v("path_cost", &ObstacleTaskConfig::path_cost);
+    v("path_horizon", &ObstacleTaskConfig::path_horizon);
+    v("path_margin", &ObstacleTaskConfig::path_margin);
+    v("path_candidates", &ObstacleTaskConfig::path_candidates);
     v("num_obstacles", &ObstacleTaskConfig::num_obstacles);
     v("obstacle_square_half", &ObstacleTaskConfig::obstacle_square_half);
     v("obstacle_min_side", &ObstacleTaskConfig::obstacle_min_side);
@@ -170,6 +186,11 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   // character frame), as action_hits does after denormalizing.
   int trajectory_hits(int i, const float* raw, float* points = nullptr, uint8_t* inside = nullptr) const;
 
+  // The collision-aware search's test (tasks/path_filter.hpp, with this env's path options,
+  // whether or not path_filter is on) of env i's current state: for each of n database rows,
+  // the frames ahead of its path's first hit (kPathSampleFrames), or 0 when clear.
+  void path_hits(int i, const int64_t* rows, int n, int32_t* first_hit_frames);
+
   // Env i's obstacles now (world meters, radians, m/s; see grid.hpp): centres and velocities
   // (n x 2, (x, z)), half sizes (n x 2, along the obstacle's own X / Z), angles (n). n is
   // obstacle_count(i); any output may be null.
@@ -211,6 +232,10 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   void on_state_set(int i) { refresh(i, false, true); }
   // transition_cost, or 0 when bias_yields and env i's continuation hits an obstacle.
   float decision_transition_cost(int i) const;
+  // The clip costs, or with path_filter env i's collision-aware filter prepared for its
+  // current state (on top of the clip costs).
+  const CandidateFilter* candidate_filter(int i);
+  int candidate_shortlist() const { return config_.path_filter ? config_.path_candidates : 0; }
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   // Steps between grid rebuilds for env i, and the margin that keeps the grid exact over them.
@@ -227,6 +252,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
                       const float* velocities);
 
   ObstacleField field_;
+  std::vector<ObstaclePathFilter> path_filters_;  // per env
   const uint8_t* map_slot(int i, int k) const {
     return &maps_[(static_cast<size_t>(i) * map_slots_ + k) * kMapCells];
   }

@@ -1,0 +1,85 @@
+// The collision-aware search: a candidate filter (kdtree.hpp's CandidateFilter, the decision's
+// extension point) that tests the path each candidate frame would play against where every
+// obstacle will be at that time, so the match prefers clips that stay clear. The idea is
+// environment-aware motion matching (Ponton, Andrews, Andujar, Pelechano 2025: collision costs
+// inside the search), here as one rule that the training env, the full path, the engine runtime
+// and mmrl play all run through ObstacleVecEnv::decide.
+//
+// The rule, for a character at root (x, z, yaw) and a candidate frame j:
+//   - j's path: the root positions that playing from j reaches kPathSampleFrames[s] frames
+//     later (Database::path_samples, placed through the character's current root), for the
+//     samples s with kPathSampleFrames[s] <= horizon (frames);
+//   - the obstacles at sample s: where the env's own motion rule (constant velocity, mirrored
+//     at the square's border; ObstacleField::path) puts them after that many frames;
+//   - j hits at s when a disc of `radius` (the body radius plus a margin covering the frames
+//     between samples) around its path point overlaps an obstacle there. The extra cost of j
+//     is cost * (2 - t_s / horizon) for its first hit at t_s = kPathSampleFrames[s] frames
+//     (twice the cost for a hit right away, the cost itself at the horizon), 0 for a clear
+//     path; cost = +inf refuses every candidate that hits. Costs add to the base filter's (the
+//     task's clip costs), if any.
+// The continuation is a candidate like any other: it keeps its transition-cost advantage while
+// its path is clear, and loses it (plus the hit's cost) when it is not. The filter only adds
+// costs, so the KD-tree search stays exact under it (tested against brute force).
+//
+// Cost: prepare() runs once per decision (the obstacles near enough to reach a path point,
+// their positions at every sample); extra_cost runs only for rows whose distance alone could
+// still win (kdtree.hpp), each a loop over samples x nearby obstacles with a bounding-circle
+// reject first. No allocation after init().
+#pragma once
+
+#include <cstdint>
+#include <limits>
+#include <vector>
+
+#include "mmrl/database.hpp"
+#include "mmrl/decision.hpp"
+#include "mmrl/grid.hpp"
+#include "mmrl/kdtree.hpp"
+
+namespace mmrl {
+
+struct PathFilterConfig {
+  float radius = 0.3f;   // disc around each path point (meters)
+  float cost = 100.0f;   // squared normalized feature distance; +inf refuses
+  int horizon = 30;      // frames; kPathSampleFrames[0] <= horizon <= kPathSampleFrames[last]
+};
+
+class ObstaclePathFilter final : public CandidateFilter {
+ public:
+  ObstaclePathFilter() = default;
+  // Sizes the filter for up to `capacity` obstacles. base (may be null) is added to every
+  // row's cost and must outlive the filter. Throws std::invalid_argument for a config out of
+  // range or a database without path samples.
+  void init(const Database& db, int capacity, const PathFilterConfig& config, const CandidateFilter* base);
+  // Prepares one decision: env's obstacles of `field` seen from a character at `root`, moved by
+  // the env's rule when `moving` (frame_dt seconds per frame) and frozen otherwise.
+  void prepare(const ObstacleField& field, int env, const RootState& root, bool moving, float frame_dt);
+
+  float extra_cost(int64_t row) const override {
+    const float base = base_ ? base_->extra_cost(row) : 0.0f;
+    const int s = first_hit(row);
+    if (s < 0) return base;
+    return base + hit_cost_[s];
+  }
+  // The first sample index s at which row's path hits (kPathSampleFrames[s] frames ahead), or -1.
+  int first_hit(int64_t row) const;
+  // Sample count within the horizon, and the cost of a first hit at sample s.
+  int samples() const { return samples_; }
+  float hit_cost(int s) const { return hit_cost_[s]; }
+  // Obstacles near enough to matter for this decision (for tests and benches).
+  int nearby() const { return kept_; }
+
+ private:
+  const float* paths_ = nullptr;  // db.path_samples
+  const CandidateFilter* base_ = nullptr;
+  PathFilterConfig config_;
+  float reach_ = 0;  // farthest path point within the horizon (meters)
+  int samples_ = 0, capacity_ = 0, kept_ = 0;
+  float hit_cost_[kPathSamples] = {};
+  float root_x_ = 0, root_z_ = 0, cos_yaw_ = 1, sin_yaw_ = 0;
+  std::vector<float> cx_, cz_;  // samples_ x capacity_, sample-major: kept obstacles' centres
+  std::vector<float> ocos_, osin_, hx_, hz_, bound2_;  // per kept obstacle
+  std::vector<float> scratch_x_, scratch_z_;           // one obstacle's positions per frame
+};
+
+}  // namespace mmrl
