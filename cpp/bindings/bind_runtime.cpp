@@ -35,11 +35,15 @@ void bind_runtime(py::module_& m) {
                                                "A loaded controller file (runtime.hpp), shared by characters.")
       .def_static(
           "load",
-          [](const std::string& path) {
+          [](const std::string& path, bool require_path_filter) {
             py::gil_scoped_release release;
-            return std::const_pointer_cast<RuntimeController>(RuntimeController::load(path));
+            RuntimeLoadOptions options;
+            options.require_path_filter = require_path_filter;
+            return std::const_pointer_cast<RuntimeController>(RuntimeController::load(path, options));
           },
-          py::arg("path"))
+          py::arg("path"), py::arg("require_path_filter") = false,
+          "Loads and checks a controller file; require_path_filter refuses one without the obstacles "
+          "task's collision-aware search.")
       .def_property_readonly("num_joints", &RuntimeController::num_joints)
       .def_property_readonly("num_frames", [](const RuntimeController& c) { return c.database().num_frames; })
       .def_property_readonly("fps", &RuntimeController::fps)

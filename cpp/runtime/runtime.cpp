@@ -58,7 +58,9 @@ std::map<std::string, double> numbers(const ControllerFile& f, const std::string
   const auto values = f.doubles(prefix + ".values", {static_cast<int64_t>(keys.size())});
   std::map<std::string, double> out;
   for (size_t k = 0; k < keys.size(); ++k) {
-    if (!std::isfinite(values[k])) f.fail("'" + prefix + "." + keys[k] + "' is not finite");
+    // +inf is a value only where a config means "never" by it (path_cost: never play a path that hits).
+    const bool inf_ok = prefix == "task" && keys[k] == "path_cost" && values[k] == HUGE_VAL;
+    if (!std::isfinite(values[k]) && !inf_ok) f.fail("'" + prefix + "." + keys[k] + "' is not finite");
     out[keys[k]] = values[k];
   }
   return out;
@@ -125,6 +127,11 @@ RuntimeTask read_task(const ControllerFile& f, int obs_dim, int64_t num_clips) {
   const TaskConfig& base = plane ? static_cast<const TaskConfig&>(t.plane) : t.obstacle;
   t.frames_per_step = base.frames_per_step;
   t.success_radius = base.success_radius;
+  if (t.obstacles && t.obstacle.path_filter) {  // the collision-aware search needs its numbers
+    for (const char* key : {"path_cost", "path_horizon", "path_margin", "path_candidates"})
+      if (t.values.find(key) == t.values.end())
+        f.fail(std::string("task.path_filter is on but the file lacks task.") + key + " (the path filter's data)");
+  }
   if (t.obstacles) {
     t.num_obstacles = t.obstacle.num_obstacles;
     if (t.obstacle.num_obstacles < 0 || t.obstacle.num_obstacles > 100000)
@@ -135,16 +142,18 @@ RuntimeTask read_task(const ControllerFile& f, int obs_dim, int64_t num_clips) {
 
 }  // namespace
 
-std::shared_ptr<const RuntimeController> RuntimeController::load(const std::string& path) {
+std::shared_ptr<const RuntimeController> RuntimeController::load(const std::string& path,
+                                                                 const RuntimeLoadOptions& options) {
   const auto t0 = std::chrono::steady_clock::now();
   ControllerFile file = ControllerFile::read(path);
   const double read = seconds_since(t0);
-  auto c = from_file(std::move(file));
+  auto c = from_file(std::move(file), options);
   const_cast<RuntimeController&>(*c).times_.read_and_check = read;
   return c;
 }
 
-std::shared_ptr<const RuntimeController> RuntimeController::from_file(ControllerFile file) {
+std::shared_ptr<const RuntimeController> RuntimeController::from_file(ControllerFile file,
+                                                                      const RuntimeLoadOptions& options) {
   std::shared_ptr<RuntimeController> c(new RuntimeController());
   auto t0 = std::chrono::steady_clock::now();
   try {
@@ -159,6 +168,13 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   t0 = std::chrono::steady_clock::now();
   c->policy_ = PolicyNet::from_file(file);
   c->task_ = read_task(file, c->policy_.obs_dim(), c->db_.num_clips());
+  if (options.require_path_filter && !(c->task_.obstacles && c->task_.obstacle.path_filter))
+    file.fail(c->task_.obstacles
+                  ? "the loader requires the collision-aware search, but this obstacles controller has none "
+                    "(task.path_filter is off or missing: written before the filter, or trained without it; "
+                    "train with --preset mmrl, or --set path_filter=true)"
+                  : "the loader requires the collision-aware search, which only obstacles controllers have "
+                    "(this file's task core is '" + c->task_.core + "')");
   if (c->policy_.act_dim() != kTrajectoryDim) file.fail("the policy must write 12 trajectory values");
   const auto ch = numbers(file, "character");
   // The Character only plays: the decisions are the task env's (RuntimeCharacter::decide).
@@ -190,7 +206,8 @@ size_t RuntimeController::memory_bytes() const {
   const Database& d = db_;
   size_t n = 4 * (d.bone_translations.size() + d.bone_rotations.size() + d.root_positions.size() +
                   d.root_yaws.size() + d.root_deltas.size() + d.features.size() + d.normalized.size()) +
-             d.valid.size() + d.contacts.size() + 4 * d.frame_clip.size() + 4 * d.clip_ranges.size();
+             d.valid.size() + d.contacts.size() + 4 * d.frame_clip.size() + 4 * d.clip_ranges.size() +
+             4 * d.path_samples.size();
   n += matcher_->tree().memory_bytes();
   n += 4 * policy_.num_parameters();
   return n;

@@ -497,12 +497,13 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
     bias_yields: bool
     hit_lookahead: bool
     hit_penalty: bool
     hit_played: bool
     hit_reward: bool
+    path_filter: bool
     random_heading: bool
     def __init__(self) -> None:
         ...
@@ -589,6 +590,30 @@ class ObstacleTaskConfig:
         ...
     @obstacle_square_half.setter
     def obstacle_square_half(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def path_candidates(self) -> int:
+        ...
+    @path_candidates.setter
+    def path_candidates(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def path_cost(self) -> float:
+        ...
+    @path_cost.setter
+    def path_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def path_horizon(self) -> int:
+        ...
+    @path_horizon.setter
+    def path_horizon(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def path_margin(self) -> float:
+        ...
+    @path_margin.setter
+    def path_margin(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def previous_map_lag(self) -> int:
@@ -710,6 +735,10 @@ class ObstacleVecEnv:
         """
         Env i's obstacles (the obstacles() dict) after `frames` more played frames of the env's own motion (constant velocity, bounce at the square's border), bit for bit as steps move them. Called at a step's start with frames = last_step_frames, it gives the obstacles at the step's end.
         """
+    def path_hits(self, index: typing.SupportsInt | typing.SupportsIndex, rows: typing.Any) -> numpy.typing.NDArray[numpy.int32]:
+        """
+        For env i's current state, each database row's collision-aware path test (tasks/path_filter.hpp, this env's path options): the frames ahead of its path's first hit, 0 when clear.
+        """
     def pop_match_stats(self) -> dict:
         """
         Every env's decisions since the last call, summed, then zeroed: decisions (steps that matched), transitions, cost_sum (their matched costs) and frames (played, each step up to its ending frame).
@@ -783,8 +812,10 @@ class RuntimeController:
     A loaded controller file (runtime.hpp), shared by characters.
     """
     @staticmethod
-    def load(path: str) -> RuntimeController:
-        ...
+    def load(path: str, require_path_filter: bool = False) -> RuntimeController:
+        """
+        Loads and checks a controller file; require_path_filter refuses one without the obstacles task's collision-aware search.
+        """
     def act(self, obs: typing.Any) -> numpy.typing.NDArray[numpy.float32]:
         """
         The policy's deterministic action for one raw observation (policy_net.hpp).

@@ -53,13 +53,23 @@ struct RuntimeLoadTimes {
   double read_and_check = 0, database = 0, search_tree = 0, policy = 0;
 };
 
+// What an engine requires of the controllers it loads.
+struct RuntimeLoadOptions {
+  // Refuse a file whose controller has no collision-aware search (an obstacles task with
+  // path_filter on, tasks/path_filter.hpp): e.g. a file written before the filter existed.
+  bool require_path_filter = false;
+};
+
 class RuntimeController {
  public:
   // Loads and checks a controller file. Throws ControllerFileError naming the file and what is
-  // wrong (truncated, corrupt, wrong version or byte order, inconsistent sections).
-  static std::shared_ptr<const RuntimeController> load(const std::string& path);
+  // wrong (truncated, corrupt, wrong version or byte order, inconsistent sections, or lacking
+  // what `options` requires).
+  static std::shared_ptr<const RuntimeController> load(const std::string& path,
+                                                       const RuntimeLoadOptions& options = {});
   // The same from a parsed file.
-  static std::shared_ptr<const RuntimeController> from_file(ControllerFile file);
+  static std::shared_ptr<const RuntimeController> from_file(ControllerFile file,
+                                                            const RuntimeLoadOptions& options = {});
 
   const Database& database() const { return db_; }
   const Matcher& matcher() const { return *matcher_; }

@@ -27,9 +27,9 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
       !finite(c.start_clearance) || !finite(c.target_clearance))
     throw std::invalid_argument("body_radius, start_clearance and target_clearance must be finite and >= 0");
   if (!(db.fps > 0)) throw std::invalid_argument("database fps must be positive");
-  if (c.path_candidates < 1 || c.path_candidates > kMaxShortlist)
-    throw std::invalid_argument("path_candidates must be between 1 and " + std::to_string(kMaxShortlist) + ", got " +
-                                std::to_string(c.path_candidates));
+  if (c.path_candidates < 0 || c.path_candidates > kMaxShortlist)
+    throw std::invalid_argument("path_candidates must be between 0 (the whole database) and " +
+                                std::to_string(kMaxShortlist) + ", got " + std::to_string(c.path_candidates));
   if (!(c.path_margin >= 0) || !finite(c.path_margin)) throw std::invalid_argument("path_margin must be finite and >= 0");
   if (std::isnan(c.path_cost) || !(c.path_cost >= 0))
     throw std::invalid_argument("path_cost must be >= 0 (inf: never play a path that hits)");

@@ -141,7 +141,9 @@ class ObstaclesConfig(TaskConfig):
     path_candidates: int = 16
     """The path filter re-ranks this many nearest candidates of each decision (by feature
     distance, plus the continuation; 1..256): the test runs on that many paths, not on every
-    frame the filter makes dearer."""
+    frame the filter makes dearer. 0: the exact filtered search over the whole database (every
+    row whose distance could still win is tested: tens of milliseconds per decision in a crowd,
+    for baselines rather than training)."""
     max_steps: int = 1500
     """Safety cap on the episode length (truncation; 1500 steps = 300 s). The paper has none."""
     num_obstacles: int = 100
@@ -186,7 +188,7 @@ OBSTACLE_PRESETS: Dict[str, Dict[str, Any]] = {
     "paper": {},
     # The default: the reward above, the collision-aware search, and the cheap learner (a small
     # MLP actor, a wider critic, 8 minibatch steps per rollout).
-    "mmrl": {**_MMRL_REWARD, "path_filter": True, "network": "mlp", "update_epochs": 2, "num_minibatches": 4},
+    "mmrl": {**_MMRL_REWARD, "path_filter": True, "network": "mlp", "num_minibatches": 4},
     # The default until the collision-aware search and the cheap learner (docs/obstacles.md's
     # nine-seed tables were measured with it): the paper's CNN, no path filter.
     "mmrl-cnn": dict(_MMRL_REWARD),
@@ -285,6 +287,11 @@ class ObstaclesVectorEnv(TargetVectorEnv):
         12-d action's three future trajectory positions (the hit reward's count)."""
         a = np.ascontiguousarray(action, dtype=np.float32).reshape(-1)
         return self._core.action_hits(int(i), a)
+
+    def path_hits(self, i: int, rows: np.ndarray) -> np.ndarray:
+        """For env i's current state, the collision-aware search's test of each database row
+        (valid frames): the frames ahead of its played path's first hit, 0 when clear (int32)."""
+        return self._core.path_hits(int(i), np.ascontiguousarray(rows, np.int64).reshape(-1))
 
     def collides(self, i: int, x: float, z: float) -> bool:
         """Whether the body disc at world (x, z) overlaps one of env i's obstacles."""

@@ -81,7 +81,9 @@ struct ObstacleTaskConfig : TaskConfig {
   float path_cost = 100.0f;
   int path_horizon = 30;
   float path_margin = 0.05f;
-  int path_candidates = 16;  // the filter re-ranks this many nearest candidates (search.hpp's shortlist)
+  // The filter re-ranks this many nearest candidates (search.hpp's shortlist); 0: the exact
+  // filtered search over the whole database (kdtree.hpp), far slower in crowds.
+  int path_candidates = 16;
   int num_obstacles = 100;
   float obstacle_square_half = 10.0f;  // obstacle centres in a 20 x 20 m square around the start
   float obstacle_min_side = 0.25f;     // rectangle sides uniform in [min, max] meters

@@ -1,0 +1,229 @@
+"""The collision-aware search (tasks/path_filter.hpp): each candidate frame's own played path,
+tested against where the obstacles will be, re-ranks the decision's shortlist.
+
+- the path test equals a numpy reference that plays the candidate's root deltas from the
+  character's root and moves the obstacles by the env's rule frame by frame;
+- the env's decisions equal a numpy brute force of the shortlist rule (search.hpp's
+  brute_force_match_shortlist: the k nearest by plain distance, re-ranked by distance plus the
+  path cost), and the filter changes decisions (not vacuous);
+- the filter makes collisions rarer for the same actions;
+- bad options name themselves.
+On the synthetic skeleton and on a second one (Mixamo names, other channel orders)."""
+import numpy as np
+import pytest
+
+import mmrl
+from mmrl import _core
+from mmrl.rl.policies import JoystickPolicy
+from mmrl.rollout import apply_stage
+from test_import_axes_fps import other_skeleton_database
+
+SAMPLES = np.array([2, 4, 6, 8, 10, 15, 20, 25, 30])
+
+
+@pytest.fixture(scope="module")
+def synthetic_db():
+    return mmrl.default_database()
+
+
+@pytest.fixture(scope="module")
+def mixamo_db(tmp_path_factory):
+    return other_skeleton_database(tmp_path_factory.mktemp("mixamo_path"))
+
+
+@pytest.fixture(params=["synthetic", "mixamo"])
+def db(request, synthetic_db, mixamo_db):
+    return synthetic_db if request.param == "synthetic" else mixamo_db
+
+
+def config(**kw):
+    base = dict(num_obstacles=60, obstacle_max_speed=1.0, path_filter=True, path_cost=50.0, path_candidates=32,
+                max_steps=80)
+    base.update(kw)
+    return mmrl.get_task("obstacles").default_config().replace(**base)
+
+
+def reference_path_distances(db, state, obstacles, rows, cfg, moving):
+    """(rows, samples) distance from each row's played root (the root deltas from the character's
+    root, decision.hpp) to the nearest obstacle where the env's motion rule puts it then."""
+    dt = np.float32(1.0 / db.fps)
+    half = np.float32(cfg.obstacle_square_half)
+    rows = np.asarray(rows)
+    x = np.full(rows.size, state["x"], np.float64)
+    z = np.full(rows.size, state["z"], np.float64)
+    yaw = np.full(rows.size, state["yaw"], np.float64)
+    c = obstacles["centres"].astype(np.float32).copy()
+    v = obstacles["velocities"].astype(np.float32).copy()
+    h, a = obstacles["half_sizes"], obstacles["angles"]
+    out = []
+    for t in range(1, SAMPLES[-1] + 1):
+        d = db.root_deltas[rows + t - 1].astype(np.float64)
+        cy, sy = np.cos(yaw), np.sin(yaw)
+        x, z, yaw = x + cy * d[:, 0] + sy * d[:, 1], z - sy * d[:, 0] + cy * d[:, 1], yaw + d[:, 2]
+        if moving:
+            c = c + v * dt
+            over, under = c > half, c < -half
+            c = np.where(over, 2 * half - c, np.where(under, -2 * half - c, c)).astype(np.float32)
+            v = np.where(over | under, -v, v)
+        if t in SAMPLES:
+            dx = x[:, None] - c[None, :, 0]
+            dz = z[:, None] - c[None, :, 1]
+            u = np.cos(a)[None] * dx - np.sin(a)[None] * dz
+            w = np.sin(a)[None] * dx + np.cos(a)[None] * dz
+            du = np.maximum(np.abs(u) - h[None, :, 0], 0)
+            dw = np.maximum(np.abs(w) - h[None, :, 1], 0)
+            out.append(np.sqrt(du * du + dw * dw).min(axis=1))
+    return np.stack(out, axis=1)
+
+
+def reference_first_hits(dist, radius, horizon):
+    """(first hit frame, 0 if clear; near: whether a sample within the horizon lies within 1 mm
+    of the radius, where float rounding may decide)."""
+    inside = SAMPLES <= horizon
+    hit = (dist <= radius) & inside[None]
+    first = np.where(hit.any(1), SAMPLES[np.argmax(hit, axis=1)], 0)
+    near = (np.abs(dist - radius) < 1e-3)[:, inside].any(1)
+    return first, near
+
+
+def stepped(env, steps, seed, noise=0.8):
+    """Steps env with noisy joystick actions; yields (states before, obstacles before, actions)."""
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(seed)
+    joy = JoystickPolicy(env.db)
+    for _ in range(steps):
+        actions = (joy.act(obs) + rng.normal(0, noise, (env.num_envs, 12))).astype(np.float32)
+        yield obs, actions
+        obs, *_ = env.step(actions)
+
+
+def test_path_test_equals_a_numpy_reference(db):
+    cfg = config()
+    env = mmrl.get_task("obstacles").make_vector_env(4, db=db, config=cfg, num_threads=1)
+    apply_stage(mmrl.get_task("obstacles"), env, None)
+    valid = np.flatnonzero(db.valid_mask)
+    rng = np.random.default_rng(3)
+    checked = hits = mismatched = 0
+    for step, _ in enumerate(stepped(env, 25, 5)):
+        for i in range(env.num_envs):
+            rows = rng.choice(valid, 300)
+            got = env.path_hits(i, rows)
+            state = env.env_state(i)
+            dist = reference_path_distances(db, state, env.obstacles(i), rows, cfg, state["max_speed"] > 0)
+            want, near = reference_first_hits(dist, cfg.body_radius + cfg.path_margin, cfg.path_horizon)
+            bad = (got != want) & ~near
+            mismatched += int(bad.sum())
+            checked += rows.size
+            hits += int((want > 0).sum())
+    assert mismatched == 0
+    assert checked >= 20000 and 0.05 * checked < hits < 0.95 * checked, (checked, hits)
+
+
+def test_a_shorter_horizon_tests_fewer_samples(synthetic_db):
+    db = synthetic_db
+    for horizon in (2, 10, 17):
+        cfg = config(path_horizon=horizon)
+        env = mmrl.get_task("obstacles").make_vector_env(2, db=db, config=cfg, num_threads=1)
+        env.reset(seed=1)
+        rows = np.flatnonzero(db.valid_mask)[::7]
+        got = env.path_hits(0, rows)
+        state = env.env_state(0)
+        dist = reference_path_distances(db, state, env.obstacles(0), rows, cfg, state["max_speed"] > 0)
+        want, near = reference_first_hits(dist, cfg.body_radius + cfg.path_margin, horizon)
+        assert ((got == want) | near).all()
+        assert got.max() <= horizon
+
+
+def brute_force_shortlist(db, frame, action, low, high, extra, k, transition_cost=0.0):
+    """(match, cost, slack) by search.hpp's shortlist rule; extra(rows) gives the filter's cost.
+    slack: how close the decision came to going another way (the shortlist's cut, the runner-up)."""
+    rows = np.asarray(db.normalized_features, np.float64)
+    query = np.concatenate([rows[frame, :15], np.clip(action, low, high)])
+    d = ((rows - query) ** 2).sum(1)
+    allowed = np.asarray(db.valid_mask, bool).copy()
+    c = int(db.frame_clip[frame])
+    start, stop = db.clip_ranges[c]
+    allowed[max(start, frame - 20):min(stop, frame + 21)] = False
+    cand = np.flatnonzero(allowed)
+    ranked = cand[np.lexsort((cand, d[cand]))]
+    order = ranked[:k]
+    slack = d[ranked[k]] - d[ranked[k - 1]] if ranked.size > k else np.inf
+    entries = [(c_, int(i)) for i, c_ in zip(order, d[order] + extra(order)) if np.isfinite(c_)]
+    bound_c = np.inf
+    if db.valid_mask[frame]:
+        bound_c = d[frame] + extra(np.array([frame]))[0]
+        if np.isfinite(bound_c):
+            entries.append((bound_c - transition_cost, frame))
+    entries.sort(key=lambda e: e[0])
+    best_c, best_i = entries[0]
+    if len(entries) > 1:
+        slack = min(slack, entries[1][0] - best_c)
+    return best_i, (bound_c if best_i == frame else best_c), slack
+
+
+def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db):
+    cfg = config()
+    task = mmrl.get_task("obstacles")
+    env = task.make_vector_env(4, db=db, config=cfg, num_threads=2)
+    apply_stage(task, env, None)
+    low, high = env.single_action_space.low, env.single_action_space.high
+    h = cfg.path_horizon
+
+    def path_cost(first):
+        return np.where(first > 0, cfg.path_cost * (2 - first / h), 0.0)
+
+    compared = changed = 0
+    for obs, actions in stepped(env, 60, 9):
+        frames = env.current_frames()
+        before = []
+        for i in range(env.num_envs):
+            extra = (lambda i: lambda rows: path_cost(env.path_hits(i, rows)))(i)
+            no_extra = lambda rows: np.zeros(len(rows))
+            before.append((brute_force_shortlist(db, frames[i], actions[i], low, high, extra, cfg.path_candidates),
+                           brute_force_shortlist(db, frames[i], actions[i], low, high, no_extra, 1)))
+        env.step(actions)
+        for i, ((want, want_cost, slack), (plain, _, _)) in enumerate(before):
+            match, cost = env.last_step_decision(i)
+            if slack < 1e-3:
+                continue  # float32 rounding may order near-equal rows either way
+            assert match == want, (i, match, want)
+            assert cost == pytest.approx(want_cost, rel=1e-4, abs=1e-4)
+            compared += 1
+            changed += match != plain
+    assert compared >= 150
+    assert changed >= 5, "the path filter never changed a decision: the test tests nothing"
+
+
+def test_the_filter_makes_collisions_rarer_for_the_same_actions(synthetic_db):
+    task = mmrl.get_task("obstacles")
+    rates = {}
+    for on in (False, True):
+        env = task.make_vector_env(200, db=synthetic_db, config=config(path_filter=on, path_cost=200.0),
+                                   num_threads=2)
+        apply_stage(task, env, None)
+        from mmrl.rollout import first_episodes
+
+        r = first_episodes(env, JoystickPolicy(synthetic_db), seed=4)
+        rates[on] = r["collision"].mean()
+    assert rates[True] < rates[False] - 0.03, rates
+
+
+@pytest.mark.parametrize("option, value, needle", [
+    ("path_horizon", 1, "path_horizon"), ("path_horizon", 31, "path_horizon"),
+    ("path_cost", -1.0, "path_cost"), ("path_cost", float("nan"), "path_cost"),
+    ("path_margin", -0.1, "path_margin"), ("path_margin", float("inf"), "path_margin"),
+    ("path_candidates", -1, "path_candidates"), ("path_candidates", 257, "path_candidates"),
+    ("path_margin", 3.0, "body_radius + path_margin"), ("body_radius", 3.5, "body_radius"),
+])
+def test_bad_filter_options_name_the_option(synthetic_db, option, value, needle):
+    with pytest.raises(ValueError, match=needle.replace("+", r"\+")):
+        mmrl.get_task("obstacles").make_vector_env(2, db=synthetic_db, config=config(**{option: value}))
+
+
+def test_path_hits_refuses_rows_that_cannot_be_matched(synthetic_db):
+    env = mmrl.get_task("obstacles").make_vector_env(2, db=synthetic_db, config=config())
+    env.reset(seed=0)
+    invalid = int(np.flatnonzero(~synthetic_db.valid_mask)[0])
+    for rows in ([-1], [synthetic_db.num_frames], [invalid]):
+        with pytest.raises(ValueError, match="rows"):
+            env.path_hits(0, np.array(rows, np.int64))
