@@ -11,7 +11,8 @@ same decisions, for 1,000 decisions per task and across episode ends.
   the same observation bit for bit, decides the same frames and shows the same roots.
 
 The configs switch on every rule that changes a match: a transition cost, the obstacles'
-bias_yields with a look-ahead and a hit disc, and a clip-cost filter."""
+bias_yields with a look-ahead and a hit disc, a clip-cost filter, and (a third config) the
+collision-aware search."""
 import numpy as np
 import pytest
 
@@ -29,7 +30,10 @@ def configs(db):
     obstacles = mmrl.get_task("obstacles").default_config().replace(
         transition_cost=5.0, bias_yields=True, hit_lookahead=True, hit_radius=0.3, num_obstacles=40,
         obstacle_max_speed=1.0, clip_costs=f"{busy}=2.0", max_steps=60)
-    return {"plane": (plane, random_plane_policy(4)), "obstacles": (obstacles, random_obstacle_policy(5))}
+    # The collision-aware search (tasks/path_filter.hpp) on top: every rule at once.
+    path = obstacles.replace(path_filter=True, path_cost=50.0, path_candidates=32)
+    return {"plane": (plane, random_plane_policy(4)), "obstacles": (obstacles, random_obstacle_policy(5)),
+            "obstacles-path": (path, random_obstacle_policy(5))}
 
 
 def hand_obstacles(character, env):
@@ -38,11 +42,12 @@ def hand_obstacles(character, env):
                               for k in ("centres", "half_sizes", "angles", "velocities")))
 
 
-@pytest.mark.parametrize("task_name", ["plane", "obstacles"])
-def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(task_name, tmp_path):
+@pytest.mark.parametrize("kind", ["plane", "obstacles", "obstacles-path"])
+def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path):
     db = mmrl.default_database()
+    task_name = kind.split("-")[0]
     task = mmrl.get_task(task_name)
-    config, policy = configs(db)[task_name]
+    config, policy = configs(db)[kind]
     path = tmp_path / f"{task_name}.mmrl"
     write_controller(path, db, policy, task_name, config)
     controller = _core.RuntimeController.load(str(path))

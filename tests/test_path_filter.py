@@ -227,3 +227,67 @@ def test_path_hits_refuses_rows_that_cannot_be_matched(synthetic_db):
     for rows in ([-1], [synthetic_db.num_frames], [invalid]):
         with pytest.raises(ValueError, match="rows"):
             env.path_hits(0, np.array(rows, np.int64))
+
+
+def test_runtime_files_carry_the_filter_and_a_loader_can_require_it(tmp_path, synthetic_db):
+    from mmrl.export.runtime_export import write_controller
+    from mmrl.export.runtime_file import read_sections, write_sections
+    ControllerFileError = _core.ControllerFileError
+    from test_runtime import random_obstacle_policy
+
+    policy = random_obstacle_policy(5)
+    with_filter, without = tmp_path / "with.mmrl", tmp_path / "without.mmrl"
+    write_controller(with_filter, synthetic_db, policy, "obstacles", config(path_cost=float("inf")))
+    write_controller(without, synthetic_db, policy, "obstacles", config(path_filter=False))
+    loaded = _core.RuntimeController.load(str(with_filter), require_path_filter=True)
+    assert loaded.task_name == "obstacles"
+    _core.RuntimeController.load(str(without))  # nothing required: loads
+    with pytest.raises(ControllerFileError, match="requires the collision-aware search.*path_filter is off"):
+        _core.RuntimeController.load(str(without), require_path_filter=True)
+    # A file that switches the filter on but lacks its numbers (hand-edited, or truncated tables).
+    sections = read_sections(with_filter)
+    keys = list(sections["task.keys"])
+    values = np.asarray(sections["task.values"])
+    keep = [k != "path_horizon" for k in keys]
+    sections["task.keys"] = [k for k, ok in zip(keys, keep) if ok]
+    sections["task.values"] = values[np.asarray(keep)]
+    broken = tmp_path / "broken.mmrl"
+    write_sections(broken, sections)
+    with pytest.raises(ControllerFileError, match="path_filter is on but the file lacks task.path_horizon"):
+        _core.RuntimeController.load(str(broken))
+
+
+@pytest.mark.parametrize("network", ["small-cnn", "mlp"])
+def test_the_cheap_networks_train_export_and_run_in_the_runtime(tmp_path, network):
+    """--set network=NAME builds the task's network; its actor exports to the runtime, which acts
+    as torch does."""
+    from mmrl.cli import main
+    from mmrl.runs import RunDir
+    from test_runtime import sample_observations
+
+    run = tmp_path / network
+    assert main(["train", "obstacles", "--steps", "1024", "--envs", "8", "--out", str(run), "--no-progress",
+                 "--set", f"network={network}"]) == 0
+    assert main(["export", str(run), "-o", str(tmp_path / "c.mmrl")]) == 0
+    r = RunDir(run)
+    policy = r.policy()
+    kind = {"small-cnn": "ObstacleActorCritic", "mlp": "MLPActorCritic"}[network]
+    assert type(policy.model).__name__ == kind
+    obs = sample_observations(r.task, r.database(), r.task_config(r.task), policy, 200, seed=3)
+    c = _core.RuntimeController.load(str(tmp_path / "c.mmrl"), require_path_filter=True)
+    ours = np.stack([c.act(o) for o in obs])
+    ref = policy.act(obs)
+    assert np.max(np.abs(ours - ref) / np.maximum(1.0, np.abs(ref))) <= 1e-5
+    actor = sum(p.numel() for p in policy.model.actor.parameters())
+    assert actor < 100_000  # the paper's actor has 572,732 weights
+
+
+def test_an_unknown_network_is_refused(tmp_path, capsys):
+    from mmrl.cli import main
+
+    assert main(["train", "obstacles", "--steps", "512", "--out", str(tmp_path / "x"), "--no-progress",
+                 "--set", "network=resnet"]) == 2
+    assert "network" in capsys.readouterr().err
+    assert main(["train", "plane", "--steps", "512", "--out", str(tmp_path / "y"), "--no-progress",
+                 "--set", "network=mlp"]) == 2
+    assert "one network" in capsys.readouterr().err

@@ -184,30 +184,34 @@ OBSTACLE_DEFAULT_LAYOUT: tuple[tuple[str, int], ...] = (("maps", 2 * 16 * 16), (
 
 
 class _ObstacleTower(nn.Module):
-    """conv 16@4x4 -> conv 32@3x3 (stride 1, no padding) -> FC 128; concat the
-    vector part; FC 256 -> FC 128 -> head. ReLU throughout (the paper does not
-    name the activation)."""
+    """conv C1@4x4 -> conv C2@3x3 (stride 1, no padding) -> FC F; concat the vector part;
+    FC H1 -> ... -> head. ReLU throughout (the paper does not name the activation). The paper's
+    sizes: C = (16, 32), F = 128, H = (256, 128)."""
 
     def __init__(self, map_shape: tuple[int, int, int], vector_dim: int, out_features: int,
-                 out_gain: float):
+                 out_gain: float, channels: tuple[int, int] = (16, 32), map_features: int = 128,
+                 head: tuple[int, ...] = (256, 128)):
         super().__init__()
-        channels, height, width = map_shape
+        in_channels, height, width = map_shape
+        c1, c2 = (int(c) for c in channels)
         self.conv = nn.Sequential(
-            nn.Conv2d(channels, 16, 4, stride=1), nn.ReLU(),
-            nn.Conv2d(16, 32, 3, stride=1), nn.ReLU(),
+            nn.Conv2d(in_channels, c1, 4, stride=1), nn.ReLU(),
+            nn.Conv2d(c1, c2, 3, stride=1), nn.ReLU(),
             nn.Flatten(),
         )
-        conv_out = 32 * (height - 3 - 2) * (width - 3 - 2)
+        conv_out = c2 * (height - 3 - 2) * (width - 3 - 2)
         for module in self.conv:
             if isinstance(module, nn.Conv2d):
                 nn.init.orthogonal_(module.weight, math.sqrt(2))
                 nn.init.zeros_(module.bias)
-        self.map_fc = nn.Sequential(_linear(conv_out, 128), nn.ReLU())
-        self.head = nn.Sequential(
-            _linear(128 + vector_dim, 256), nn.ReLU(),
-            _linear(256, 128), nn.ReLU(),
-            _linear(128, out_features, out_gain),
-        )
+        self.map_fc = nn.Sequential(_linear(conv_out, int(map_features)), nn.ReLU())
+        layers: list[nn.Module] = []
+        width_in = int(map_features) + vector_dim
+        for size in head:
+            layers += [_linear(width_in, int(size)), nn.ReLU()]
+            width_in = int(size)
+        layers.append(_linear(width_in, out_features, out_gain))
+        self.head = nn.Sequential(*layers)
 
     def forward(self, maps: torch.Tensor, vector: torch.Tensor) -> torch.Tensor:
         features = self.map_fc(self.conv(maps))
@@ -216,21 +220,29 @@ class _ObstacleTower(nn.Module):
 
 @register_network
 class ObstacleActorCritic(nn.Module):
-    """Moving-obstacles task: separate CNN towers for policy and value.
+    """Moving-obstacles task: a CNN tower for the policy; for the value, another tower (the
+    paper's) or an MLP on the flat observation (``critic_hidden``).
 
     The observation is one flat float vector; ``layout`` names its consecutive
     segments and sizes (default ``OBSTACLE_DEFAULT_LAYOUT``: 512 map entries,
     then 15 pose, then 2 goal). The segment named "maps" is reshaped to
     ``map_shape`` (C, H, W); every other segment is concatenated, in layout
-    order, into the vector that joins after the map's FC 128 layer. Pass the
+    order, into the vector that joins after the map's FC layer. Pass the
     env's layout here if it differs.
+
+    The defaults are the paper's network. ``channels``, ``map_features`` and ``head`` size the
+    actor's tower (and the critic's, without ``critic_hidden``); only the actor is exported,
+    so a small actor is what the runtime pays for, while the critic (training only) may be
+    larger than it.
 
     PPO should leave the binary maps unnormalized: pass
     ``PPOConfig(obs_norm_exclude=ObstacleActorCritic.map_range(layout))``.
     """
 
     def __init__(self, act_dim: int, layout: tuple[tuple[str, int], ...] = OBSTACLE_DEFAULT_LAYOUT,
-                 map_shape: tuple[int, int, int] = (2, 16, 16), init_log_std: float = 0.0):
+                 map_shape: tuple[int, int, int] = (2, 16, 16), init_log_std: float = 0.0,
+                 channels: tuple[int, int] = (16, 32), map_features: int = 128,
+                 head: tuple[int, ...] = (256, 128), critic_hidden: Optional[tuple[int, ...]] = None):
         super().__init__()
         layout = tuple((str(name), int(size)) for name, size in layout)
         names = [name for name, _ in layout]
@@ -240,8 +252,11 @@ class ObstacleActorCritic(nn.Module):
         if map_stop - map_start != math.prod(map_shape):
             raise ValueError(f"ObstacleActorCritic: 'maps' segment has {map_stop - map_start} entries "
                              f"but map_shape {tuple(map_shape)} needs {math.prod(map_shape)}")
+        tower = dict(channels=tuple(int(c) for c in channels), map_features=int(map_features),
+                     head=tuple(int(h) for h in head))
         self.init_kwargs = dict(act_dim=act_dim, layout=layout, map_shape=tuple(map_shape),
-                                init_log_std=init_log_std)
+                                init_log_std=init_log_std, **tower,
+                                critic_hidden=None if critic_hidden is None else tuple(int(h) for h in critic_hidden))
         self.obs_dim = sum(size for _, size in layout)
         self.map_shape = tuple(map_shape)
         self._map_slice = slice(map_start, map_stop)
@@ -252,8 +267,12 @@ class ObstacleActorCritic(nn.Module):
         self._vector_slice = slice(vector_idx[0], vector_idx[-1] + 1) if vector_idx else slice(0, 0)
         self.register_buffer("_vector_index", torch.tensor(vector_idx, dtype=torch.long), persistent=False)
         vector_dim = len(vector_idx)
-        self.actor = _ObstacleTower(self.map_shape, vector_dim, act_dim, 0.01)
-        self.critic = _ObstacleTower(self.map_shape, vector_dim, 1, 1.0)
+        self.actor = _ObstacleTower(self.map_shape, vector_dim, act_dim, 0.01, **tower)
+        self._critic_mlp = critic_hidden is not None
+        if self._critic_mlp:
+            self.critic = _mlp(self.obs_dim, tuple(int(h) for h in critic_hidden), 1, 1.0, nn.ReLU)
+        else:
+            self.critic = _ObstacleTower(self.map_shape, vector_dim, 1, 1.0, **tower)
         self.log_std = nn.Parameter(torch.full((act_dim,), float(init_log_std)))
 
     @staticmethod
@@ -280,4 +299,8 @@ class ObstacleActorCritic(nn.Module):
         return self.actor(*self._split(obs))
 
     def value(self, obs: torch.Tensor) -> torch.Tensor:
+        if self._critic_mlp:
+            if obs.shape[-1] != self.obs_dim:
+                raise ValueError(f"ObstacleActorCritic: expected obs with {self.obs_dim} entries, got {tuple(obs.shape)}")
+            return self.critic(obs).squeeze(-1)
         return self.critic(*self._split(obs)).squeeze(-1)

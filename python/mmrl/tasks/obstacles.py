@@ -56,7 +56,10 @@ OBSTACLE_MAP_RANGE = (0, 2 * _core.OBSTACLE_MAP_SIDE ** 2)
 
 
 #: The networks ``obstacle_policy_factory`` builds (``--set network=NAME``; "default" is "cnn").
-OBSTACLE_NETWORKS = ("cnn", "mlp")
+OBSTACLE_NETWORKS = ("cnn", "small-cnn", "mlp")
+#: "small-cnn": the paper's tower with conv 8@4x4, conv 8@3x3, FC 64, head 64 (about 66k actor
+#: weights against 573k), and an MLP critic 128 x 128 on the flat observation.
+SMALL_CNN = dict(channels=(8, 8), map_features=64, head=(64,), critic_hidden=(128, 128))
 
 
 def obstacle_policy_factory(envs=None, network: str = "default"):
@@ -78,7 +81,8 @@ def obstacle_policy_factory(envs=None, network: str = "default"):
 
         if network == "mlp":
             return MLPActorCritic(obs_dim, act_dim)
-        return ObstacleActorCritic(act_dim, layout=layout, map_shape=map_shape)
+        small = SMALL_CNN if network == "small-cnn" else {}
+        return ObstacleActorCritic(act_dim, layout=layout, map_shape=map_shape, **small)
 
     return factory
 

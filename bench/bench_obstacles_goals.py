@@ -1,0 +1,112 @@
+"""The moving-obstacles goals (issue 24): stage-10 success and motion quality of trained runs next
+to the joysticks with and without the collision-aware search, all on the same episodes.
+
+    python bench/bench_obstacles_goals.py RUN [RUN ...] [--db FILE.npz] [--episodes 2000]
+        [--quality-episodes 200] [--seed 1000] [--peers joystick joystick+path ...] [--json OUT.json]
+
+Success comes from ``--episodes`` fast-path episodes (``mmrl.rollout.evaluate_fast``, the same
+episodes for every controller); motion from ``--quality-episodes`` full-path episodes
+(``evaluate_full_path``, IK on, with the IK-off foot sliding of the same run), plus the
+raw-mocap floor. Peers (``--peers``):
+
+- ``joystick`` / ``joystick-run``: straight at the target at walking / running speed, blind;
+- ``joystick+path`` / ``joystick-run+path``: the same queries through the collision-aware
+  search (``path_filter``, the task's defaults: the 16 nearest re-ranked);
+- ``joystick+path-exact`` / ``joystick-run+path-exact``: the exact filtered search over the
+  whole database (``path_candidates=0``), slow in crowds (tens of ms per decision);
+  ``--peer-cost`` sets its path cost.
+
+Each RUN runs with its own options (its config.json). Prints a markdown table.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+PEERS = ("joystick", "joystick-run", "joystick+path", "joystick-run+path", "joystick+path-exact",
+         "joystick-run+path-exact")
+KEYS = ("foot_sliding_ik_off_cm_per_s", "foot_sliding_cm_per_s", "transitions_per_s", "pose_jump_p99_cm")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("runs", nargs="*", help="training run directories")
+    ap.add_argument("--db", default=None, help="database .npz (default: the first run's)")
+    ap.add_argument("--episodes", type=int, default=2000)
+    ap.add_argument("--quality-episodes", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=1000)
+    ap.add_argument("--peers", nargs="*", default=["joystick", "joystick+path"], choices=PEERS)
+    ap.add_argument("--peer-cost", type=float, default=100.0, help="path_cost of the peers with the filter")
+    ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+
+    from mmrl.motion.database import Database
+    from mmrl.rl.policies import JoystickPolicy
+    from mmrl.rollout import evaluate_fast, evaluate_full_path
+    from mmrl.runs import RunDir
+    from mmrl.tasks import get_task
+
+    task = get_task("obstacles")
+    runs = [RunDir(r) for r in args.runs]
+    if args.db:
+        db = Database.load(args.db)
+    elif runs:
+        db = runs[0].database()
+    else:
+        ap.error("give a RUN or --db")
+    controllers = []
+    for peer in args.peers:
+        name, _, search = peer.partition("+")
+        cfg = task.default_config()
+        if search:
+            cfg = cfg.replace(path_filter=True, path_cost=args.peer_cost,
+                              path_candidates=0 if search == "path-exact" else cfg.path_candidates)
+        controllers.append((peer, JoystickPolicy.preset(db, name), cfg))
+    for run, path in zip(runs, args.runs):
+        controllers.append((path, run.policy(), run.task_config(task)))
+
+    results = {}
+    floor = None
+    for name, policy, cfg in controllers:
+        t0 = time.perf_counter()
+        fast = evaluate_fast(task, db, policy, episodes=args.episodes, seed=args.seed, config=cfg,
+                             num_threads=args.threads)
+        t1 = time.perf_counter()
+        row = {"success_rate": fast["success_rate"], "success_stderr": fast["success_stderr"],
+               "collision_rate": fast.get("collision_rate"), "fast_s": t1 - t0}
+        if args.quality_episodes > 0:
+            on = evaluate_full_path(task, db, policy, episodes=args.quality_episodes, seed=args.seed, config=cfg)
+            row.update({k: on.get(k) for k in KEYS})
+            row["full_path_success_rate"] = on["success_rate"]
+            floor = floor or on.get("raw_mocap")
+        row["seconds"] = time.perf_counter() - t0
+        results[name] = row
+        print(f"{name}: {json.dumps(row)}", flush=True)
+
+    print()
+    print("| controller | stage-10 success | transitions/s | sliding IK off (cm/s) | sliding IK on (cm/s) | "
+          "pose-jump p99 (cm) |")
+    print("|---|---:|---:|---:|---:|---:|")
+
+    def fmt(v, spec=".2f"):
+        return "" if v is None else format(v, spec)
+
+    for name, r in results.items():
+        print(f"| {name} | {100 * r['success_rate']:.1f}% ± {100 * r['success_stderr']:.1f} | "
+              f"{fmt(r.get('transitions_per_s'))} | {fmt(r.get('foot_sliding_ik_off_cm_per_s'), '.1f')} | "
+              f"{fmt(r.get('foot_sliding_cm_per_s'))} | {fmt(r.get('pose_jump_p99_cm'), '.1f')} |")
+    if floor:
+        print(f"| raw mocap (floor) | | | {fmt(floor.get('foot_sliding_ik_off_cm_per_s') or floor.get('foot_sliding_cm_per_s'), '.1f')} | | |")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"episodes": args.episodes, "quality_episodes": args.quality_episodes,
+                                               "seed": args.seed, "results": results, "raw_mocap": floor},
+                                              indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
