@@ -57,6 +57,45 @@ MMRL_MULTIVERSION int brute_force_knn(const float* points, int64_t num_points, i
   return found;
 }
 
+namespace {
+
+// The continuation rule's running best, shared by brute_force_match and the shortlist: the
+// bound's filtered cost less the transition cost is the starting best (a refused bound is no
+// bound), and a row replaces the best only with a strictly lower filtered cost (the first of
+// equal costs wins when there is no best yet). The reported cost is the bound's own.
+class RunningMatch {
+ public:
+  RunningMatch(const float* points, int dim, const float* query, int64_t bound_index, float transition_cost,
+               const CandidateFilter* candidates)
+      : bound_(bound_index) {
+    if (bound_index < 0) return;
+    bound_cost_ = filtered_cost(sqdist_row(query, points + bound_index * dim, dim), candidates, bound_index);
+    if (bound_cost_ < kInf) {
+      best_ = bound_index;
+      best_cost_ = bound_cost_ - transition_cost;
+    }
+  }
+  float best_cost() const { return best_cost_; }
+  void offer(int64_t i, float cost) {
+    if (cost == kInf) return;  // refused by the candidate filter
+    if (cost < best_cost_ || (best_ < 0 && cost == best_cost_)) {
+      best_cost_ = cost;
+      best_ = i;
+    }
+  }
+  int64_t finish(float* out_cost) const {
+    if (out_cost) *out_cost = best_ == bound_ ? bound_cost_ : best_cost_;
+    return best_;
+  }
+
+ private:
+  static constexpr float kInf = std::numeric_limits<float>::infinity();
+  int64_t bound_, best_ = -1;
+  float best_cost_ = kInf, bound_cost_ = kInf;
+};
+
+}  // namespace
+
 MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                           const float* query, int64_t exclude_lo, int64_t exclude_hi, int64_t bound_index,
                           float* out_cost, float transition_cost, const CandidateFilter* candidates) {
@@ -65,31 +104,15 @@ MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_poi
   if (bound_index >= num_points) throw std::out_of_range("brute_force_match: bound_index out of range");
   if (!(transition_cost >= 0.0f) || !std::isfinite(transition_cost))
     throw std::invalid_argument("brute_force_match: transition_cost must be finite and >= 0");
-  int64_t best = -1;
-  float best_cost = std::numeric_limits<float>::infinity();
-  float bound_cost = best_cost;
-  if (bound_index >= 0) {
-    bound_cost = filtered_cost(sqdist_row(query, points + bound_index * dim, dim), candidates, bound_index);
-    if (bound_cost < std::numeric_limits<float>::infinity()) {  // else the filter refused the bound
-      best = bound_index;
-      best_cost = bound_cost - transition_cost;  // another row must beat the bound by the margin
-    }
-  }
+  RunningMatch match(points, dim, query, bound_index, transition_cost, candidates);
   float dist[kLanes];
   for (int64_t i = 0; i < num_points; ++i) {
     if (i % kLanes == 0)
       rows_sqdist(query, points + i * dim, static_cast<int>(std::min<int64_t>(kLanes, num_points - i)), dim, dist);
     if ((valid && !valid[i]) || (i >= exclude_lo && i < exclude_hi)) continue;
-    const float d = filtered_cost(dist[i % kLanes], candidates, i);
-    if (d == std::numeric_limits<float>::infinity()) continue;  // refused by the candidate filter
-    if (d < best_cost || (best < 0 && d == best_cost)) {
-      best_cost = d;
-      best = i;
-    }
+    match.offer(i, filtered_cost(dist[i % kLanes], candidates, i));
   }
-  if (best == bound_index) best_cost = bound_cost;
-  if (out_cost) *out_cost = best_cost;
-  return best;
+  return match.finish(out_cost);
 }
 
 namespace {
@@ -107,32 +130,14 @@ void check_shortlist(int shortlist, float transition_cost, const char* who) {
 int64_t rerank_shortlist(const float* points, int dim, const float* query, const int64_t* rows, const float* sqdist,
                          int found, int64_t bound_index, float* out_cost, float transition_cost,
                          const CandidateFilter* candidates) {
-  int64_t best = -1;
-  float best_cost = std::numeric_limits<float>::infinity();
-  float bound_cost = best_cost;
-  if (bound_index >= 0) {
-    bound_cost = filtered_cost(sqdist_row(query, points + bound_index * dim, dim), candidates, bound_index);
-    if (bound_cost < std::numeric_limits<float>::infinity()) {
-      best = bound_index;
-      best_cost = bound_cost - transition_cost;
-    }
-  }
+  RunningMatch match(points, dim, query, bound_index, transition_cost, candidates);
   for (int r = 0; r < found; ++r) {
     // Rows come by plain distance and extra costs are >= 0: once a row's distance reaches the
     // best filtered cost, no later row can beat it (a replacement must be strictly lower).
-    if (sqdist[r] >= best_cost) break;
-    const int64_t i = rows[r];
-    if (i == bound_index) continue;  // (the window excludes it anyway)
-    const float c = filtered_cost(sqdist[r], candidates, i);
-    if (c == std::numeric_limits<float>::infinity()) continue;
-    if (c < best_cost || (best < 0 && c == best_cost)) {
-      best_cost = c;
-      best = i;
-    }
+    if (sqdist[r] >= match.best_cost()) break;
+    if (rows[r] != bound_index) match.offer(rows[r], filtered_cost(sqdist[r], candidates, rows[r]));
   }
-  if (best == bound_index) best_cost = bound_cost;
-  if (out_cost) *out_cost = best_cost;
-  return best;
+  return match.finish(out_cost);
 }
 
 }  // namespace

@@ -192,7 +192,7 @@ OBSTACLE_PRESETS: Dict[str, Dict[str, Any]] = {
     "paper": {},
     # The default: the reward above, the collision-aware search, and the cheap learner (a small
     # MLP actor, a wider critic, 8 minibatch steps per rollout).
-    "mmrl": {**_MMRL_REWARD, "path_filter": True, "network": "mlp", "num_minibatches": 4},
+    "mmrl": {**_MMRL_REWARD, "path_filter": True, "network": "small-cnn", "num_minibatches": 4},
     # The default until the collision-aware search and the cheap learner (docs/obstacles.md's
     # nine-seed tables were measured with it): the paper's CNN, no path filter.
     "mmrl-cnn": dict(_MMRL_REWARD),
