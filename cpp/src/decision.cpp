@@ -1,5 +1,6 @@
 #include "mmrl/decision.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -23,6 +24,28 @@ ClipCostFilter::ClipCostFilter(const Database& db, std::vector<float> costs, con
       throw std::invalid_argument(std::string(option) + ": the cost of clip " + std::to_string(c) +
                                   " must be >= 0 (inf: never play it), got " + std::to_string(costs_[c]));
   frame_clip_ = db.frame_clip.data();
+}
+
+int shortlist_queries(const Database& db, const float* query, const Shortlist& shortlist, float* out) {
+  std::copy(query, query + kFeatureDim, out);
+  if (shortlist.fan <= 0) return 1;
+  float raw[kTrajectoryDim], turned[kTrajectoryDim];
+  trajectory_denormalize(db, query + kPoseDim, raw);
+  int n = 1;
+  for (int m = 1; m <= shortlist.fan; ++m)
+    for (int side : {1, -1}) {
+      const float a = static_cast<float>(side * m) * shortlist.fan_step;
+      const float c = std::cos(a), s = std::sin(a);
+      for (int k = 0; k < kTrajectoryDim; k += 2) {  // (x, z) pairs: positions and directions
+        turned[k] = c * raw[k] + s * raw[k + 1];
+        turned[k + 1] = -s * raw[k] + c * raw[k + 1];
+      }
+      float* q = out + static_cast<size_t>(n) * kFeatureDim;
+      std::copy(query, query + kPoseDim, q);
+      trajectory_normalize(db, turned, q + kPoseDim);
+      ++n;
+    }
+  return n;
 }
 
 void trajectory_action_box(const Database& db, float limit_std, float* low, float* high) {

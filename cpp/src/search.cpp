@@ -1,6 +1,7 @@
 #include "mmrl/search.hpp"
 
 #include <algorithm>
+#include <utility>
 #include <limits>
 #include <stdexcept>
 #include <string>
@@ -117,12 +118,35 @@ MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_poi
 
 namespace {
 
-void check_shortlist(int shortlist, float transition_cost, const char* who) {
+void check_shortlist(int shortlist, float transition_cost, int num_queries, int other_shortlist, const char* who) {
+  if (num_queries > 1 && (other_shortlist < 1 || other_shortlist > kMaxShortlist))
+    throw std::invalid_argument(std::string(who) + ": other_shortlist must be between 1 and " +
+                                std::to_string(kMaxShortlist) + ", got " + std::to_string(other_shortlist));
   if (shortlist < 1 || shortlist > kMaxShortlist)
     throw std::invalid_argument(std::string(who) + ": shortlist must be between 1 and " + std::to_string(kMaxShortlist) +
                                 ", got " + std::to_string(shortlist));
+  if (num_queries < 1 || num_queries > kMaxShortlistQueries)
+    throw std::invalid_argument(std::string(who) + ": num_queries must be between 1 and " +
+                                std::to_string(kMaxShortlistQueries) + ", got " + std::to_string(num_queries));
   if (!(transition_cost >= 0.0f) || !std::isfinite(transition_cost))
     throw std::invalid_argument(std::string(who) + ": transition_cost must be finite and >= 0");
+}
+
+// The union of several queries' k-NN lists (rows[q * k ..], found[q] each) in place: distinct
+// rows, ranked by plain distance to the first query (sqdist_row, the kernel every search uses),
+// then index. Returns the count; rows and sqdist then hold the ranked union.
+int merge_shortlists(const float* points, int dim, const float* query, int64_t* rows, float* sqdist, const int* found,
+                     int num_queries, int k) {
+  int n = 0;
+  for (int q = 0; q < num_queries; ++q)
+    for (int r = 0; r < found[q]; ++r) rows[n++] = rows[q * k + r];
+  std::sort(rows, rows + n);
+  n = static_cast<int>(std::unique(rows, rows + n) - rows);
+  std::pair<float, int64_t> ranked[kMaxShortlist * kMaxShortlistQueries];
+  for (int r = 0; r < n; ++r) ranked[r] = {sqdist_row(query, points + rows[r] * dim, dim), rows[r]};
+  std::sort(ranked, ranked + n);
+  for (int r = 0; r < n; ++r) sqdist[r] = ranked[r].first, rows[r] = ranked[r].second;
+  return n;
 }
 
 // The re-ranking of a shortlist (found rows, ordered as k-NN orders them) with the
@@ -145,19 +169,25 @@ int64_t rerank_shortlist(const float* points, int dim, const float* query, const
 int64_t brute_force_match_shortlist(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                                     const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
                                     int64_t bound_index, float* out_cost, float transition_cost,
-                                    const CandidateFilter* candidates) {
+                                    const CandidateFilter* candidates, int num_queries, int other_shortlist) {
   check_points(points, num_points, dim, "brute_force_match_shortlist");
   if (query == nullptr) throw std::invalid_argument("brute_force_match_shortlist: null query");
   if (bound_index >= num_points) throw std::out_of_range("brute_force_match_shortlist: bound_index out of range");
-  check_shortlist(shortlist, transition_cost, "brute_force_match_shortlist");
-  int64_t rows[kMaxShortlist];
-  float sqdist[kMaxShortlist];
+  check_shortlist(shortlist, transition_cost, num_queries, other_shortlist, "brute_force_match_shortlist");
+  int64_t rows[kMaxShortlist * kMaxShortlistQueries];
+  float sqdist[kMaxShortlist * kMaxShortlistQueries];
+  int found[kMaxShortlistQueries];
   SearchFilter filter;
   filter.allowed = valid;
   filter.exclude_lo = exclude_lo;
   filter.exclude_hi = exclude_hi;
-  const int found = brute_force_knn(points, num_points, dim, query, shortlist, rows, sqdist, filter);
-  return rerank_shortlist(points, dim, query, rows, sqdist, found, bound_index, out_cost, transition_cost, candidates);
+  for (int q = 0; q < num_queries; ++q)
+    found[q] = brute_force_knn(points, num_points, dim, query + static_cast<size_t>(q) * dim,
+                               q == 0 ? shortlist : other_shortlist, rows + q * kMaxShortlist,
+                               sqdist + q * kMaxShortlist, filter);
+  const int n = num_queries == 1 ? found[0]
+                                 : merge_shortlists(points, dim, query, rows, sqdist, found, num_queries, kMaxShortlist);
+  return rerank_shortlist(points, dim, query, rows, sqdist, n, bound_index, out_cost, transition_cost, candidates);
 }
 
 Matcher::Matcher(const float* rows, int64_t num_rows, int dim, const uint8_t* valid, const MatcherOptions& options)
@@ -186,17 +216,22 @@ MMRL_MULTIVERSION int64_t Matcher::match(const float* query, int64_t exclude_lo,
 
 int64_t Matcher::match_shortlist(const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
                                  int64_t bound_index, float* out_cost, float transition_cost,
-                                 const CandidateFilter* candidates) const {
-  check_shortlist(shortlist, transition_cost, "Matcher::match_shortlist");
+                                 const CandidateFilter* candidates, int num_queries, int other_shortlist) const {
+  check_shortlist(shortlist, transition_cost, num_queries, other_shortlist, "Matcher::match_shortlist");
   if (bound_index >= tree_.size()) throw std::out_of_range("Matcher::match_shortlist: bound_index out of range");
-  int64_t rows[kMaxShortlist];
-  float sqdist[kMaxShortlist];
+  int64_t rows[kMaxShortlist * kMaxShortlistQueries];
+  float sqdist[kMaxShortlist * kMaxShortlistQueries];
+  int found[kMaxShortlistQueries];
   SearchFilter filter;
   filter.exclude_lo = exclude_lo;
   filter.exclude_hi = exclude_hi;
-  const int found = kdtree_knn(tree_, query, shortlist, rows, sqdist, filter);
-  return rerank_shortlist(rows_, tree_.dim(), query, rows, sqdist, found, bound_index, out_cost, transition_cost,
-                          candidates);
+  const int dim = tree_.dim();
+  for (int q = 0; q < num_queries; ++q)
+    found[q] = kdtree_knn(tree_, query + static_cast<size_t>(q) * dim, q == 0 ? shortlist : other_shortlist,
+                          rows + q * kMaxShortlist, sqdist + q * kMaxShortlist, filter);
+  const int n = num_queries == 1 ? found[0]
+                                 : merge_shortlists(rows_, dim, query, rows, sqdist, found, num_queries, kMaxShortlist);
+  return rerank_shortlist(rows_, dim, query, rows, sqdist, n, bound_index, out_cost, transition_cost, candidates);
 }
 
 namespace {

@@ -296,6 +296,52 @@ TEST(Matcher, ShortlistEqualsBruteForceWithTheSameFilter) {
   }
 }
 
+TEST(Matcher, ShortlistOfSeveralQueriesEqualsBruteForce) {
+  // The union of several queries' k nearest, ranked by distance to the first query: tree and
+  // brute force agree bit for bit, and the union can only lower the filtered cost.
+  const int64_t n = 4000;
+  const int dim = 27;
+  const auto rows = walk_rows(n, dim, 13);
+  std::vector<uint8_t> valid(static_cast<size_t>(n), 1);
+  for (int64_t i = 0; i < n; i += 5) valid[i] = 0;
+  mmrl::Matcher matcher(rows.data(), n, dim, valid.data());
+  const RowCosts filter(random_row_costs(n, 0.9f, 99));
+  Case c = make_queries(rows, n, dim, 150, 0.5f, 37);
+  std::mt19937 rng(5);
+  std::normal_distribution<float> g(0.0f, 0.3f);
+  int lowered = 0, differs = 0;
+  for (int q = 0; q < 150; ++q)
+    for (int nq : {2, 5, mmrl::kMaxShortlistQueries}) {
+      std::vector<float> queries(static_cast<size_t>(nq) * dim);
+      for (int k = 0; k < nq; ++k)
+        for (int d = 0; d < dim; ++d)
+          queries[k * dim + d] = c.queries[static_cast<size_t>(q) * dim + d] + (k == 0 ? 0.0f : g(rng));
+      const int64_t bound = c.bound[q] >= 0 && valid[c.bound[q]] ? c.bound[q] : -1;
+      float tree_cost = -1, brute_cost = -2, one_cost = 0;
+      const int other = nq == 2 ? 1 : 8;
+      const int64_t t =
+          matcher.match_shortlist(queries.data(), 8, c.lo[q], c.hi[q], bound, &tree_cost, 0.3f, &filter, nq, other);
+      const int64_t b = mmrl::brute_force_match_shortlist(rows.data(), n, dim, valid.data(), queries.data(), 8,
+                                                          c.lo[q], c.hi[q], bound, &brute_cost, 0.3f, &filter, nq,
+                                                          other);
+      ASSERT_EQ(t, b) << "query " << q << " nq " << nq;
+      ASSERT_EQ(tree_cost, brute_cost);
+      const int64_t one = matcher.match_shortlist(queries.data(), 8, c.lo[q], c.hi[q], bound, &one_cost, 0.3f, &filter);
+      if (one >= 0) {
+        ASSERT_GE(t, 0);
+        ASSERT_LE(tree_cost, one_cost);
+      }
+      lowered += t >= 0 && (one < 0 || tree_cost < one_cost);
+      differs += t != one;
+    }
+  EXPECT_GT(lowered, 0) << "the other queries never added a better row: the test tests nothing (" << differs << ")";
+  float cost = 0;
+  EXPECT_THROW(matcher.match_shortlist(c.queries.data(), 8, 0, 0, -1, &cost, 0.0f, &filter, 0), std::invalid_argument);
+  EXPECT_THROW(matcher.match_shortlist(c.queries.data(), 8, 0, 0, -1, &cost, 0.0f, &filter,
+                                       mmrl::kMaxShortlistQueries + 1),
+               std::invalid_argument);
+}
+
 TEST(Matcher, ShortlistHandComputedCases) {
   // Rows on a line: 0, 1, 2, 3, 4; the query at 1.1. Plain order: 1, 2, 0, 3, 4.
   const std::vector<float> rows = {0.0f, 1.0f, 2.0f, 3.0f, 4.0f};

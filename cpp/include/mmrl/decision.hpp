@@ -65,9 +65,24 @@ void check_frames_per_step(int frames_per_step);
 constexpr int kMatchExcludeWindow = 20;
 
 // The match with the continuation rule (see above). Returns the frame to play from.
+// How a filter's shortlist is drawn (decision_match): the k nearest candidates of the query,
+// and with fan > 0 the fan_k nearest of the query with its trajectory turned by +-step,
+// +-2 step, ... +-fan step radians about the vertical (positions and directions; the pose part
+// stays), so the filter sees turning clips as well; all ranked by distance to the query itself.
+// k = 0: no shortlist (the filter runs inside the exact search). fan <= (kMaxShortlistQueries - 1) / 2.
+struct Shortlist {
+  int k = 0;
+  int fan = 0;
+  float fan_step = 0.0f;
+  int fan_k = 1;
+};
+
+// The queries of a shortlist (1 + 2 * fan rows of kFeatureDim, the first the query itself).
+int shortlist_queries(const Database& db, const float* query, const Shortlist& shortlist, float* out);
+
 inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_t frame, const float* query,
                                 float* cost = nullptr, float transition_cost = 0.0f,
-                                const CandidateFilter* filter = nullptr, int shortlist = 0) {
+                                const CandidateFilter* filter = nullptr, const Shortlist& shortlist = {}) {
   const int64_t bound = (frame >= 0 && db.valid[frame]) ? frame : -1;
   int64_t lo = 0, hi = 0;
   if (frame >= 0) {
@@ -75,9 +90,14 @@ inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_
     lo = std::max<int64_t>(db.clip_ranges[c * 2], frame - kMatchExcludeWindow);
     hi = std::min<int64_t>(db.clip_ranges[c * 2 + 1], frame + kMatchExcludeWindow + 1);
   }
-  const int64_t j = (shortlist > 0 && filter != nullptr)
-                        ? matcher.match_shortlist(query, shortlist, lo, hi, bound, cost, transition_cost, filter)
-                        : matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
+  int64_t j;
+  if (shortlist.k > 0 && filter != nullptr) {
+    float queries[kMaxShortlistQueries * kFeatureDim];
+    const int n = shortlist_queries(db, query, shortlist, queries);
+    j = matcher.match_shortlist(queries, shortlist.k, lo, hi, bound, cost, transition_cost, filter, n, shortlist.fan_k);
+  } else {
+    j = matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
+  }
   if (j >= 0 || filter == nullptr) return j;
   return matcher.match(query, lo, hi, bound, cost, transition_cost);  // the filter refused everything
 }
@@ -87,7 +107,7 @@ inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_
 inline int64_t decision_for_action(const Database& db, const Matcher& matcher, int64_t frame, const float* action,
                                  const float* low, const float* high, float* cost = nullptr,
                                  float transition_cost = 0.0f, const CandidateFilter* filter = nullptr,
-                                 int shortlist = 0) {
+                                 const Shortlist& shortlist = {}) {
   float query[kFeatureDim];
   float traj[kTrajectoryDim];
   for (int k = 0; k < kTrajectoryDim; ++k) traj[k] = std::min(high[k], std::max(low[k], action[k]));

@@ -49,8 +49,10 @@ struct MatcherOptions {
   int64_t brute_force_below = 512;   // fewer valid rows than this: one leaf, i.e. a blocked scan
 };
 
-// The most candidates a shortlist match (Matcher::match_shortlist) re-ranks.
+// The most candidates a shortlist match (Matcher::match_shortlist) takes per query, and the
+// most queries it takes them from.
 constexpr int kMaxShortlist = 256;
+constexpr int kMaxShortlistQueries = 9;
 
 // The shortlist rule, by brute force (the reference): the `shortlist` nearest valid rows
 // outside [exclude_lo, exclude_hi) by plain squared distance (brute_force_knn: ordered by
@@ -60,10 +62,17 @@ constexpr int kMaxShortlist = 256;
 // filtered cost is strictly lower (the first of equal costs in shortlist order wins between
 // rows). Returns -1 when the filter refuses every shortlisted row and the bound.
 // 1 <= shortlist <= kMaxShortlist.
+//
+// With num_queries > 1 (queries: num_queries x dim, the first the match's own query), the
+// shortlist is the union of the first query's `shortlist` nearest rows and each other query's
+// `other_shortlist` nearest (e.g. the query's trajectory turned left and right, so a costly
+// filter sees turns too), ranked by plain distance to the first query (then index); the rest
+// is the same. 1 <= num_queries <= kMaxShortlistQueries, 1 <= other_shortlist <= kMaxShortlist.
 int64_t brute_force_match_shortlist(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                                     const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
                                     int64_t bound_index, float* out_cost, float transition_cost,
-                                    const CandidateFilter* candidates);
+                                    const CandidateFilter* candidates, int num_queries = 1,
+                                    int other_shortlist = 1);
 
 class Matcher {
  public:
@@ -87,7 +96,7 @@ class Matcher {
   // many rows it makes dearer. Allocates nothing.
   int64_t match_shortlist(const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
                           int64_t bound_index, float* out_cost, float transition_cost,
-                          const CandidateFilter* candidates) const;
+                          const CandidateFilter* candidates, int num_queries = 1, int other_shortlist = 1) const;
 
   // M queries (M x dim row-major) across the pool. Per-query exclude windows and bound
   // indices are optional arrays of M entries (null = none). Allocates nothing.

@@ -372,9 +372,9 @@ class TargetVecEnv {
   // The candidate filter of env i's next match (a task hides it to add its own rules): the
   // config's clip costs (decision.hpp's ClipCostFilter), or none.
   const CandidateFilter* candidate_filter(int) const { return clip_filter_.get(); }
-  // How many nearest candidates the filter re-ranks (decision.hpp; 0: the whole database, the
-  // clip costs' rule). A task with a costly filter hides it.
-  int candidate_shortlist() const { return 0; }
+  // How the filter's shortlist is drawn (decision.hpp's Shortlist; k = 0: no shortlist, the
+  // filter runs in the exact search, the clip costs' rule). A task with a costly filter hides it.
+  Shortlist candidate_shortlist() const { return {}; }
 
   // Distance (meters) from env i's root to its target.
   float target_distance(const State& s) const { return std::hypot(s.target_x - s.root.x, s.target_z - s.root.z); }

@@ -30,6 +30,14 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
   if (c.path_candidates < 0 || c.path_candidates > kMaxShortlist)
     throw std::invalid_argument("path_candidates must be between 0 (the whole database) and " +
                                 std::to_string(kMaxShortlist) + ", got " + std::to_string(c.path_candidates));
+  if (c.path_fan < 0 || 2 * c.path_fan + 1 > kMaxShortlistQueries)
+    throw std::invalid_argument("path_fan must be between 0 and " + std::to_string((kMaxShortlistQueries - 1) / 2) +
+                                ", got " + std::to_string(c.path_fan));
+  if (c.path_fan_candidates < 1 || c.path_fan_candidates > kMaxShortlist)
+    throw std::invalid_argument("path_fan_candidates must be between 1 and " + std::to_string(kMaxShortlist) +
+                                ", got " + std::to_string(c.path_fan_candidates));
+  if (!(c.path_fan_degrees > 0) || !(c.path_fan_degrees <= 90))
+    throw std::invalid_argument("path_fan_degrees must be in (0, 90]");
   if (!(c.path_margin >= 0) || !finite(c.path_margin)) throw std::invalid_argument("path_margin must be finite and >= 0");
   if (std::isnan(c.path_cost) || !(c.path_cost >= 0))
     throw std::invalid_argument("path_cost must be >= 0 (inf: never play a path that hits)");

@@ -148,6 +148,14 @@ class ObstaclesConfig(TaskConfig):
     frame the filter makes dearer. 0: the exact filtered search over the whole database (every
     row whose distance could still win is tested: tens of milliseconds per decision in a crowd,
     for baselines rather than training)."""
+    path_fan: int = 0
+    """With ``path_fan`` = n > 0 the shortlist also takes the ``path_fan_candidates`` nearest of the
+    query with its trajectory turned by +-1..n x ``path_fan_degrees`` (0..4 turns each way), all
+    ranked by distance to the query itself: turning clips join the candidates the filter sees."""
+    path_fan_degrees: float = 30.0
+    """The turn between the path fan's queries (degrees, (0, 90])."""
+    path_fan_candidates: int = 1
+    """How many nearest candidates each turned query of the path fan adds (1..256)."""
     max_steps: int = 1500
     """Safety cap on the episode length (truncation; 1500 steps = 300 s). The paper has none."""
     num_obstacles: int = 100

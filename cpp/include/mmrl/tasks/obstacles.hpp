@@ -84,6 +84,11 @@ struct ObstacleTaskConfig : TaskConfig {
   // The filter re-ranks this many nearest candidates (search.hpp's shortlist); 0: the exact
   // filtered search over the whole database (kdtree.hpp), far slower in crowds.
   int path_candidates = 16;
+  // ... of the query and of the query turned by +-path_fan_degrees, +-2 path_fan_degrees, ...
+  // (path_fan turns each way, 0..4): turning clips join the shortlist.
+  int path_fan = 0;
+  float path_fan_degrees = 30.0f;
+  int path_fan_candidates = 1;  // the nearest candidates taken from each turned query
   int num_obstacles = 100;
   float obstacle_square_half = 10.0f;  // obstacle centres in a 20 x 20 m square around the start
   float obstacle_min_side = 0.25f;     // rectangle sides uniform in [min, max] meters
@@ -113,6 +118,9 @@ struct ObstacleTaskConfig : TaskConfig {
     v("path_horizon", &ObstacleTaskConfig::path_horizon);
     v("path_margin", &ObstacleTaskConfig::path_margin);
     v("path_candidates", &ObstacleTaskConfig::path_candidates);
+    v("path_fan", &ObstacleTaskConfig::path_fan);
+    v("path_fan_degrees", &ObstacleTaskConfig::path_fan_degrees);
+    v("path_fan_candidates", &ObstacleTaskConfig::path_fan_candidates);
     v("num_obstacles", &ObstacleTaskConfig::num_obstacles);
     v("obstacle_square_half", &ObstacleTaskConfig::obstacle_square_half);
     v("obstacle_min_side", &ObstacleTaskConfig::obstacle_min_side);
@@ -237,7 +245,10 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   // The clip costs, or with path_filter env i's collision-aware filter prepared for its
   // current state (on top of the clip costs).
   const CandidateFilter* candidate_filter(int i);
-  int candidate_shortlist() const { return config_.path_filter ? config_.path_candidates : 0; }
+  Shortlist candidate_shortlist() const {
+    if (!config_.path_filter) return {};
+    return {config_.path_candidates, config_.path_fan, deg_to_rad(config_.path_fan_degrees), config_.path_fan_candidates};
+  }
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   // Steps between grid rebuilds for env i, and the margin that keeps the grid exact over them.
