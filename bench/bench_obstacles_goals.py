@@ -16,7 +16,9 @@ raw-mocap floor. Peers (``--peers``):
   whole database (``path_candidates=0``), slow in crowds (tens of ms per decision);
   ``--peer-cost`` sets its path cost.
 
-Each RUN runs with its own options (its config.json). Prints a markdown table.
+Each RUN runs with its own options (its config.json), and once more per ``--set`` with those
+changed (e.g. ``--set transition_cost=30`` or ``--set path_fan=2,path_candidates=8``). Prints a
+markdown table.
 """
 from __future__ import annotations
 
@@ -41,6 +43,9 @@ def main(argv=None) -> int:
     ap.add_argument("--peers", nargs="*", default=["joystick", "joystick+path"], choices=PEERS)
     ap.add_argument("--peer-cost", type=float, default=100.0, help="path_cost of the peers with the filter")
     ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="also run each RUN with these task options changed (one extra row per --set, "
+                    "several options separated by commas)")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
 
@@ -66,8 +71,14 @@ def main(argv=None) -> int:
             cfg = cfg.replace(path_filter=True, path_cost=args.peer_cost,
                               path_candidates=0 if search == "path-exact" else cfg.path_candidates)
         controllers.append((peer, JoystickPolicy.preset(db, name), cfg))
+    from mmrl.commands.common import split_overrides
+
     for run, path in zip(runs, args.runs):
-        controllers.append((path, run.policy(), run.task_config(task)))
+        policy, cfg = run.policy(), run.task_config(task)
+        controllers.append((path, policy, cfg))
+        for item in args.set:
+            (values,) = split_overrides(item.split(","), cfg)
+            controllers.append((f"{path} ({item})", policy, cfg.replace(**values)))
 
     results = {}
     floor = None

@@ -497,7 +497,7 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
     bias_yields: bool
     hit_lookahead: bool
     hit_penalty: bool
@@ -608,6 +608,12 @@ class ObstacleTaskConfig:
         ...
     @path_fan.setter
     def path_fan(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def path_fan_candidates(self) -> int:
+        ...
+    @path_fan_candidates.setter
+    def path_fan_candidates(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def path_fan_degrees(self) -> float:
