@@ -148,10 +148,11 @@ class MLPActorCritic(nn.Module):
     """An actor and a critic MLP of their own sizes on the whole flat observation.
 
     The actor is what gets exported (ONNX, the C++ runtime's dense evaluator), so it can stay
-    small; the critic is only used in training and may be wider. The moving-obstacles default
-    (``--preset mmrl``): actor 64 x 64, critic 128 x 128, ReLU, on the 529 observation floats
-    (the binary maps flattened): about 38k actor weights against the paper's CNN's 573k, and
-    an update some 15 times cheaper on a CPU (bench/bench_obstacles_learner.py).
+    small; the critic is only used in training and may be wider. On the moving-obstacles task
+    (``--set network=mlp``): actor 64 x 64, critic 128 x 128, ReLU, on the 529 observation floats
+    (the binary maps flattened): about 39k actor weights against the paper's CNN's 573k, 4x the
+    training steps per second (bench/bench_obstacles_learner.py), but far less learned per step
+    (docs/obstacles.md, "The learner").
     """
 
     def __init__(self, obs_dim: int, act_dim: int, actor_hidden: tuple[int, ...] = (64, 64),
