@@ -4,7 +4,8 @@ each network, in the same run (the machine is noisy: compare the ratios).
     python bench/bench_obstacles_learner.py [--db FILE.npz] [--seconds 90] [--networks cnn small-cnn mlp]
         [--set KEY=VALUE ...] [--rounds 1]
 
-Each network trains from scratch for ``--seconds`` with ``--preset mmrl`` (plus ``--set``) into
+Each network trains from scratch for ``--seconds`` with ``--preset mmrl-small``'s options (the
+path filter, 8 minibatch steps per rollout; plus ``--set``) into
 a temporary directory; the bench reads its metrics.csv and prints steps/s and the split of a
 step's wall time (env, policy forward, update: µs per env step), then each network's ratio to
 the first. Rounds alternate the order.
@@ -22,7 +23,7 @@ def train_once(db: str, network: str, seconds: float, sets, out: Path) -> dict:
     from mmrl.cli import main
 
     args = ["train", "obstacles", "--seconds", str(seconds), "--out", str(out), "--no-progress",
-            "--set", f"network={network}"]
+            "--preset", "mmrl-small", "--set", f"network={network}"]
     for kv in sets:
         args += ["--set", kv]
     if db:
