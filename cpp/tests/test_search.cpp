@@ -291,7 +291,9 @@ TEST(Matcher, ShortlistEqualsBruteForceWithTheSameFilter) {
             }
             differs_from_exact += (t != e);
           }
-      if (refused > 0) EXPECT_GT(differs_from_exact, 0) << "the shortlist never mattered: the test tests nothing";
+      if (refused > 0) {
+        EXPECT_GT(differs_from_exact, 0) << "the shortlist never mattered: the test tests nothing";
+      }
     }
   }
 }
