@@ -12,17 +12,17 @@ from mmrl import default_database
 def core_env(cls, config, n, seed):
     db = default_database()
     env = cls(db._db, db.matcher, n, config, 1)
-    obs = np.zeros((n, cls.obs_dim), np.float32)
+    obs = np.zeros((n, env.obs_dim), np.float32)
     env.reset(seed, obs)
     return db, env, obs
 
 
-def buffers(cls, n, obstacles):
-    b = dict(obs=np.zeros((n, cls.obs_dim), np.float32), rewards=np.zeros(n, np.float32),
+def buffers(env, n, obstacles):
+    b = dict(obs=np.zeros((n, env.obs_dim), np.float32), rewards=np.zeros(n, np.float32),
              terminated=np.zeros(n, np.uint8), truncated=np.zeros(n, np.uint8), success=np.zeros(n, np.uint8))
     if obstacles:
         b.update(collision=np.zeros(n, np.uint8), hits=np.zeros(n, np.int32))
-    b.update(final_obs=np.zeros((n, cls.obs_dim), np.float32), episode_return=np.zeros(n, np.float32),
+    b.update(final_obs=np.zeros((n, env.obs_dim), np.float32), episode_return=np.zeros(n, np.float32),
              episode_length=np.zeros(n, np.int32))
     return b
 
@@ -42,7 +42,7 @@ def test_obstacles_after_and_last_step_frames_agree_with_stepping():
     env.last_step_frames(played)
     assert (played == 0).all()
     rng = np.random.default_rng(0)
-    b = buffers(_core.ObstacleVecEnv, n, True)
+    b = buffers(env, n, True)
     ended_early = continued = 0
     for _ in range(40):
         now = [env.obstacles(i) for i in range(n)]
@@ -77,7 +77,7 @@ def test_plane_last_step_frames_counts_to_the_first_frame_inside_the_disc():
     for i in range(n):  # the target at the root: the first played frame is inside the disc
         s = env.state(i)
         env.set_target(i, s["x"], s["z"])
-    b = buffers(_core.PlaneVecEnv, n, False)
+    b = buffers(env, n, False)
     env.step(policy_actions(db, np.random.default_rng(1), n), *b.values())
     played = np.zeros(n, np.int32)
     env.last_step_frames(played)

@@ -83,7 +83,9 @@ def test_layout_matches_the_network_default():
     with pytest.raises(ValueError, match="obs_dim 17"):
         obstacle_policy_factory()(17, 12)
     assert OBSTACLE_MAP_SHAPE == (2, 16, 16)
-    assert _core.ObstacleVecEnv.obs_dim == 529
+    assert sum(size for _, size in _core.ObstacleVecEnv.layout) == 529
+    env = mmrl.get_task("obstacles").make_vector_env(1, db=mmrl.default_database(), num_threads=1)
+    assert env.obs_dim == 529 and env.layout == OBSTACLE_LAYOUT
 
 
 @pytest.mark.parametrize("lag", [1, 3])

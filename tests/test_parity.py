@@ -32,8 +32,12 @@ def configs(db):
         obstacle_max_speed=1.0, clip_costs=f"{busy}=2.0", max_steps=60)
     # The collision-aware search (tasks/path_filter.hpp) on top: every rule at once.
     path = obstacles.replace(path_filter=True, path_cost=50.0, path_candidates=32)
+    # ... and the continuation's trajectory and path hit in the observation.
+    seen = path.replace(observe_continuation=True)
+    layout = mmrl.get_task("obstacles").make_vector_env(1, db=db, config=seen, num_threads=1).layout
     return {"plane": (plane, random_plane_policy(4)), "obstacles": (obstacles, random_obstacle_policy(5)),
-            "obstacles-path": (path, random_obstacle_policy(5))}
+            "obstacles-path": (path, random_obstacle_policy(5)),
+            "obstacles-continuation": (seen, random_obstacle_policy(5, layout))}
 
 
 def hand_obstacles(character, env):
@@ -42,7 +46,7 @@ def hand_obstacles(character, env):
                               for k in ("centres", "half_sizes", "angles", "velocities")))
 
 
-@pytest.mark.parametrize("kind", ["plane", "obstacles", "obstacles-path"])
+@pytest.mark.parametrize("kind", ["plane", "obstacles", "obstacles-path", "obstacles-continuation"])
 def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path):
     db = mmrl.default_database()
     task_name = kind.split("-")[0]

@@ -123,14 +123,17 @@ def test_runtime_on_another_skeleton(tmp_path):
     assert np.count_nonzero(np.diff(out["py_matches"]) != 6) >= 5
 
 
-def random_obstacle_policy(seed: int) -> Policy:
-    from mmrl.rl.networks import ObstacleActorCritic
+def random_obstacle_policy(seed: int, layout=None) -> Policy:
+    """A CNN policy with random weights for the obstacles task's observation (``layout``: an
+    env's, e.g. with observe_continuation; default the paper's 529 floats)."""
+    from mmrl.rl.networks import OBSTACLE_DEFAULT_LAYOUT, ObstacleActorCritic
 
     torch.manual_seed(seed)
-    model = ObstacleActorCritic(12)
+    layout = tuple(layout or OBSTACLE_DEFAULT_LAYOUT)
+    model = ObstacleActorCritic(12, layout=layout)
     with torch.no_grad():
         model.actor.head[-1].weight.normal_(0, 0.3)
-    norm = ObsNormalizer(529, True, ObstacleActorCritic.map_range(), 10.0, torch.device("cpu"))
+    norm = ObsNormalizer(model.obs_dim, True, ObstacleActorCritic.map_range(layout), 10.0, torch.device("cpu"))
     norm.refresh()
     return Policy(model, norm, torch.device("cpu"))
 

@@ -73,12 +73,12 @@ TargetStepBuffers step_buffers(const Env& env, const py::handle& obs, const py::
                                const py::handle& transitions, const py::handle& costs,
                                const py::handle& episode_frames) {
   const py::ssize_t n = env.num_envs();
-  TargetStepBuffers out{writable_buffer<float>(obs, "obs", {n, Env::kObsDim}),
+  TargetStepBuffers out{writable_buffer<float>(obs, "obs", {n, env.obs_dim()}),
                         writable_buffer<float>(rewards, "rewards", {n}),
                         writable_buffer<uint8_t>(terminated, "terminated", {n}),
                         writable_buffer<uint8_t>(truncated, "truncated", {n}),
                         writable_buffer<uint8_t>(success, "success", {n}),
-                        writable_buffer<float>(final_obs, "final_obs", {n, Env::kObsDim}),
+                        writable_buffer<float>(final_obs, "final_obs", {n, env.obs_dim()}),
                         writable_buffer<float>(episode_return, "episode_return", {n}),
                         writable_buffer<int32_t>(episode_length, "episode_length", {n})};
   if (!step_frames.is_none()) out.step_frames = writable_buffer<int32_t>(step_frames, "step_frames", {n});
@@ -107,7 +107,7 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
        py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
       .def_property_readonly("num_envs", [](const Wrapper& s) { return s.env.num_envs(); })
       .def_property_readonly_static("core_name", [](py::object) { return std::string(Env::kCoreName); })
-      .def_property_readonly_static("obs_dim", [](py::object) { return Env::kObsDim; })
+      .def_property_readonly("obs_dim", [](const Wrapper& s) { return s.env.obs_dim(); })
       .def_property_readonly_static("action_dim", [](py::object) { return Env::kActionDim; })
       .def_property_readonly("action_low",
                              [](const Wrapper& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_low()); })
@@ -116,7 +116,7 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
       .def(
           "reset",
           [](Wrapper& s, uint64_t seed, const py::handle& obs) {
-            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), Env::kObsDim});
+            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), s.env.obs_dim()});
             py::gil_scoped_release release;
             s.env.reset(seed, o);
           },
@@ -125,15 +125,15 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
           "reset_env",
           [](Wrapper& s, int i, const py::handle& obs) {
             checked_env_index(s, i);
-            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), Env::kObsDim});
-            s.env.reset_env(i, o + static_cast<size_t>(i) * Env::kObsDim);
+            float* o = writable_buffer<float>(obs, "obs", {s.env.num_envs(), s.env.obs_dim()});
+            s.env.reset_env(i, o + static_cast<size_t>(i) * s.env.obs_dim());
           },
           py::arg("index"), py::arg("obs"))
       .def(
           "observe",
           [](const Wrapper& s, int i, const py::handle& out) {
             checked_env_index(s, i);
-            s.env.observe(i, writable_buffer<float>(out, "out", {Env::kObsDim}));
+            s.env.observe(i, writable_buffer<float>(out, "out", {s.env.obs_dim()}));
           },
           py::arg("index"), py::arg("out"), "Writes environment i's current observation into out (float32, obs_dim).")
       .def(

@@ -118,12 +118,15 @@ RuntimeTask read_task(const ControllerFile& f, int obs_dim, int64_t num_clips) {
   t.obstacles = t.core == ObstacleVecEnv::kCoreName;
   if (!plane && !t.obstacles)
     f.fail("task.core '" + t.core + "' is not a core this runtime has (plane, obstacles)");
-  const int want = plane ? PlaneVecEnv::kObsDim : ObstacleVecEnv::kObsDim;
-  if (obs_dim != want)
-    f.fail("the policy reads " + std::to_string(obs_dim) + " observations; the " + t.core + " task's are " +
-           std::to_string(want));
   t.plane = task_config<PlaneTaskConfig>(f, t, num_clips);
   t.obstacle = task_config<ObstacleTaskConfig>(f, t, num_clips);
+  const bool continuation = t.obstacles && t.obstacle.observe_continuation;
+  const int want = plane ? PlaneVecEnv::kObsDim
+                         : ObstacleVecEnv::kObsDim + (continuation ? ObstacleVecEnv::kContinuationDim : 0);
+  if (obs_dim != want)
+    f.fail("the policy reads " + std::to_string(obs_dim) + " observations; the " + t.core + " task's are " +
+           std::to_string(want) +
+           (t.obstacles ? std::string(" (task.observe_continuation ") + (continuation ? "on" : "off") + ")" : ""));
   const TaskConfig& base = plane ? static_cast<const TaskConfig&>(t.plane) : t.obstacle;
   t.frames_per_step = base.frames_per_step;
   t.success_radius = base.success_radius;

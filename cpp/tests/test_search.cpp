@@ -282,7 +282,9 @@ TEST(Matcher, ShortlistEqualsBruteForceWithTheSameFilter) {
                                                                 c.hi[q], bound, &brute_cost, margin, &filter);
             ASSERT_EQ(t, b) << "n " << n << " k " << k << " query " << q;
             ASSERT_EQ(tree_cost, brute_cost);
-            if (t >= 0) ASSERT_TRUE(filter.extra_cost(t) < INFINITY);
+            if (t >= 0) {
+              ASSERT_TRUE(filter.extra_cost(t) < INFINITY);
+            }
             // The exact filtered match is never dearer than the shortlist's choice.
             const int64_t e = matcher.match(query, c.lo[q], c.hi[q], bound, &exact_cost, margin, &filter);
             if (t >= 0) {

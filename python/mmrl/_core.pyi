@@ -289,7 +289,6 @@ class PlaneVecEnv:
     """
     action_dim: typing.ClassVar[int] = 12
     core_name: typing.ClassVar[str] = 'plane'
-    obs_dim: typing.ClassVar[int] = 17
     def __init__(self, db: Database, matcher: Matcher, num_envs: typing.SupportsInt | typing.SupportsIndex, config: PlaneTaskConfig, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
     def current_frames(self, out: typing.Any) -> None:
@@ -360,6 +359,9 @@ class PlaneVecEnv:
         ...
     @property
     def num_envs(self) -> int:
+        ...
+    @property
+    def obs_dim(self) -> int:
         ...
 class CharacterOptions:
     """
@@ -497,12 +499,13 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'observe_continuation', 'grid_cell_size')
     bias_yields: bool
     hit_lookahead: bool
     hit_penalty: bool
     hit_played: bool
     hit_reward: bool
+    observe_continuation: bool
     path_filter: bool
     random_heading: bool
     def __init__(self) -> None:
@@ -706,7 +709,6 @@ class ObstacleVecEnv:
     action_dim: typing.ClassVar[int] = 12
     core_name: typing.ClassVar[str] = 'obstacles'
     layout: typing.ClassVar[tuple] = (('maps', 512), ('pose', 15), ('goal', 2))
-    obs_dim: typing.ClassVar[int] = 529
     def __init__(self, db: Database, matcher: Matcher, num_envs: typing.SupportsInt | typing.SupportsIndex, config: ObstacleTaskConfig, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
     def action_hits(self, index: typing.SupportsInt | typing.SupportsIndex, action: typing.Any) -> tuple[int, numpy.typing.NDArray[numpy.float32], tuple[bool, bool, bool]]:
@@ -819,6 +821,12 @@ class ObstacleVecEnv:
         ...
     @property
     def num_envs(self) -> int:
+        ...
+    @property
+    def obs_dim(self) -> int:
+        ...
+    @property
+    def obs_layout(self) -> tuple:
         ...
     @property
     def stage(self) -> tuple[float, float]:

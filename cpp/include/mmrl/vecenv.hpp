@@ -19,7 +19,8 @@
 //   - the bookkeeping: steps, truncation at max_steps, episode return, frames played.
 //
 // A task is a class Task deriving from TargetVecEnv<Task, Config, State> (CRTP) that defines
-//   static constexpr int kObsDim, kActionDim;
+//   static constexpr int kObsDim, kActionDim;  (kObsDim: the base observation's size)
+//   int obs_dim() const;                       (this env's, >= kObsDim with optional segments)
 //   void observe(int i, float* obs_row) const;        // env i's observation now
 //   void begin_episode(int i);                         // draws env i's episode (its RNG only)
 //   TaskStep advance(int i, const float* action);     // one RL step of env i, no autoreset
@@ -90,7 +91,7 @@ struct TaskStep {
   int frames_played = 0;  // see TargetEnvState::last_step_frames
 };
 
-// The step outputs every task writes, N rows each (obs and final_obs: N x kObsDim).
+// The step outputs every task writes, N rows each (obs and final_obs: N x obs_dim()).
 // final_obs, episode_return and episode_length rows are written only where an episode ended.
 // The last three are optional (null: not written): each env's last_step_frames and its
 // decision (a transition, the matched cost), every row on every step, so one call returns
@@ -150,7 +151,7 @@ class TargetVecEnv {
   void set_autoreset_next_step(bool on) { next_step_autoreset_ = on; }
   bool autoreset_next_step() const { return next_step_autoreset_; }
 
-  // Reseeds every environment's RNG from (seed, index) and resets all; obs: N x kObsDim (or null).
+  // Reseeds every environment's RNG from (seed, index) and resets all; obs: N x obs_dim() (or null).
   void reset(uint64_t seed, float* obs) {
     for (int i = 0; i < num_envs(); ++i) {
       envs_[i].rng = Rng(seed, static_cast<uint64_t>(i));
@@ -161,7 +162,7 @@ class TargetVecEnv {
       envs_[i].last_step_transition_cost = 0;
     }
     pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
-      for (int64_t i = b; i < e; ++i) reset_env(static_cast<int>(i), obs ? obs + i * Task::kObsDim : nullptr);
+      for (int64_t i = b; i < e; ++i) reset_env(static_cast<int>(i), obs ? obs + i * task().obs_dim() : nullptr);
     });
   }
 
@@ -293,7 +294,7 @@ class TargetVecEnv {
       for (int64_t i = b; i < e; ++i) {
         const int env = static_cast<int>(i);
         State& s = envs_[i];
-        float* row = out.obs + i * Task::kObsDim;
+        float* row = out.obs + i * task().obs_dim();
         if (s.autoreset_pending) {  // NEXT_STEP: this step is the reset; the action is ignored
           reset_env(env, row);
           s.last_step_frames = 0;
@@ -329,13 +330,13 @@ class TargetVecEnv {
         write_decision(s, out, i);
         after_step(env);
         if (r.terminated || truncated) {
-          float* final_row = out.final_obs + i * Task::kObsDim;
+          float* final_row = out.final_obs + i * task().obs_dim();
           task().observe(env, final_row);
           out.episode_return[i] = static_cast<float>(s.episode_return);
           out.episode_length[i] = s.steps;
           if (out.episode_frames) out.episode_frames[i] = s.episode_frames;
           if (next_step_autoreset_) {
-            std::copy(final_row, final_row + Task::kObsDim, row);
+            std::copy(final_row, final_row + task().obs_dim(), row);
             s.autoreset_pending = true;
           } else {
             reset_env(env, row);

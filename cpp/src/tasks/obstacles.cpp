@@ -137,6 +137,14 @@ void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
   if (maps == MapUpdate::kReset)
     for (int k = 0; k < map_slots_; ++k)
       if (k != st.map_head) std::copy(cur, cur + kMapCells, map_slot(i, k));
+  if (config_.observe_continuation) {  // the collision-aware search's test of the continuation
+    ObstaclePathFilter& f = path_filters_[i];
+    f.prepare(field_, i, st.root, st.max_speed > 0, frame_dt_);
+    // A frame too close to its clip's end to be matched has no continuation: the next decision
+    // must jump, which the observation tells as a hit right away.
+    const int hit = db_.valid[st.frame] ? f.first_hit(st.frame) : 0;
+    st.continuation_hit = hit < 0 ? -1 : db_.valid[st.frame] ? kPathSampleFrames[hit] : 0;
+  }
 }
 
 void ObstacleVecEnv::observe(int i, float* obs) const {
@@ -147,6 +155,14 @@ void ObstacleVecEnv::observe(int i, float* obs) const {
   for (int k = 0; k < kMapCells; ++k) obs[kPrevMapOffset + k] = prev[k];
   observe_pose(s, obs + kPoseOffset);
   observe_goal(s, obs + kGoalOffset);
+  if (config_.observe_continuation) {
+    float* c = obs + kContinuationOffset;
+    const float* trajectory = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim + kPoseDim];
+    std::copy(trajectory, trajectory + kTrajectoryDim, c);
+    const bool hits = s.continuation_hit >= 0;
+    c[kTrajectoryDim] = hits ? 1.0f : 0.0f;
+    c[kTrajectoryDim + 1] = static_cast<float>(hits ? s.continuation_hit : config_.path_horizon) * frame_dt_;
+  }
 }
 
 void ObstacleVecEnv::begin_episode(int i) {

@@ -132,7 +132,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     db = database_from_spec(data)
     try:  # the options are the user's: a value the env refuses is bad input
-        envs = task.make_vector_env(num_envs, db=db, config=task_cfg, num_threads=args.threads)
+        # The training envs: a task may train with other options than it evaluates with
+        # (Task.training_config); config.json records the run's own.
+        envs = task.make_vector_env(num_envs, db=db, config=task.train_config(task_cfg), num_threads=args.threads)
     except (ValueError, TypeError) as e:
         raise InputError(f"{task.name} options: {e}") from e
     callbacks = list(task.callbacks(envs, options)) if task.callbacks else []

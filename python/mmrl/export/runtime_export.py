@@ -139,7 +139,9 @@ def controller_sections(db, policy, task_name: str, task_config,
     out.update(policy_sections(policy))
     out["task.name"] = [task_name]
     out["task.core"] = [_task_core(task_name)]
-    numbers = {k: float(v) for k, v in asdict(task_config).items() if isinstance(v, (bool, int, float))}
+    skip = set(getattr(task_config, "training_only", ()))  # the trainer's options, not the controller's
+    numbers = {k: float(v) for k, v in asdict(task_config).items()
+               if isinstance(v, (bool, int, float)) and k not in skip}
     out.update(_numbers("task", numbers))
     clip_costs = getattr(task_config, "clip_costs", "")
     if clip_costs:  # the decision's clip-cost filter, one cost per clip (docs/runtime.md)

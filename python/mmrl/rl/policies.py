@@ -14,8 +14,13 @@ import numpy as np
 from .. import _core
 from ..motion.database import POSE_DIM, TRAJECTORY_DIM, Database
 
-#: Observation sizes the scripted policies read: the plane task's and the moving-obstacles task's.
-OBSERVATION_DIMS = (POSE_DIM + 2, int(_core.ObstacleVecEnv.obs_dim))
+#: Observation sizes the scripted policies read: the plane task's and the moving-obstacles task's
+#: (the obstacles task's with and without ``observe_continuation``'s 14 floats after g_t).
+_OBSTACLE_GOAL = sum(size for name, size in _core.ObstacleVecEnv.layout if name != "goal")
+OBSERVATION_DIMS = (POSE_DIM + 2, _OBSTACLE_GOAL + 2, _OBSTACLE_GOAL + 2 + TRAJECTORY_DIM + 2)
+#: Where g_t starts in each of them.
+_GOAL_OFFSET = {POSE_DIM + 2: POSE_DIM, _OBSTACLE_GOAL + 2: _OBSTACLE_GOAL,
+                _OBSTACLE_GOAL + 2 + TRAJECTORY_DIM + 2: _OBSTACLE_GOAL}
 #: Frames ahead of the three trajectory samples (+10, +20, +30), from the C++ feature layout.
 TRAJECTORY_FRAMES = tuple(_core.TRAJECTORY_OFFSETS)
 _LAST_POSITION = _core.TRAJECTORY_POSITION_COLUMNS[2]  # x of the +30-frame position (z next)
@@ -73,7 +78,8 @@ class JoystickPolicy:
 
     def raw_trajectory(self, obs: np.ndarray) -> np.ndarray:
         """(N, 12) trajectory in meters / unit directions, character frame."""
-        g = obs[:, -2:].astype(np.float64)
+        start = _GOAL_OFFSET.get(obs.shape[1], obs.shape[1] - 2)
+        g = obs[:, start:start + 2].astype(np.float64)
         dist = np.linalg.norm(g, axis=1, keepdims=True)
         d = np.where(dist > 1e-6, g / np.maximum(dist, 1e-6), np.array([[0.0, 1.0]]))
         out = np.empty((obs.shape[0], TRAJECTORY_DIM), np.float32)
@@ -83,7 +89,7 @@ class JoystickPolicy:
         return out
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """Actions (N, 12) in the env's normalized units for observations (N, 17) or (N, 529)."""
+        """Actions (N, 12) in the env's normalized units for observations (N, 17), (N, 529) or (N, 543)."""
         obs = np.asarray(obs)
         if obs.ndim != 2 or obs.shape[1] not in OBSERVATION_DIMS:
             raise ValueError(f"obs: expected shape (N, D) with D in {OBSERVATION_DIMS} (plane, obstacles), "

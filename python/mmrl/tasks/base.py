@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import asdict, dataclass, field, fields
-from typing import Any, Callable, Dict, Mapping, Optional, Sequence, Tuple, Type, Union
+from typing import Any, Callable, ClassVar, Dict, Mapping, Optional, Sequence, Tuple, Type, Union
 
 import gymnasium as gym
 import numpy as np
@@ -81,6 +81,9 @@ class TaskConfig:
     COST >= 0 in squared normalized feature distance or ``inf`` (never play those clips). Costs of patterns matching the same clip add up; a pattern that matches
     no clip is an error. Empty: no filter."""
 
+    #: Fields the trainer reads and the C++ core never sees (``Task.training_config``).
+    training_only: ClassVar[Tuple[str, ...]] = ()
+
     def replace(self, **overrides) -> "TaskConfig":
         """A copy with ``overrides`` applied; an unknown name raises TypeError listing the options."""
         names = [f.name for f in fields(self)]
@@ -96,6 +99,8 @@ class TaskConfig:
         against ``db``'s clips, which it then needs)."""
         c = core_config_type()
         for f in fields(self):
+            if f.name in self.training_only:
+                continue
             value = getattr(self, f.name)
             if f.name == "clip_costs":
                 value = clip_cost_array(value, db).tolist() if value else []
@@ -175,7 +180,7 @@ class TargetVectorEnv(VectorEnv):
         self.autoreset_mode = autoreset_mode
         self.metadata = {**type(self).metadata, "autoreset_mode": autoreset_mode}
         self._core.autoreset_next_step = autoreset_mode == AutoresetMode.NEXT_STEP
-        self.obs_dim, self.act_dim = int(self.core_type.obs_dim), int(self.core_type.action_dim)
+        self.obs_dim, self.act_dim = int(self._core.obs_dim), int(self.core_type.action_dim)
         self.single_observation_space = self._observation_space()
         self.single_action_space = gym.spaces.Box(self._core.action_low, self._core.action_high, (self.act_dim,),
                                                   np.float32)
@@ -448,6 +453,15 @@ class Task:
     scene: Optional[Callable[[TargetVectorEnv], Any]] = None
     """``scene(env)`` -> a recorder of what the full path draws besides the character (see
     ``mmrl.rollout.SceneRecorder``); None draws the character and targets only."""
+
+    training_config: Optional[Callable[[Any], Any]] = None
+    """``training_config(config)`` -> the config the training envs run with, when it differs from
+    the run's own (which evaluation, rendering, play and export use): e.g. the obstacles task
+    trains without its collision-aware search when ``train_path_filter`` is off."""
+
+    def train_config(self, config):
+        """The config the training envs of a run with ``config`` use (``training_config``)."""
+        return config if self.training_config is None or config is None else self.training_config(config)
 
     def make_vector_env(self, num_envs: int, *, db, config=None, num_threads: int = 0, **overrides):
         return self.vector_env(num_envs, db=db, config=config, num_threads=num_threads, **overrides)

@@ -10,7 +10,8 @@ curriculum callback and the full path's scene (obstacles, sensor maps, hit point
   binary sensor maps as (channel, row, col) in C order (channel 0 current; row along the
   character's forward Z, col along its left X; the 6 x 6 m square sits 1.5 m ahead of the
   root by default), then c_t (15 normalized pose features), then g_t (target (x, z) in the
-  character frame, meters).
+  character frame, meters); with ``observe_continuation`` 14 more (``env.layout``): the
+  continuation's trajectory and whether (and when) its played path hits.
 - action: the same 12-d box as the plane task.
 - reward: ``exp(-|g_t|) + exp(-hits(a_t))`` (the second term off with ``hit_reward=False``),
   plus ``success_bonus`` on success (default 10: the paper says 10 in section 4 and no bonus
@@ -47,7 +48,8 @@ from .. import _core
 from .base import SingleEnv, TargetVectorEnv, Task, TaskConfig, TaskFlag
 from .curriculum import Curriculum, stage_params
 
-#: Flat observation layout: (name, size) of each consecutive segment (``ObstacleActorCritic``'s format).
+#: Flat observation layout: (name, size) of each consecutive segment (``ObstacleActorCritic``'s
+#: format); an env with ``observe_continuation`` appends two (its ``layout``).
 OBSTACLE_LAYOUT = tuple((str(name), int(size)) for name, size in _core.ObstacleVecEnv.layout)
 #: Shape of the "maps" segment: (channel, row, col), channel 0 current, 1 previous.
 OBSTACLE_MAP_SHAPE = (2, _core.OBSTACLE_MAP_SIDE, _core.OBSTACLE_MAP_SIDE)
@@ -93,6 +95,7 @@ class ObstaclesConfig(TaskConfig):
     """Numbers of the moving-obstacles task. The defaults are the paper's hardest stage."""
 
     task_label = "moving-obstacles"
+    training_only = ("train_path_filter",)
 
     # Redeclared: other defaults or meaning than TaskConfig's.
     target_half_extent: float = 5.0
@@ -157,6 +160,11 @@ class ObstaclesConfig(TaskConfig):
     """The turn between the path fan's queries (degrees, (0, 90])."""
     path_fan_candidates: int = 1
     """How many nearest candidates each turned query of the path fan adds (1..256)."""
+    train_path_filter: bool = True
+    """Whether the training envs run the collision-aware search too. False trains the policy
+    without it (it learns to dodge on its own) and keeps ``path_filter`` for everything after
+    training: evaluation, rendering, ``mmrl play`` and the exported controller. A trainer's
+    option: the C++ core never sees it."""
     max_steps: int = 1500
     """Safety cap on the episode length (truncation; 1500 steps = 300 s). The paper has none."""
     num_obstacles: int = 100
@@ -181,6 +189,13 @@ class ObstaclesConfig(TaskConfig):
     """The observation's second map is the one read this many RL steps ago (1: the paper's
     previous step). At 0.5 m/s an obstacle moves 0.1 m in one step, under the 0.375 m sensor
     pitch; a longer lag makes its motion show."""
+    observe_continuation: bool = False
+    """Append the continuation to the observation (14 floats after g_t): the current frame's
+    own 12 trajectory features, normalized as the action (where the clip goes if nothing else
+    is matched), then whether its played path hits an obstacle within ``path_horizon`` frames
+    (1/0, the collision-aware search's test) and the seconds to that first hit (the horizon's
+    when clear; (1, 0) when the clip is too close to its end to continue). The policy sees when
+    its own clip is about to run into something."""
     grid_cell_size: float = 1.5
     """Cell side (meters) of the uniform grid used for sensors, hits and collisions."""
 
@@ -225,6 +240,7 @@ class ObstaclesVectorEnv(TargetVectorEnv):
         if render_mode is not None:
             raise ValueError(f"render_mode: this env renders through mmrl render, got {render_mode!r}")
         super().__init__(num_envs, **kwargs)
+        self.layout = tuple((str(name), int(size)) for name, size in self._core.obs_layout)
         n = self.num_envs
         self._collision = np.zeros(n, np.uint8)
         self._hits = np.zeros(n, np.int32)
@@ -345,6 +361,10 @@ def _set_stage(envs: ObstaclesVectorEnv, stage: int) -> None:
     envs.set_stage(*stage_params(stage), label=stage)
 
 
+def _training_config(config: ObstaclesConfig) -> ObstaclesConfig:
+    return config if config.train_path_filter else config.replace(path_filter=False)
+
+
 def _scene(env: ObstaclesVectorEnv):
     from .obstacles_scene import ObstacleScene
 
@@ -374,4 +394,5 @@ TASK = Task(
     set_stage=_set_stage,
     outcomes=("collision", "truncated"),
     scene=_scene,
+    training_config=_training_config,
 )

@@ -10,6 +10,14 @@
 //   [512, 527)  c_t: normalized pose features of the current frame
 //   [527, 529)  g_t: target (x, z) in the character frame, meters
 //   i.e. maps as (channel, row, col) with channel 0 current, 1 previous.
+//   With observe_continuation (kContinuationDim = 14 more floats, obs_dim() = 543):
+//   [529, 541)  the continuation's trajectory: the current frame's own 12 trajectory features
+//               (where the clip goes if no other frame is matched), normalized as the action
+//   [541, 543)  whether the continuation's played path hits an obstacle within path_horizon
+//               frames (1 or 0; the collision-aware search's test, tasks/path_filter.hpp, with
+//               the path options, whether or not path_filter is on) and the seconds until that
+//               first hit (path_horizon / fps when clear); a frame too close to its clip's end
+//               to be matched (no continuation: the next decision jumps) reads (1, 0)
 // action       12-d trajectory feature in normalized units, clipped to the box of
 //              mean +- action_limit_std * std (as the plane task)
 // reward       exp(-|g_t|) after the step
@@ -99,6 +107,7 @@ struct ObstacleTaskConfig : TaskConfig {
   float sensor_size = 6.0f;            // sensor square side (meters)
   float sensor_forward = 1.5f;         // sensor square centre ahead of the root (meters; 0 = centred)
   int previous_map_lag = 1;            // the "previous" map is this many RL steps old (1: the paper's)
+  bool observe_continuation = false;   // append the continuation's trajectory and path hit to the observation
   float grid_cell_size = 1.5f;         // broadphase cell side (meters)
 
   template <class Visit>
@@ -131,6 +140,7 @@ struct ObstacleTaskConfig : TaskConfig {
     v("sensor_size", &ObstacleTaskConfig::sensor_size);
     v("sensor_forward", &ObstacleTaskConfig::sensor_forward);
     v("previous_map_lag", &ObstacleTaskConfig::previous_map_lag);
+    v("observe_continuation", &ObstacleTaskConfig::observe_continuation);
     v("grid_cell_size", &ObstacleTaskConfig::grid_cell_size);
   }
 };
@@ -144,6 +154,7 @@ struct ObstacleEnvState : TargetEnvState {
   float hit_points[6] = {0, 0, 0, 0, 0, 0};
   uint8_t hit_inside[3] = {0, 0, 0};
   bool collided = false;
+  int continuation_hit = -1;  // frames ahead of the continuation's first path hit, -1 clear (observe_continuation)
   int grid_age = 0;  // RL steps since env's grid was rebuilt
   int map_head = 0;  // ring slot of the current sensor map (the previous one is the next slot)
 };
@@ -154,7 +165,10 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   static constexpr int kPrevMapOffset = kMapCells;
   static constexpr int kPoseOffset = 2 * kMapCells;
   static constexpr int kGoalOffset = kPoseOffset + kPoseDim;
-  static constexpr int kObsDim = kGoalOffset + 2;
+  static constexpr int kObsDim = kGoalOffset + 2;  // the paper's observation
+  static constexpr int kContinuationOffset = kObsDim;
+  static constexpr int kContinuationDim = kTrajectoryDim + 2;
+  int obs_dim() const { return kObsDim + (config_.observe_continuation ? kContinuationDim : 0); }
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
 

@@ -31,6 +31,7 @@ class PlaneVecEnv : public TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvS
   static constexpr int kObsDim = kPoseDim + 2;
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "plane";  // the name a controller file gives this core
+  int obs_dim() const { return kObsDim; }
 
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
   // Throws std::invalid_argument on a bad config.

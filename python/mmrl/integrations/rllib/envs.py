@@ -141,7 +141,9 @@ def make_env(config) -> EpisodeLog:
 
         torch.set_num_threads(int(torch_threads))
     task_config = task.config_from_dict(config.get("task_config", {}), strict=True)
-    env = task.make_vector_env(int(config.get("num_envs", 1)), db=db, config=task_config, num_threads=threads,
+    # The training envs (a task may train with other options than it evaluates with).
+    env = task.make_vector_env(int(config.get("num_envs", 1)), db=db, config=task.train_config(task_config),
+                               num_threads=threads,
                                autoreset_mode=AutoresetMode.NEXT_STEP)
     return EpisodeLog(env, reward_scale=float(config.get("reward_scale", 1.0)))
 
