@@ -161,6 +161,39 @@ def test_obstacles_drag_and_pause(db):
     assert s.shown["obstacles"].shape == (len(frozen), 4, 2) and s.shown["sensors"]["map"].shape == (16, 16)
 
 
+def test_play_shows_the_continuation_s_path_and_where_it_hits(db):
+    """mmrl play draws, per decision, the path the playing clip would take if it continued (its
+    frame's path samples through the root) with the collision-aware search's hits in red."""
+    s = session(db, task="obstacles", seed=5)
+    seen = red = 0
+    reach = []
+    for _ in range(240):
+        env = s.run.env
+        deciding = s.k >= s.F
+        if deciding:
+            state = env.env_state(0)
+            frame = int(state["frame"])
+            want_hit = int(env.path_hits(0, np.array([frame]))[0]) if db.valid_mask[frame] else None
+        s.step()
+        if not deciding:
+            continue
+        path = s.shown["continuation_path"]
+        if want_hit is None:
+            assert path is None
+            continue
+        seen += 1
+        c, sn = np.cos(state["yaw"]), np.sin(state["yaw"])
+        local = db.path_samples[frame]
+        world = np.column_stack([state["x"] + c * local[:, 0] + sn * local[:, 1],
+                                 state["z"] - sn * local[:, 0] + c * local[:, 1]])
+        np.testing.assert_allclose(path["points"], world, atol=1e-4)
+        reach.append(np.hypot(*(world[-1] - [state["x"], state["z"]])))  # 1 s ahead: the clip's speed
+        frames = np.asarray(_core.PATH_SAMPLE_FRAMES)
+        np.testing.assert_array_equal(path["inside"], frames >= want_hit if want_hit else np.zeros(9, bool))
+        red += bool(path["inside"].any())
+    assert seen >= 20 and red >= 1 and np.mean(reach) > 0.5, (seen, red, np.mean(reach))
+
+
 def test_ground_hit():
     from mmrl.viewer.scene import ground_hit
 

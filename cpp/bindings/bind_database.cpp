@@ -139,6 +139,9 @@ void bind_layout_constants(py::module_& m) {
   m.attr("TRAJECTORY_OFFSETS") = py::tuple(offsets);               // frames ahead of the three samples
   m.attr("TRAJECTORY_POSITION_COLUMNS") = py::tuple(positions);    // x column of each sample's position (z next)
   m.attr("TRAJECTORY_DIRECTION_COLUMNS") = py::tuple(directions);  // x column of each sample's direction (z next)
+  py::list path_frames;
+  for (int s = 0; s < kPathSamples; ++s) path_frames.append(kPathSampleFrames[s]);
+  m.attr("PATH_SAMPLE_FRAMES") = py::tuple(path_frames);  // frames ahead of Database::path_samples
   m.attr("MATCH_EXCLUDE_WINDOW") = kMatchExcludeWindow;
   m.attr("MAX_FRAMES_PER_STEP") = kMaxFramesPerStep;
 }
@@ -199,6 +202,11 @@ void bind_database(py::module_& m) {
                              [](py::object self) {
                                const Database& db = self.cast<const Database&>();
                                return make_view(db.contacts.data(), {db.num_frames, 2}, self);
+                             })
+      .def_property_readonly("path_samples",
+                             [](py::object self) {
+                               const Database& db = self.cast<const Database&>();
+                               return make_view(db.path_samples.data(), {db.num_frames, kPathSamples, 2}, self);
                              })
       .def_property_readonly("feature_scale",
                              [](const Database& db) {

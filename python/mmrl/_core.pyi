@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose']
+__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -154,6 +154,9 @@ class Database:
         ...
     @property
     def parents(self) -> list[int]:
+        ...
+    @property
+    def path_samples(self) -> numpy.ndarray:
         ...
     @property
     def roles(self) -> dict:
@@ -929,6 +932,7 @@ FEATURE_DIM: int = 27
 MATCH_EXCLUDE_WINDOW: int = 20
 MAX_FRAMES_PER_STEP: int = 30
 OBSTACLE_MAP_SIDE: int = 16
+PATH_SAMPLE_FRAMES: tuple = (2, 4, 6, 8, 10, 15, 20, 25, 30)
 POSE_DIM: int = 15
 TRAJECTORY_DIM: int = 12
 TRAJECTORY_DIRECTION_COLUMNS: tuple = (17, 21, 25)

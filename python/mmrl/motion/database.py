@@ -209,6 +209,10 @@ class Database:
     valid_mask = property(lambda self: self._db.valid_mask.view(np.bool_))
     frame_clip = property(lambda self: self._db.frame_clip, doc="Clip index of each frame.")
     contacts = property(lambda self: self._db.contacts.view(np.bool_), doc="(N, 2) left/right foot contacts.")
+    path_samples = property(lambda self: self._db.path_samples,
+                            doc="(N, 9, 2) root (x, z) that playing from each valid frame reaches "
+                                "``_core.PATH_SAMPLE_FRAMES`` frames later, in that frame's character frame "
+                                "(zeros for frames that cannot be matched); the collision-aware search's paths.")
     feature_mean = property(lambda self: self._state()["feature_mean"])
     feature_scale = property(lambda self: self._db.feature_scale,
                              doc="Per-column divisor: normalized = (features - mean) / scale.")

@@ -4,8 +4,9 @@ The same shown values as the MP4 renderer (:func:`mmrl.viz.render.recording_fram
 as bones colored by side (:func:`mmrl.viz.render.skeleton_bones`, :func:`mmrl.viz.render.joint_sides`),
 the target as a ring of the success radius, obstacles as low boxes, the sensor map (occupied
 cells orange), the policy's three trajectory points with their facing directions (green, red
-when inside an obstacle) and the matched frame's three (blue), and foot contacts (a dot under
-each planted ankle). World meters, Y up.
+when inside an obstacle) and the matched frame's three (blue), in ``mmrl play`` the played clip's
+own path if it continued (violet, red from where the collision-aware search's test finds it
+inside an obstacle), and foot contacts (a dot under each planted ankle). World meters, Y up.
 """
 from __future__ import annotations
 
@@ -23,6 +24,7 @@ OBSTACLE = (0.55, 0.52, 0.62)
 SENSOR_FREE, SENSOR_OCCUPIED = (0.55, 0.55, 0.6), (0.95, 0.55, 0.1)
 CONTACT = (0.95, 0.75, 0.1)
 TRAJECTORY = (0.35, 0.35, 0.45)
+CONTINUATION = (0.6, 0.45, 0.8)
 #: Camera offset from the character (meters): close behind it, or higher above an obstacle
 #: scene (as the MP4 renderer does) so the boxes do not hide it.
 CAMERA_OFFSET, CAMERA_OFFSET_OBSTACLES = (2.6, 1.1, 2.6), (3.0, 4.0, 3.0)
@@ -126,6 +128,19 @@ class Painter:
         self.scene.visible(name + "/points", True)
         self.scene.visible(name + "/directions", True)
 
+    def continuation(self, path: Optional[Dict[str, np.ndarray]]) -> None:
+        """The clip's own path if it continued (``points`` (9, 2) world (x, z), ``inside`` (9,)
+        red from the collision-aware search's first hit on); None hides it."""
+        name = self.root + "/continuation"
+        if path is None:
+            self.scene.visible(name, False)
+            return
+        p = _flat(path["points"], 0.03)
+        colors = np.tile(np.asarray(CONTINUATION, np.float64), (len(p), 1))
+        colors[np.asarray(path["inside"], bool).reshape(-1)] = HIT_INSIDE
+        self.scene.points(name, p, colors, size=0.06)
+        self.scene.visible(name, True)
+
     def trajectory(self, xz: np.ndarray) -> None:
         """The root's path over the ground, (T, 2) world (x, z)."""
         p = _flat(np.asarray(xz, np.float64)[::2], 0.005)
@@ -145,5 +160,7 @@ class Painter:
             if "query_points" in shown:
                 self.queries(self.root + "/query", shown["query_points"], shown.get("query_directions"), QUERY,
                              shown.get("hit_inside"))
+            if "continuation_path" in shown:
+                self.continuation(shown["continuation_path"])
             if "match_points" in shown:
                 self.queries(self.root + "/matched", shown["match_points"], shown.get("match_directions"), MATCHED)

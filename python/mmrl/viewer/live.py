@@ -25,7 +25,7 @@ from typing import Any, Dict, Optional
 
 import numpy as np
 
-from .. import metrics
+from .. import _core, metrics
 from ..character import Character
 from ..motion.database import POSE_DIM
 from ..rl.policies import JoystickPolicy
@@ -153,6 +153,7 @@ class LiveSession:
         clipped = np.clip(action, low, high)
         points, directions = _world_query(self.db, clipped, run.ctrl.root)
         root_before = run.ctrl.root
+        continuation = self._continuation_path()
         scene_before = self._obstacles_after_step() if self.has_obstacles else None
         out = run.step(action)
         t2 = time.perf_counter()
@@ -169,7 +170,8 @@ class LiveSession:
         match_points, match_directions = _world_query(
             self.db, np.asarray(self.db.normalized_features[res.match, POSE_DIM:], np.float32), root_before)
         self.shown.update(query_points=points, query_directions=directions, match_points=match_points,
-                          match_directions=match_directions, sensors=self._sensors())
+                          match_directions=match_directions, sensors=self._sensors(),
+                          continuation_path=continuation)
         self._write_trace(root_before, res)
 
     # ------------------------------------------------------------------ controller options
@@ -231,6 +233,25 @@ class LiveSession:
             elif self._velocities is not None and len(self._velocities) == len(o["velocities"]):
                 o["velocities"] = self._velocities
         self._restore_obstacles(o)
+
+    def _continuation_path(self) -> Optional[Dict[str, np.ndarray]]:
+        """At a decision: the path the clip being played would take if it continued (its frame's
+        ``Database.path_samples``, world (x, z), (9, 2)) and which samples the collision-aware
+        search's test finds inside an obstacle (from the first hit on); None without obstacles or
+        when the clip cannot continue."""
+        env = self.run.env
+        if not hasattr(env, "path_hits"):
+            return None
+        state = env.env_state(0)
+        frame = int(state["frame"])
+        if not self.db.valid_mask[frame]:
+            return None
+        c, s = np.cos(state["yaw"]), np.sin(state["yaw"])
+        local = np.asarray(self.db.path_samples[frame], np.float64)
+        world = local @ np.array([[c, s], [-s, c]]).T + np.array([state["x"], state["z"]])
+        hit = int(env.path_hits(0, np.array([frame], np.int64))[0])
+        inside = (np.asarray(_core.PATH_SAMPLE_FRAMES) >= hit) if hit > 0 else np.zeros(len(world), bool)
+        return {"points": world.astype(np.float32), "inside": inside}
 
     def _sensors(self) -> Optional[Dict[str, np.ndarray]]:
         env = self.run.env
