@@ -2,7 +2,8 @@
 
 Observations are the plane task's (D = 17, see :mod:`mmrl.tasks.plane`): ``obs = [pose features (15,
 normalized), target (x, z) in the character frame (meters)]``, or the moving-obstacles task's
-(D = 529, :mod:`mmrl.tasks.obstacles`), which ends with the same 17 floats after its sensor maps.
+(D = 529, :mod:`mmrl.tasks.obstacles`; 543 with ``observe_continuation``), which holds the same
+17 floats after its sensor maps.
 Actions are the 12-d trajectory features in the database's normalized units.
 """
 from __future__ import annotations
