@@ -46,6 +46,10 @@ def register_cli(sub) -> None:
     e = sub.add_parser("eval", help="evaluate a policy on the task with the full character (quality metrics)")
     add_shared_options(e)
     e.add_argument("--json", action="store_true", help="print one JSON object")
+    e.add_argument("--line", type=int, default=None, metavar="N",
+                   help="also run N joysticks at speeds from the data's slowest walk to its fastest run on the "
+                   "same episodes, and report the policy's IK-off foot sliding against that line at its own time "
+                   "to target (default 5 on the plane task, 0 = none elsewhere)")
     e.set_defaults(func=cmd_eval)
 
     r = sub.add_parser("render", help="render a policy following a sequence of targets to MP4, GIF or a "
@@ -130,6 +134,16 @@ def cmd_eval(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     res = evaluate_full_path(s.task, s.db, s.policy, episodes=args.episodes, seed=args.seed, config=s.config,
                              stage=s.stage, **s.options)
+    line = (5 if s.task.name == "plane" else 0) if args.line is None else args.line
+    if line:
+        from ..reference import against_line, joystick_line, joystick_speeds
+
+        try:
+            speeds = joystick_speeds(s.db, line)
+        except ValueError as e:
+            raise InputError(f"--line {line}: {e}") from None
+        res.update(against_line(res, joystick_line(s.task, s.db, speeds=speeds, episodes=args.episodes,
+                                                   seed=args.seed, config=s.config, stage=s.stage, **s.options)))
     res.update({"policy": s.policy_name, "env": s.task.name, "seed": args.seed, "ik": not args.no_ik,
                 "inertialization": not args.no_inertialization, "wall_time_s": time.perf_counter() - t0})
     res["episode_results"] = res.pop("episode_results")  # keep the per-episode list last
@@ -148,6 +162,19 @@ def cmd_eval(args: argparse.Namespace) -> int:
     floor = res.get("raw_mocap") or {}
     if floor:
         print(f"  raw mocap (clips played straight): foot sliding {fmt(floor.get('foot_sliding_cm_per_s'))} cm/s")
+    if res.get("joystick_line"):
+        print("  joysticks on the same episodes (the equal-speed line):")
+        print(f"    {'speed m/s':>9} {'success':>8} {'time s':>7} {'sliding IK off':>15} {'transitions/s':>14}")
+        for r in res["joystick_line"]:
+            print(f"    {r['speed_m_per_s']:>9.2f} {fmt(r['success_rate']):>8} {fmt(r['mean_time_to_target_s']):>7} "
+                  f"{fmt(r['foot_sliding_ik_off_cm_per_s']):>15} {fmt(r['transitions_per_s']):>14}")
+        ref, ratio = res["joystick_line_sliding_ik_off_cm_per_s"], res["sliding_ik_off_vs_joystick_line"]
+        if ref is None:
+            print("  against the line: n/a (no time to target)")
+        else:
+            where = "at or below" if res["at_or_below_joystick_line"] else "above"
+            print(f"  against the line at its time to target: {fmt(res.get('foot_sliding_ik_off_cm_per_s'))} vs "
+                  f"{fmt(ref)} cm/s ({ratio:.2f}x, {where} the line)")
     return 0
 
 

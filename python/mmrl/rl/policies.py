@@ -27,6 +27,12 @@ TRAJECTORY_FRAMES = tuple(_core.TRAJECTORY_OFFSETS)
 _LAST_POSITION = _core.TRAJECTORY_POSITION_COLUMNS[2]  # x of the +30-frame position (z next)
 
 
+def frame_speeds(db: Database) -> np.ndarray:
+    """Each valid frame's speed (m/s): the distance to its +30-frame trajectory sample over that time."""
+    f = db.features[db.valid_mask]
+    return np.hypot(f[:, _LAST_POSITION], f[:, _LAST_POSITION + 1]) * db.fps / TRAJECTORY_FRAMES[2]
+
+
 def database_speeds(db: Database) -> Tuple[float, float]:
     """(walk, run) speeds of a database, m/s.
 
@@ -34,8 +40,7 @@ def database_speeds(db: Database) -> Tuple[float, float]:
     time. The speeds are split in two groups (a 1-d two-means), and each speed is the median
     of its group: for the Bandai data about 1.1-1.2 m/s and 2.7-2.8 m/s.
     """
-    f = db.features[db.valid_mask]
-    speed = np.hypot(f[:, _LAST_POSITION], f[:, _LAST_POSITION + 1]) * db.fps / TRAJECTORY_FRAMES[2]
+    speed = frame_speeds(db)
     lo, hi = np.percentile(speed, 10), np.percentile(speed, 90)
     for _ in range(20):
         split = 0.5 * (lo + hi)
@@ -55,9 +60,14 @@ class JoystickPolicy:
     Args:
         db: the database whose normalization the actions use.
         speed: m/s; default: the database's walking speed (:func:`database_speeds`).
+        arrive: never ask to go past the target: each trajectory position is at most the
+            target's distance away (a player easing the stick at the target). Off for the
+            ``joystick`` baselines (as measured in the docs); on for the equal-speed line
+            (:mod:`mmrl.reference`), whose fast joysticks would otherwise circle the target.
     """
 
-    def __init__(self, db: Database, speed: Optional[float] = None):
+    def __init__(self, db: Database, speed: Optional[float] = None, arrive: bool = False):
+        self.arrive = bool(arrive)
         if speed is None:
             speed = database_speeds(db)[0]
         if not np.isfinite(speed) or speed <= 0:
@@ -85,7 +95,8 @@ class JoystickPolicy:
         d = np.where(dist > 1e-6, g / np.maximum(dist, 1e-6), np.array([[0.0, 1.0]]))
         out = np.empty((obs.shape[0], TRAJECTORY_DIM), np.float32)
         for k, t in enumerate(self._times):
-            out[:, 4 * k:4 * k + 2] = d * self.speed * t
+            reach = np.minimum(self.speed * t, dist) if self.arrive else self.speed * t
+            out[:, 4 * k:4 * k + 2] = d * reach
             out[:, 4 * k + 2:4 * k + 4] = d
         return out
 
