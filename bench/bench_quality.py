@@ -128,7 +128,8 @@ def run_databases(args) -> None:
         name, db, npz = database_for(spec, out)
         run = out / f"{name}-seed{args.seeds[0]}"
         if not (run / "latest.pt").exists() and not args.no_train:
-            code = cli(["train", "plane", "--db", str(npz), "--seconds", str(args.seconds), "--seed",
+            budget = ["--steps", str(args.train_steps)] if args.train_steps else ["--seconds", str(args.seconds)]
+            code = cli(["train", "plane", "--db", str(npz), *budget, "--seed",
                         str(args.seeds[0]), "--out", str(run), "--no-progress", *args.train_args])
             if code != 0:
                 raise SystemExit(f"training {run} failed ({code})")
@@ -195,6 +196,8 @@ def main() -> None:
     p.add_argument("--db", help="a database saved by 'mmrl db build' (all shared data for the goals)")
     p.add_argument("--dbs", nargs="+", help="run the default on each of these databases (see above)")
     p.add_argument("--seconds", type=float, default=30.0, help="with --dbs: the training budget of each")
+    p.add_argument("--train-steps", type=int, default=None,
+                   help="with --dbs: train this many steps instead of --seconds (the same result on a busy machine)")
     p.add_argument("--line", type=int, default=5, help="with --dbs: joystick speeds on the line")
     p.add_argument("--train-args", nargs=argparse.REMAINDER, default=[],
                    help="with --dbs: more 'mmrl train plane' arguments (last on the command line)")

@@ -1,43 +1,154 @@
 #include "mmrl/database.hpp"
 
+#include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
 
 namespace mmrl {
 
+namespace {
+
+// Whether joint j of m translates: a root, or a joint whose translation leaves its offset on
+// some frame (position channels that only repeat the offset, as Bandai-Namco's, do not count).
+bool translates(const Motion& m, int j) {
+  const Skeleton& sk = m.skeleton;
+  if (sk.parents[j] < 0) return true;
+  const int J = sk.num_joints();
+  for (int f = 0; f < m.num_frames; ++f) {
+    const float* t = &m.translations[(static_cast<size_t>(f) * J + j) * 3];
+    if (std::abs(t[0] - sk.offsets[j].x()) + std::abs(t[1] - sk.offsets[j].y()) + std::abs(t[2] - sk.offsets[j].z()) >
+        1e-4f)
+      return true;
+  }
+  return false;
+}
+
+Vec3 reflect(const Vec3& v) { return Vec3(-v.x(), v.y(), v.z()); }
+Vec3 load3(const float* p) { return Vec3(p[0], p[1], p[2]); }
+
+// The shortest rotation taking direction a to direction b (both nonzero).
+Quat rotation_between(const Vec3& a, const Vec3& b) {
+  Quat q;
+  q.setFromTwoVectors(a, b);
+  return q.normalized();
+}
+
+}  // namespace
+
+std::vector<Quat> mirror_corrections(const std::vector<const Motion*>& clips, const std::vector<int>& map) {
+  if (clips.empty()) throw std::invalid_argument("mirror_corrections: no clips");
+  const Skeleton& sk = clips.front()->skeleton;
+  const int J = sk.num_joints();
+  // Each joint's fixed child offsets (children without position channels, and its end site)
+  // and where the mirror must put them: the partner's matching offsets, reflected.
+  std::vector<std::vector<std::pair<Vec3, Vec3>>> pairs(J);
+  for (int c = 0; c < J; ++c) {
+    const int p = sk.parents[c];
+    if (p < 0 || std::any_of(clips.begin(), clips.end(), [&](const Motion* m) { return translates(*m, c); })) continue;
+    pairs[p].emplace_back(sk.offsets[c], reflect(sk.offsets[map[c]]));
+  }
+  for (int j = 0; j < J; ++j)
+    if (sk.has_end_site[j] && sk.has_end_site[map[j]]) pairs[j].emplace_back(sk.end_sites[j], reflect(sk.end_sites[map[j]]));
+  for (auto& list : pairs)  // zero-length offsets fix no direction
+    list.erase(std::remove_if(list.begin(), list.end(),
+                              [](const std::pair<Vec3, Vec3>& q) { return q.first.norm() < 1e-6f || q.second.norm() < 1e-6f; }),
+               list.end());
+  std::vector<Quat> out(J, Quat::Identity());
+  std::vector<bool> fitted(J, false);
+  for (int j = 0; j < J; ++j) {
+    if (pairs[j].size() < 2) continue;
+    Eigen::Matrix3d h = Eigen::Matrix3d::Zero();
+    for (const auto& [a, b] : pairs[j]) h += a.cast<double>() * b.cast<double>().transpose();
+    Eigen::JacobiSVD<Eigen::Matrix3d> svd(h, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    const Eigen::Vector3d sv = svd.singularValues();
+    if (!(sv(1) > 1e-6 * sv(0))) continue;  // collinear children: a direction, not a frame
+    Eigen::Matrix3d d = Eigen::Matrix3d::Identity();
+    d(2, 2) = (svd.matrixV() * svd.matrixU().transpose()).determinant() < 0 ? -1.0 : 1.0;
+    const Eigen::Matrix3d r = svd.matrixV() * d * svd.matrixU().transpose();
+    out[j] = Quat(r.cast<float>()).normalized();
+    fitted[j] = true;
+  }
+  // The rest: the mean over frames of M r_s(j)^-1 M C_p r_j (parents first), which for a
+  // symmetric pose is exactly the correction that leaves its local rotations unchanged.
+  std::vector<int> order(J);
+  for (int j = 0; j < J; ++j) order[j] = j;
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    auto depth = [&](int x) {
+      int d = 0;
+      while (sk.parents[x] >= 0) x = sk.parents[x], ++d;
+      return d;
+    };
+    return depth(a) < depth(b);
+  });
+  for (int j : order) {
+    const int p = sk.parents[j];
+    if (fitted[j] || p < 0) continue;  // a root without a fitted frame keeps the identity
+    Eigen::Vector4d sum = Eigen::Vector4d::Zero();
+    const Quat cp = out[p];
+    for (const Motion* m : clips) {
+      const int step = std::max(1, m->num_frames / 64);
+      for (int f = 0; f < m->num_frames; f += step) {
+        const float* r = &m->rotations[(static_cast<size_t>(f) * J) * 4];
+        const Quat rj = quat_load(r + j * 4), rs = quat_load(r + map[j] * 4);
+        const Quat q = (quat_mirror_x(rs).conjugate() * cp * rj).normalized();
+        Eigen::Vector4d v(q.w(), q.x(), q.y(), q.z());
+        if (v.dot(sum) < 0) v = -v;
+        sum += v;
+      }
+    }
+    Quat c = sum.norm() > 0 ? Quat(static_cast<float>(sum(0)), static_cast<float>(sum(1)), static_cast<float>(sum(2)),
+                                   static_cast<float>(sum(3))).normalized()
+                            : Quat::Identity();
+    if (pairs[j].size() == 1) c = (rotation_between(c * pairs[j][0].first, pairs[j][0].second) * c).normalized();
+    out[j] = c;
+  }
+  return out;
+}
+
 Motion motion_mirror(const Motion& m, const std::vector<int>& mirror_map) {
+  return motion_mirror(m, mirror_map, mirror_corrections({&m}, mirror_map));
+}
+
+Motion motion_mirror(const Motion& m, const std::vector<int>& mirror_map, const std::vector<Quat>& corrections) {
   const int J = m.skeleton.num_joints();
+  if (static_cast<int>(corrections.size()) != J || static_cast<int>(mirror_map.size()) != J)
+    throw std::invalid_argument("motion_mirror: one mirror partner and one correction per joint");
   Motion out = m;
   out.source = m.source;
   std::vector<float> gp(static_cast<size_t>(J) * 3), gr(static_cast<size_t>(J) * 4);
   std::vector<Vec3> mp(J);
   std::vector<Quat> mr(J);
+  std::vector<uint8_t> moves(J);
+  for (int j = 0; j < J; ++j) moves[j] = translates(m, j);
   for (int f = 0; f < m.num_frames; ++f) {
     const size_t o = static_cast<size_t>(f) * J;
     pose_forward_kinematics(m.skeleton.parents, &m.translations[o * 3], &m.rotations[o * 4], gp.data(), gr.data());
     for (int j = 0; j < J; ++j) {
       const int s = mirror_map[j];
-      mp[j] = Vec3(-gp[s * 3], gp[s * 3 + 1], gp[s * 3 + 2]);
-      mr[j] = quat_mirror_x(quat_load(&gr[s * 4]));
+      mr[j] = (quat_mirror_x(quat_load(&gr[s * 4])) * corrections[j]).normalized();
+    }
+    // Global positions of the mirror, parents first: translating joints at the mirrored
+    // positions, the others through their own (unchanged) offsets.
+    for (int j = 0; j < J; ++j) {
+      const int p = m.skeleton.parents[j];
+      const int s = mirror_map[j];
+      if (moves[j]) {
+        mp[j] = Vec3(-gp[s * 3], gp[s * 3 + 1], gp[s * 3 + 2]);
+      } else {
+        mp[j] = mp[p] + mr[p] * load3(&m.translations[(o + j) * 3]);
+      }
     }
     for (int j = 0; j < J; ++j) {
       const int p = m.skeleton.parents[j];
-      Vec3 t;
-      Quat r;
-      if (p < 0) {
-        t = mp[j];
-        r = mr[j];
-      } else {
-        const Quat pinv = mr[p].conjugate();
-        t = pinv * (mp[j] - mp[p]);
-        r = (pinv * mr[j]).normalized();
-      }
+      Quat r = p < 0 ? mr[j] : (mr[p].conjugate() * mr[j]).normalized();
+      quat_store(r, &out.rotations[(o + j) * 4]);
+      if (!moves[j]) continue;  // fixed offsets stay the skeleton's
+      const Vec3 t = p < 0 ? mp[j] : Vec3(mr[p].conjugate() * (mp[j] - mp[p]));
       float* tr = &out.translations[(o + j) * 3];
       tr[0] = t.x();
       tr[1] = t.y();
       tr[2] = t.z();
-      quat_store(r, &out.rotations[(o + j) * 4]);
     }
   }
   return out;
@@ -239,8 +350,9 @@ Database database_build(const std::vector<const Motion*>& clips_in, const Databa
   for (const Motion* m : clips_in) clips.push_back(m);
   if (opt.mirror) {
     const auto map = skeleton_mirror_map(db.skeleton);
+    const auto corrections = mirror_corrections(clips_in, map);  // one set for every clip of the skeleton
     mirrored.reserve(clips_in.size());
-    for (const Motion* m : clips_in) mirrored.push_back(motion_mirror(*m, map));
+    for (const Motion* m : clips_in) mirrored.push_back(motion_mirror(*m, map, corrections));
     for (const Motion& m : mirrored) clips.push_back(&m);
   }
 

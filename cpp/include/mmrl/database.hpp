@@ -95,9 +95,31 @@ struct Database {
   void validate() const;
 };
 
-// Mirrors a motion across the world YZ plane (x -> -x), swapping left and right joints.
-// Local translations are recomputed so that FK of the result gives the exact mirrored
-// positions; mirroring twice gives the original.
+// Mirroring across the world YZ plane (x -> -x), swapping left and right joints, in the
+// skeleton's own joint bases: a mirrored clip keeps the skeleton's bone offsets, and its local
+// rotations mean what the original clips' mean, so a blend between an original clip and a
+// mirrored one (a transition) moves between two poses of the same skeleton.
+//
+// Joint j's global rotation in the mirror is M G_s(j) M C_j (M the reflection, s(j) the
+// mirror partner, G the source's global rotation) with one constant correction C_j per joint
+// and skeleton (mirror_corrections): the rotation that takes j's child offsets (and end site)
+// to its partner's mirrored ones (a best fit when j has two or more, which is exact for a
+// skeleton whose sides mirror each other), or for a joint with one child or none, the mean
+// of the rotation that maps the partner's mirrored pose onto j's over the clips' frames (then
+// turned to fit the child exactly), which near-symmetric locomotion averages to the rest
+// symmetry. A root joint with fewer than two fixed children keeps C = identity (its rotation
+// carries the heading, which the mirror must flip). Joints that translate (roots, and joints
+// whose translation leaves its offset on some frame) are placed at the mirrored positions
+// exactly; the others keep their offsets.
+//
+// Without it (C = identity and every translation recomputed from the mirrored positions, as
+// before) a skeleton whose rest pose is not mirror-symmetric in world X (Bandai-Namco's
+// bones lie along their local X) gets mirrored clips in other joint bases: the hips' local
+// rotation differed by 180 degrees, and every transition between an original and a mirrored
+// clip jumped (joystick foot sliding 131 cm/s on the mirrored shared data, against 19).
+std::vector<Quat> mirror_corrections(const std::vector<const Motion*>& clips, const std::vector<int>& mirror_map);
+Motion motion_mirror(const Motion& motion, const std::vector<int>& mirror_map, const std::vector<Quat>& corrections);
+// The same with the corrections of this motion alone.
 Motion motion_mirror(const Motion& motion, const std::vector<int>& mirror_map);
 
 // Foot contact detection (offline). A foot is planted on a frame when its toe or its ankle
