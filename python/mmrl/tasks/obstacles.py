@@ -214,11 +214,14 @@ _MMRL_REWARD = {"success_bonus": 1000.0, "hit_penalty": True, "hit_weight": 10.0
                 "hit_lookahead": True, "anneal_lr": True}
 OBSTACLE_PRESETS: Dict[str, Dict[str, Any]] = {
     "paper": {},
-    # The default: the reward above on the paper's CNN, with the collision-aware search.
-    "mmrl": {**_MMRL_REWARD, "path_filter": True},
+    # The default: the reward above on the paper's CNN, trained without the collision-aware
+    # search and deployed with it (eval, render, play, export): trained with it, the policy
+    # leans on the search and learns less (docs/obstacles.md).
+    "mmrl": {**_MMRL_REWARD, "path_filter": True, "train_path_filter": False},
     # The same with the cheap learner (a small CNN actor, an MLP critic, 8 minibatch steps per
     # rollout): 2.4x the training steps per second, less success per step (docs/obstacles.md).
-    "mmrl-small": {**_MMRL_REWARD, "path_filter": True, "network": "small-cnn", "num_minibatches": 4},
+    "mmrl-small": {**_MMRL_REWARD, "path_filter": True, "train_path_filter": False, "network": "small-cnn",
+                   "num_minibatches": 4},
     # The default until the collision-aware search and the cheap learner (docs/obstacles.md's
     # nine-seed tables were measured with it): the paper's CNN, no path filter.
     "mmrl-cnn": dict(_MMRL_REWARD),
