@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mmrl
-from mmrl.reference import MIN_GAIT_SPEED, against_line, joystick_line, joystick_speeds, line_value
+from mmrl.rl.reference import MIN_GAIT_SPEED, against_line, joystick_line, joystick_speeds, line_value
 from mmrl.rl.policies import JoystickPolicy, frame_speeds
 from mmrl.rollout import evaluate_full_path
 from test_import_axes_fps import other_skeleton_database

@@ -136,7 +136,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
                              stage=s.stage, **s.options)
     line = (5 if s.task.name == "plane" else 0) if args.line is None else args.line
     if line:
-        from ..reference import against_line, joystick_line, joystick_speeds
+        from ..rl.reference import against_line, joystick_line, joystick_speeds
 
         try:
             speeds = joystick_speeds(s.db, line)

@@ -16,8 +16,8 @@ from typing import Any, Dict, List, Optional, Sequence
 
 import numpy as np
 
-from .motion.database import Database
-from .rl.policies import TRAJECTORY_FRAMES, JoystickPolicy, frame_speeds
+from ..motion.database import Database
+from .policies import TRAJECTORY_FRAMES, JoystickPolicy, frame_speeds
 
 #: What each joystick of the line reports (evaluate_full_path's keys).
 LINE_KEYS = ("success_rate", "mean_time_to_target_s", "foot_sliding_ik_off_cm_per_s", "foot_sliding_cm_per_s",
@@ -47,7 +47,7 @@ def joystick_line(task, db: Database, *, speeds: Optional[Sequence[float]] = Non
                   seed: int = 0, config=None, stage: Optional[int] = None, **options) -> List[Dict[str, Any]]:
     """One row per speed (default :func:`joystick_speeds`): the joystick at that speed on the
     same full-path episodes (``evaluate_full_path`` with ``seed``), ordered by speed."""
-    from .rollout import evaluate_full_path
+    from ..rollout import evaluate_full_path
 
     rows = []
     for speed in (joystick_speeds(db) if speeds is None else speeds):
