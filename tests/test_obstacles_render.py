@@ -120,7 +120,7 @@ def test_evaluate_obstacles_counts_outcomes(db):
 
 
 def test_eval_json_keys_match_the_plane_task_plus_collision_rate(capsys):
-    assert main(["eval", "--policy", "joystick", "--episodes", "1", "--json"]) == 0
+    assert main(["eval", "--policy", "joystick", "--episodes", "1", "--line", "0", "--json"]) == 0
     plane = json.loads(capsys.readouterr().out)
     assert main(["eval", "--env", "obstacles", "--policy", "joystick", "--episodes", "3", "--stage", "2",
                  "--json"]) == 0
