@@ -36,7 +36,7 @@ VARIANTS = {
     "smooth": ["--preset", "smooth"],
 }
 KEYS = ("success_rate", "mean_time_to_target_s", "foot_sliding_cm_per_s", "foot_sliding_ik_off_cm_per_s",
-        "transitions_per_s", "pose_jump_p99_cm", "matched_cost_mean")
+        "transitions_per_s", "pose_jump_p99_cm", "matched_cost_mean", "mean_speed_m_per_s")
 
 
 def train(run: Path, db: str, steps: int, seed: int, extra) -> None:
@@ -126,31 +126,37 @@ def run_databases(args) -> None:
     table = {}
     for spec in args.dbs:
         name, db, npz = database_for(spec, out)
-        run = out / f"{name}-seed{args.seeds[0]}"
-        if not (run / "latest.pt").exists() and not args.no_train:
-            budget = ["--steps", str(args.train_steps)] if args.train_steps else ["--seconds", str(args.seconds)]
-            code = cli(["train", "plane", "--db", str(npz), *budget, "--seed",
-                        str(args.seeds[0]), "--out", str(run), "--no-progress", *args.train_args])
-            if code != 0:
-                raise SystemExit(f"training {run} failed ({code})")
-        rd = RunDir(run)
-        cfg = rd.task_config()
-        res = evaluate_full_path(task, db, rd.policy(), episodes=args.episodes, seed=args.eval_seed, config=cfg)
-        line = joystick_line(task, db, speeds=joystick_speeds(db, args.line), episodes=args.episodes,
-                             seed=args.eval_seed, config=cfg)
-        row = {k: res.get(k) for k in KEYS}
-        row.update(against_line(res, line))
-        row.update(frames=db.num_frames, raw_mocap=res.get("raw_mocap"), transition_cost=cfg.transition_cost)
-        table[name] = row
-        print(f"{name}: {json.dumps({k: v for k, v in row.items() if k != 'joystick_line'})}", flush=True)
+        line = None
+        for seed in args.seeds:  # one row per seed; the joysticks' line once per database
+            run = out / f"{name}-seed{seed}"
+            if not (run / "latest.pt").exists() and not args.no_train:
+                budget = ["--steps", str(args.train_steps)] if args.train_steps else ["--seconds", str(args.seconds)]
+                code = cli(["train", "plane", "--db", str(npz), *budget, "--seed",
+                            str(seed), "--out", str(run), "--no-progress", *args.train_args])
+                if code != 0:
+                    raise SystemExit(f"training {run} failed ({code})")
+            rd = RunDir(run)
+            cfg = rd.task_config()
+            res = evaluate_full_path(task, db, rd.policy(), episodes=args.episodes, seed=args.eval_seed, config=cfg)
+            if line is None:
+                line = joystick_line(task, db, speeds=joystick_speeds(db, args.line), episodes=args.episodes,
+                                     seed=args.eval_seed, config=cfg)
+            row = {k: res.get(k) for k in KEYS}
+            row.update(against_line(res, line))
+            row.update(frames=db.num_frames, raw_mocap=res.get("raw_mocap"), transition_cost=cfg.transition_cost,
+                       seed=seed)
+            key = name if len(args.seeds) == 1 else f"{name} seed {seed}"
+            table[key] = row
+            print(f"{key}: {json.dumps({k: v for k, v in row.items() if k != 'joystick_line'})}", flush=True)
     print("| database | frames | success | time to target (s) | transitions/s | sliding IK off | line at that "
-          "time | IK off / line | sliding IK on | raw mocap |")
-    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+          "time | IK off / line | mean speed (m/s) | IK off / line at that speed | sliding IK on | raw mocap |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     f2 = lambda v: "n/a" if v is None else f"{v:.2f}"  # noqa: E731
     for name, r in table.items():
         print(f"| {name} | {r['frames']:,} | {100 * r['success_rate']:.0f}% | {f2(r['mean_time_to_target_s'])} | "
               f"{f2(r['transitions_per_s'])} | {f2(r['foot_sliding_ik_off_cm_per_s'])} | "
               f"{f2(r['joystick_line_sliding_ik_off_cm_per_s'])} | {f2(r['sliding_ik_off_vs_joystick_line'])} | "
+              f"{f2(r.get('mean_speed_m_per_s'))} | {f2(r.get('sliding_ik_off_vs_joystick_line_at_speed'))} | "
               f"{f2(r['foot_sliding_cm_per_s'])} | {f2((r['raw_mocap'] or {}).get('foot_sliding_cm_per_s'))} |")
     out.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out / "quality-dbs.json", json.dumps(table, indent=1))

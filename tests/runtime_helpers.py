@@ -12,7 +12,8 @@ def scripted_targets(n: int, seed: int, half: float = 6.0) -> np.ndarray:
     return np.random.default_rng(seed).uniform(-half, half, (n, 2))
 
 
-def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0, success_radius: float = 0.5):
+def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0, success_radius: float = 0.5,
+               request: str = ""):
     """``decisions`` decisions of the runtime and of the Python full path from the same start,
     through the same scripted targets (the next one once the root is within success_radius at
     a decision). ``python_act(obs) -> action`` is the Python side's policy.
@@ -22,6 +23,10 @@ def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0
     x, z, yaw = fp.ctrl.root
     controller = _core.RuntimeController.load(str(path))
     ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.ctrl.frame)
+    if request:  # the same request on both sides (tags.hpp)
+        fp.env.set_request(0, request)
+        fp.obs = fp.env.observe(0)
+        ch.set_request(request)
     targets = scripted_targets(decisions + 1, seed)
     t = 0
     fp.set_target(*targets[0])

@@ -2,6 +2,7 @@
 #include "mmrl/decision.hpp"
 #include "mmrl/database.hpp"
 #include "mmrl/database_io.hpp"
+#include "mmrl/tags.hpp"
 
 namespace mmrl {
 
@@ -59,6 +60,8 @@ py::dict database_state(py::object self) {
   s["clip_ranges"] = make_view(db.clip_ranges.data(), {C, 2}, self);
   s["clip_names"] = db.clip_names;
   s["clip_mirrored"] = make_view(db.clip_mirrored.data(), {C}, self);
+  s["tag_names"] = db.tag_names;
+  s["clip_tags"] = make_view(db.clip_tags.data(), {C, static_cast<py::ssize_t>(db.tag_names.size())}, self);
   s["bone_translations"] = make_view(db.bone_translations.data(), {N, J, 3}, self);
   s["bone_rotations"] = make_view(db.bone_rotations.data(), {N, J, 4}, self);
   s["root_positions"] = make_view(db.root_positions.data(), {N, 3}, self);
@@ -88,6 +91,8 @@ Database database_from_dict(const py::dict& s, bool borrow) {
   st.clip_names = s["clip_names"].cast<std::vector<std::string>>();
   st.clip_ranges = take<int32_t>(s, "clip_ranges");
   st.clip_mirrored = take<uint8_t>(s, "clip_mirrored");
+  if (s.contains("tag_names")) st.tag_names = s["tag_names"].cast<std::vector<std::string>>();
+  if (s.contains("clip_tags")) st.clip_tags = take<uint8_t>(s, "clip_tags");
   st.bone_translations = take<float>(s, "bone_translations", borrow);
   st.bone_rotations = take<float>(s, "bone_rotations", borrow);
   st.root_positions = take<float>(s, "root_positions", borrow);
@@ -220,7 +225,44 @@ void bind_database(py::module_& m) {
             out.set_weights(weights_from(w));
             return out;
           },
-          py::arg("weights"), "A new Database with other block weights (same mean and block scales).");
+          py::arg("weights"), "A new Database with other block weights (same mean and block scales).")
+      .def_property_readonly("tag_names", [](const Database& db) { return db.tag_names; })
+      .def_property_readonly("clip_tags",
+                             [](py::object self) {
+                               const Database& db = self.cast<const Database&>();
+                               return make_view(db.clip_tags.data(),
+                                                {db.num_clips(), static_cast<int>(db.tag_names.size())}, self);
+                             })
+      .def(
+          "set_tags",
+          [](Database& db, const std::vector<std::string>& names, const py::array& tags) {
+            StateArray<uint8_t> a = take<uint8_t>(py::dict(py::arg("clip_tags") = tags), "clip_tags");
+            const std::vector<int64_t> want = {db.num_clips(), static_cast<int64_t>(names.size())};
+            if (a.shape != want)
+              throw py::value_error("clip_tags: expected shape (" + std::to_string(want[0]) + ", " +
+                                    std::to_string(want[1]) + ")");
+            std::vector<uint8_t> values(a.values.begin(), a.values.end());
+            check_tags(names, values, db.num_clips());
+            db.tag_names = names;
+            db.clip_tags = std::move(values);
+          },
+          py::arg("names"), py::arg("clip_tags"),
+          "Sets the tags (names 'group=value', a (C, T) uint8 0/1 matrix); only on a database nothing uses yet.");
+  m.def(
+      "parse_request",
+      [](const Database& db, const std::string& text) { return parse_request(db, text).text; }, py::arg("db"),
+      py::arg("request"), "The canonical text of a tag request (ValueError naming what is unknown).");
+  m.def(
+      "select_request",
+      [](const Database& db, const std::string& text) {
+        const RequestSelection s = select_request(db, text);
+        py::array_t<uint8_t> mask(db.num_clips());
+        for (int c = 0; c < db.num_clips(); ++c) mask.mutable_at(c) = s.restricts() ? s.clip_mask[c] : 1;
+        return py::make_tuple(s.request.text, mask, py::array_t<int64_t>(s.valid_frames.size(), s.valid_frames.data()));
+      },
+      py::arg("db"), py::arg("request"),
+      "(canonical text, (C,) uint8 clip mask, valid frames) of a request; ValueError when it selects no valid frame.");
+  m.def("tags_available", &tags_available, py::arg("db"), "What tags db offers, as the error messages list them.");
   bind_layout_constants(m);
 }
 

@@ -79,6 +79,7 @@ void bind_obstacles(py::module_& m) {
           out.append(py::make_tuple("continuation", kTrajectoryDim));
           out.append(py::make_tuple("continuation_hit", 2));
         }
+        if (s.env.request_dim() > 0) out.append(py::make_tuple("request", s.env.request_dim()));
         return py::tuple(out);
       })
       .def(

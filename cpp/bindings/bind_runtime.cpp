@@ -68,6 +68,10 @@ void bind_runtime(py::module_& m) {
            }),
            py::arg("controller"), py::arg("x"), py::arg("z"), py::arg("yaw"), py::arg("start_frame") = -1)
       .def("set_target", &RuntimeCharacter::set_target, py::arg("x"), py::arg("z"))
+      .def("set_request", &RuntimeCharacter::set_request, py::arg("request"),
+           "A request over the file's tags ('style=elderly & gait=walk'; '' for every clip), from the next decision "
+           "on. ValueError naming an unknown tag (the file's tags listed) or a request selecting no valid frame.")
+      .def_property_readonly("request", &RuntimeCharacter::request)
       .def(
           "set_obstacles",
           [](RuntimeCharacter& ch, const py::handle& centres, const py::handle& half_sizes, const py::handle& angles,

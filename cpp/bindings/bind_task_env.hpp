@@ -217,7 +217,32 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
       .def(
           "set_target",
           [](Wrapper& s, int i, float x, float z) { s.env.set_target(checked_env_index(s, i), x, z); },
-          py::arg("index"), py::arg("x"), py::arg("z"), "Moves env i's target (world meters).");
+          py::arg("index"), py::arg("x"), py::arg("z"), "Moves env i's target (world meters).")
+      .def_property_readonly("request_dim", [](const Wrapper& s) { return s.env.request_dim(); },
+                             "Floats of the request code at the end of each observation (0 without request_groups).")
+      .def_property_readonly("request_groups", [](const Wrapper& s) { return s.env.request_code().groups(); })
+      .def(
+          "set_request",
+          [](Wrapper& s, int i, const std::string& text) { s.env.set_request(checked_env_index(s, i), text); },
+          py::arg("index"), py::arg("request"),
+          "Pins env i's request ('style=elderly & gait=walk'; '' unpins): its matches and episode starts keep to the "
+          "clips carrying it from the next decision on. ValueError naming an unknown tag, or when it selects no "
+          "valid frame (listing the tags available).")
+      .def(
+          "request",
+          [](const Wrapper& s, int i) { return s.env.request(checked_env_index(s, i)).request.text; },
+          py::arg("index"), "Env i's request now, as canonical text ('' = every clip).")
+      .def(
+          "request_mix",
+          [](const Wrapper& s) {
+            const RequestMix& mix = s.env.request_mix();
+            py::list out;
+            for (size_t k = 0; k < mix.selections.size(); ++k)
+              out.append(py::make_tuple(mix.selections[k].request.text,
+                                        mix.cumulative[k] - (k ? mix.cumulative[k - 1] : 0.0)));
+            return out;
+          },
+          "The requests training draws per episode: (text, probability) pairs ([] without request_groups).");
 }
 
 }  // namespace mmrl

@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "mmrl/database_io.hpp"
+#include "mmrl/tags.hpp"
 
 namespace mmrl {
 
@@ -40,6 +41,10 @@ DatabaseState database_state(const ControllerFile& f) {
   s.source_scale = scalars[1];
   s.clip_ranges = ints("db.clip_ranges");
   s.clip_mirrored = bytes("db.clip_mirrored");
+  if (f.has("db.tag_names")) {  // tags (optional; tags.hpp)
+    s.tag_names = f.texts("db.tag_names");
+    s.clip_tags = bytes("db.clip_tags");
+  }
   s.bone_translations = floats("db.bone_translations");
   s.bone_rotations = floats("db.bone_rotations");
   s.root_positions = floats("db.root_positions");
@@ -83,6 +88,9 @@ Config task_config(const ControllerFile& f, const RuntimeTask& t, int64_t num_cl
     if constexpr (std::is_same<T, std::vector<float>>::value) {
       const std::string section = std::string("task.") + name;
       if (f.has(section)) c.*member = f.floats(section, {num_clips});
+    } else if constexpr (std::is_same<T, std::vector<std::string>>::value) {
+      const std::string section = std::string("task.") + name;
+      if (f.has(section)) c.*member = f.texts(section);
     } else {
       const auto it = t.values.find(name);
       if (it == t.values.end()) return;
@@ -95,7 +103,8 @@ Config task_config(const ControllerFile& f, const RuntimeTask& t, int64_t num_cl
   return c;
 }
 
-RuntimeTask read_task(const ControllerFile& f, int obs_dim, int64_t num_clips) {
+RuntimeTask read_task(const ControllerFile& f, int obs_dim, const Database& db) {
+  const int64_t num_clips = db.num_clips();
   RuntimeTask t;
   const auto names = f.texts("task.name");
   if (names.size() != 1) f.fail("section 'task.name' must hold one name");
@@ -121,12 +130,21 @@ RuntimeTask read_task(const ControllerFile& f, int obs_dim, int64_t num_clips) {
   t.plane = task_config<PlaneTaskConfig>(f, t, num_clips);
   t.obstacle = task_config<ObstacleTaskConfig>(f, t, num_clips);
   const bool continuation = t.obstacles && t.obstacle.observe_continuation;
-  const int want = plane ? PlaneVecEnv::kObsDim
-                         : ObstacleVecEnv::kObsDim + (continuation ? ObstacleVecEnv::kContinuationDim : 0);
+  const std::vector<std::string>& groups = plane ? t.plane.request_groups : t.obstacle.request_groups;
+  int request_dim = 0;
+  try {
+    request_dim = RequestCode(db, groups).dim();
+  } catch (const std::invalid_argument& e) {
+    f.fail(std::string("task.request_groups: ") + e.what());
+  }
+  const int want = (plane ? PlaneVecEnv::kObsDim
+                          : ObstacleVecEnv::kObsDim + (continuation ? ObstacleVecEnv::kContinuationDim : 0)) +
+                   request_dim;
   if (obs_dim != want)
     f.fail("the policy reads " + std::to_string(obs_dim) + " observations; the " + t.core + " task's are " +
            std::to_string(want) +
-           (t.obstacles ? std::string(" (task.observe_continuation ") + (continuation ? "on" : "off") + ")" : ""));
+           (t.obstacles ? std::string(" (task.observe_continuation ") + (continuation ? "on" : "off") + ")" : "") +
+           (request_dim ? " with a request code of " + std::to_string(request_dim) : ""));
   const TaskConfig& base = plane ? static_cast<const TaskConfig&>(t.plane) : t.obstacle;
   t.frames_per_step = base.frames_per_step;
   t.success_radius = base.success_radius;
@@ -170,7 +188,7 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   c->times_.database = seconds_since(t0);
   t0 = std::chrono::steady_clock::now();
   c->policy_ = PolicyNet::from_file(file);
-  c->task_ = read_task(file, c->policy_.obs_dim(), c->db_.num_clips());
+  c->task_ = read_task(file, c->policy_.obs_dim(), c->db_);
   if (options.require_path_filter && !(c->task_.obstacles && c->task_.obstacle.path_filter))
     file.fail(c->task_.obstacles
                   ? "the loader requires the collision-aware search, but this obstacles controller has none "
@@ -248,6 +266,17 @@ RuntimeCharacter::RuntimeCharacter(std::shared_ptr<const RuntimeController> cont
   }
   pose_.num_joints = controller_->num_joints();
   fill_pose(-1);
+}
+
+void RuntimeCharacter::set_request(const std::string& request) {
+  if (obstacles_)
+    obstacles_->set_request(0, request);
+  else
+    plane_->set_request(0, request);
+}
+
+const std::string& RuntimeCharacter::request() const {
+  return obstacles_ ? obstacles_->request(0).request.text : plane_->request(0).request.text;
 }
 
 void RuntimeCharacter::set_target(float x, float z) {

@@ -1,5 +1,7 @@
 #include "mmrl/database.hpp"
 
+#include "mmrl/tags.hpp"
+
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
@@ -232,6 +234,7 @@ void Database::validate() const {
   }
   if (prev != num_frames) throw std::invalid_argument("database clip_ranges do not cover all frames");
   need(contacts.size(), N * 2, "contacts");
+  check_tags(tag_names, clip_tags, num_clips());
   for (float v : features)
     if (!std::isfinite(v)) throw std::invalid_argument("database features contain NaN or inf");
   for (int p : skeleton.parents)

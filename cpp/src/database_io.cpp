@@ -116,6 +116,9 @@ Database database_from_state(DatabaseState s) {
   const int64_t C = static_cast<int64_t>(db.clip_names.size());
   db.clip_ranges = take_vector(s.clip_ranges, "clip_ranges", {C, 2});
   db.clip_mirrored = take_vector(s.clip_mirrored, "clip_mirrored", {C});
+  db.tag_names = s.tag_names;
+  if (!db.tag_names.empty() || !s.clip_tags.shape.empty())
+    db.clip_tags = take_vector(s.clip_tags, "clip_tags", {C, static_cast<int64_t>(db.tag_names.size())});
   const int64_t N = C > 0 ? db.clip_ranges[C * 2 - 1] : 0;
   if (N < 0) throw state_error("clip_ranges must not be negative");
   db.num_frames = static_cast<int>(N);

@@ -21,6 +21,8 @@ void check_task_config(const TaskConfig& c) {
     throw std::invalid_argument("transition_cost must be finite and >= 0");
   if (!(c.transition_pose_weight >= 0.0f) || !finite(c.transition_pose_weight))
     throw std::invalid_argument("transition_pose_weight must be finite and >= 0");
+  if (!(c.transition_penalty >= 0.0f) || !finite(c.transition_penalty))
+    throw std::invalid_argument("transition_penalty must be finite and >= 0");
 }
 
 void target_env_check(const Database& db, const Matcher& matcher, int num_envs, const TaskConfig& config) {

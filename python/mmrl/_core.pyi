@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose']
+__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose', 'parse_request', 'select_request', 'tags_available']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -106,6 +106,10 @@ class Database:
         """
         A database from the arrays of state() (plus, optionally, 'normalized'). borrow=True keeps the large per-frame float arrays where they are (read-only memory is fine: they are only read) instead of copying them; the database keeps references to them.
         """
+    def set_tags(self, names: collections.abc.Sequence[str], clip_tags: numpy.ndarray) -> None:
+        """
+        Sets the tags (names 'group=value', a (C, T) uint8 0/1 matrix); only on a database nothing uses yet.
+        """
     def state(self) -> dict:
         """
         All arrays as a dict of read-only views (for saving).
@@ -121,6 +125,9 @@ class Database:
         """
     @property
     def clip_names(self) -> list[str]:
+        ...
+    @property
+    def clip_tags(self) -> numpy.ndarray:
         ...
     @property
     def contacts(self) -> numpy.ndarray:
@@ -163,6 +170,9 @@ class Database:
         ...
     @property
     def source_scale(self) -> float:
+        ...
+    @property
+    def tag_names(self) -> list[str]:
         ...
     @property
     def valid_mask(self) -> numpy.ndarray:
@@ -222,7 +232,7 @@ class PlaneTaskConfig:
     """
     Numbers of the plane task (see tasks/plane.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any')
     random_heading: bool
     def __init__(self) -> None:
         ...
@@ -257,6 +267,18 @@ class PlaneTaskConfig:
     def min_target_distance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
+    def request_any(self) -> float:
+        ...
+    @request_any.setter
+    def request_any(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def request_groups(self) -> list[str]:
+        ...
+    @request_groups.setter
+    def request_groups(self, arg0: collections.abc.Sequence[str]) -> None:
+        ...
+    @property
     def success_bonus(self) -> float:
         ...
     @success_bonus.setter
@@ -279,6 +301,12 @@ class PlaneTaskConfig:
         ...
     @transition_cost.setter
     def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def transition_penalty(self) -> float:
+        ...
+    @transition_penalty.setter
+    def transition_penalty(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def transition_pose_weight(self) -> float:
@@ -326,10 +354,22 @@ class PlaneVecEnv:
         """
         Every env's decisions since the last call, summed, then zeroed: decisions (steps that matched), transitions, cost_sum (their matched costs) and frames (played, each step up to its ending frame).
         """
+    def request(self, index: typing.SupportsInt | typing.SupportsIndex) -> str:
+        """
+        Env i's request now, as canonical text ('' = every clip).
+        """
+    def request_mix(self) -> list:
+        """
+        The requests training draws per episode: (text, probability) pairs ([] without request_groups).
+        """
     def reset(self, seed: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
         ...
     def reset_env(self, index: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
         ...
+    def set_request(self, index: typing.SupportsInt | typing.SupportsIndex, request: str) -> None:
+        """
+        Pins env i's request ('style=elderly & gait=walk'; '' unpins): its matches and episode starts keep to the clips carrying it from the next decision on. ValueError naming an unknown tag, or when it selects no valid frame (listing the tags available).
+        """
     def set_state(self, index: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
         """
         Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.
@@ -365,6 +405,14 @@ class PlaneVecEnv:
         ...
     @property
     def obs_dim(self) -> int:
+        ...
+    @property
+    def request_dim(self) -> int:
+        """
+        Floats of the request code at the end of each observation (0 without request_groups).
+        """
+    @property
+    def request_groups(self) -> list[str]:
         ...
 class CharacterOptions:
     """
@@ -502,7 +550,7 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'clip_costs', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'observe_continuation', 'grid_cell_size')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'observe_continuation', 'grid_cell_size')
     bias_yields: bool
     hit_lookahead: bool
     hit_penalty: bool
@@ -646,6 +694,18 @@ class ObstacleTaskConfig:
     def previous_map_lag(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
+    def request_any(self) -> float:
+        ...
+    @request_any.setter
+    def request_any(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def request_groups(self) -> list[str]:
+        ...
+    @request_groups.setter
+    def request_groups(self, arg0: collections.abc.Sequence[str]) -> None:
+        ...
+    @property
     def sensor_forward(self) -> float:
         ...
     @sensor_forward.setter
@@ -698,6 +758,12 @@ class ObstacleTaskConfig:
         ...
     @transition_cost.setter
     def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def transition_penalty(self) -> float:
+        ...
+    @transition_penalty.setter
+    def transition_penalty(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def transition_pose_weight(self) -> float:
@@ -766,6 +832,14 @@ class ObstacleVecEnv:
         """
         Every env's decisions since the last call, summed, then zeroed: decisions (steps that matched), transitions, cost_sum (their matched costs) and frames (played, each step up to its ending frame).
         """
+    def request(self, index: typing.SupportsInt | typing.SupportsIndex) -> str:
+        """
+        Env i's request now, as canonical text ('' = every clip).
+        """
+    def request_mix(self) -> list:
+        """
+        The requests training draws per episode: (text, probability) pairs ([] without request_groups).
+        """
     def reset(self, seed: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
         ...
     def reset_env(self, index: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
@@ -785,6 +859,10 @@ class ObstacleVecEnv:
     def set_obstacles(self, index: typing.SupportsInt | typing.SupportsIndex, centres: typing.Any, half_sizes: typing.Any, angles: typing.Any, velocities: typing.Any) -> None:
         """
         Replace env i's obstacles (float32 arrays); refreshes its grid and current sensor map.
+        """
+    def set_request(self, index: typing.SupportsInt | typing.SupportsIndex, request: str) -> None:
+        """
+        Pins env i's request ('style=elderly & gait=walk'; '' unpins): its matches and episode starts keep to the clips carrying it from the next decision on. ValueError naming an unknown tag, or when it selects no valid frame (listing the tags available).
         """
     def set_root(self, index: typing.SupportsInt | typing.SupportsIndex, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
@@ -830,6 +908,14 @@ class ObstacleVecEnv:
         ...
     @property
     def obs_layout(self) -> tuple:
+        ...
+    @property
+    def request_dim(self) -> int:
+        """
+        Floats of the request code at the end of each observation (0 without request_groups).
+        """
+    @property
+    def request_groups(self) -> list[str]:
         ...
     @property
     def stage(self) -> tuple[float, float]:
@@ -892,6 +978,10 @@ class RuntimeCharacter:
         """
         The obstacles now (world meters, radians; float32) and, optionally, their velocities (m/s; None: standing still), read at the next decision.
         """
+    def set_request(self, request: str) -> None:
+        """
+        A request over the file's tags ('style=elderly & gait=walk'; '' for every clip), from the next decision on. ValueError naming an unknown tag (the file's tags listed) or a request selecting no valid frame.
+        """
     def set_target(self, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     def update(self, dt: typing.SupportsFloat | typing.SupportsIndex) -> None:
@@ -901,6 +991,9 @@ class RuntimeCharacter:
         ...
     @property
     def frames_shown(self) -> int:
+        ...
+    @property
+    def request(self) -> str:
         ...
     @property
     def root(self) -> tuple[float, float, float]:
@@ -926,6 +1019,18 @@ def joint_side(name: str) -> tuple[int, str]:
 def motion_from_pose(db: Database, local_translations: typing.Any, local_rotations: typing.Any, source: str = '<generated>') -> Motion:
     """
     A Motion on the database's skeleton from local transforms (meters; quaternions w x y z).
+    """
+def parse_request(db: Database, request: str) -> str:
+    """
+    The canonical text of a tag request (ValueError naming what is unknown).
+    """
+def select_request(db: Database, request: str) -> tuple[str, numpy.typing.NDArray[numpy.uint8], numpy.typing.NDArray[numpy.int64]]:
+    """
+    (canonical text, (C,) uint8 clip mask, valid frames) of a request; ValueError when it selects no valid frame.
+    """
+def tags_available(db: Database) -> str:
+    """
+    What tags db offers, as the error messages list them.
     """
 FEATURE_BLOCKS: list = [('foot_position', [0, 1, 2, 3, 4, 5], 0.75), ('foot_velocity', [6, 7, 8, 9, 10, 11], 1.0), ('hips_velocity', [12, 13, 14], 1.0), ('trajectory_position', [15, 16, 19, 20, 23, 24], 1.0), ('trajectory_direction', [17, 18, 21, 22, 25, 26], 1.5)]
 FEATURE_DIM: int = 27

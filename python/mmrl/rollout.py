@@ -27,6 +27,7 @@ import numpy as np
 from . import metrics
 from .character import Character
 from .motion.database import POSE_DIM, Database
+from .rl.policies import goal_offset
 from .tasks import Task
 
 #: Per-shown-frame keys of a controller recording (trimmed together).
@@ -217,7 +218,8 @@ class FullPath:
                 if not key.startswith("_") and key != "final_obs":
                     out[key] = value[0].item()
             # The env's last goal vector, read at the ending frame, against the controller's root there.
-            out["goal_error"] = self._goal_error(info["final_obs"][0, -2:], res.roots[shown - 1])
+            g = goal_offset(info["final_obs"].shape[1])
+            out["goal_error"] = self._goal_error(info["final_obs"][0, g:g + 2], res.roots[shown - 1])
             self.obs = obs[0]
             if not self.continuous:
                 if self.ctrl._record:
@@ -262,6 +264,7 @@ class EpisodeSummary:
         self.results: List[Dict[str, Any]] = []
         self.quality = metrics.QualityAccumulator()
         self.transitions = self.frames = 0
+        self.distance = 0.0  # meters the root travelled over the shown frames
         self.costs: List[np.ndarray] = []
 
     def add(self, ep: Dict[str, Any], rec: Dict[str, np.ndarray], frames: int) -> None:
@@ -269,6 +272,8 @@ class EpisodeSummary:
         if not self.fast:
             ep.update(self.quality.add(self.db, rec))
         self.transitions += int(rec["transitions"].sum())
+        roots = np.asarray(rec["roots"], np.float64)[: int(frames) + 1]
+        self.distance += float(np.hypot(*np.diff(roots[:, :2], axis=0).T).sum()) if len(roots) > 1 else 0.0
         self.frames += int(frames)
         self.costs.append(rec["costs"])
         self.results.append(ep)
@@ -283,6 +288,7 @@ class EpisodeSummary:
         out["mean_time_to_target_s"] = float(np.mean(times)) if times else None
         out.update(self.quality.result())
         out["transitions_per_s"] = metrics.rate_per_second(self.transitions, self.frames, self.db.fps)
+        out["mean_speed_m_per_s"] = metrics.rate_per_second(self.distance, self.frames, self.db.fps)
         costs = np.concatenate(self.costs) if self.costs else np.zeros(0)
         out["matched_cost_mean"] = float(costs.mean()) if costs.size else None
         out["mean_steps"] = float(np.mean([e["steps"] for e in results]))

@@ -48,6 +48,10 @@ struct Database {
   std::vector<int32_t> clip_ranges;  // C x 2
   std::vector<std::string> clip_names;
   std::vector<uint8_t> clip_mirrored;
+  // Tags on clips (tags.hpp): T names "group=value" and a C x T matrix, 1 where clip c carries
+  // tag t. No names: an untagged database. A mirrored clip carries its original's tags.
+  std::vector<std::string> tag_names;
+  std::vector<uint8_t> clip_tags;
 
   // The per-frame float arrays are Buffers: owned after building or loading a file, or
   // borrowed from memory shared between processes (mmrl.integrations.rllib).

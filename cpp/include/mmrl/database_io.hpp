@@ -36,6 +36,8 @@ struct DatabaseState {
   std::vector<std::string> clip_names;   // C
   StateArray<int32_t> clip_ranges;       // C x 2, [start, stop), contiguous from 0 to N
   StateArray<uint8_t> clip_mirrored;     // C
+  std::vector<std::string> tag_names;    // T, optional (tags.hpp)
+  StateArray<uint8_t> clip_tags;         // C x T, optional (empty with no tag names)
   StateArray<float> bone_translations;   // N x J x 3
   StateArray<float> bone_rotations;      // N x J x 4 (w, x, y, z)
   StateArray<float> root_positions;      // N x 3

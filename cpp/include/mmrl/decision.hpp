@@ -17,7 +17,9 @@
 //      the obstacles task's collision-aware path test) the filter re-ranks only the k nearest
 //      candidates by plain distance, plus the continuation (search.hpp's
 //      brute_force_match_shortlist is the rule). When a filter refuses every candidate the
-//      match is made without it, so a character always has a frame to play;
+//      match is made with the filter it was built over (CandidateFilter::fallback: a
+//      request's clips under the path test), and at last without any, so a character always
+//      has a frame to play;
 //   3. playback: frames j+1 .. j+n are shown; the root advances by the database root
 //      deltas of frames j .. j+n-1 (each expressed in its own character frame), and the
 //      current frame becomes j+n.
@@ -98,8 +100,13 @@ inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_
   } else {
     j = matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
   }
-  if (j >= 0 || filter == nullptr) return j;
-  return matcher.match(query, lo, hi, bound, cost, transition_cost);  // the filter refused everything
+  // The filter refused everything: retry with the filter it was built over (a request's clips,
+  // the clip costs), in the exact search, down to no filter.
+  while (j < 0 && filter != nullptr) {
+    filter = filter->fallback();
+    j = matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
+  }
+  return j;
 }
 
 // One decision: clips the trajectory action to the box [low, high] (12 each), forms the

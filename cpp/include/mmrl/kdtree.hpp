@@ -101,6 +101,9 @@ class CandidateFilter {
   // 0 (a filter can only make rows dearer, which keeps the tree's pruning exact). Called only
   // for rows whose distance alone could still win, so a costly rule runs on few rows.
   virtual float extra_cost(int64_t row) const = 0;
+  // The filter a decision retries with when this one refuses every candidate (decision.hpp's
+  // decision_match): a filter built over another returns it; null falls back to no filter.
+  virtual const CandidateFilter* fallback() const { return nullptr; }
 };
 
 // Squared distance d of row i plus the filter's extra cost (+inf when refused). Tree and

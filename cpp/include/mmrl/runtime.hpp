@@ -125,6 +125,13 @@ class RuntimeCharacter {
 
   // The target, world meters; used from the next decision on.
   void set_target(float x, float z);
+  // A request over the database's tags (tags.hpp: "style=elderly & gait=walk"; "" for every
+  // clip): from the next decision on, matches keep to the clips carrying it, and a policy
+  // conditioned on requests (task.request_groups) observes its code. Throws
+  // std::invalid_argument naming an unknown tag (listing those the file has; a file without
+  // tags says so) or a request that selects no valid frame; the character is then unchanged.
+  void set_request(const std::string& request);
+  const std::string& request() const;  // canonical text, "" for every clip
   // Obstacle tasks: the obstacles now, world meters and radians (see grid.hpp: centres and
   // half sizes n x 2, angles n), and optionally their velocities (n x 2, m/s; null: standing
   // still), which the task's look-ahead tests use (hit_lookahead, the continuation test of

@@ -36,6 +36,7 @@
 
 #include "mmrl/decision.hpp"
 #include "mmrl/rng.hpp"
+#include "mmrl/tags.hpp"
 #include "mmrl/tasks/task_config.hpp"
 #include "mmrl/threadpool.hpp"
 
@@ -81,6 +82,13 @@ struct TargetEnvState {
   int64_t episode_frames = 0;  // frames played in this episode (the last step up to its ending frame)
   MatchStats stats;            // since the last pop_match_stats
   Rng rng;
+  // The request (tags.hpp) env i's matches and episode starts keep to: pinned by set_request,
+  // else drawn per episode from the env's RequestMix (request_index; -1: every clip).
+  bool request_pinned = false;
+  int request_index = -1;
+  RequestSelection pinned_request;
+  std::vector<float> pinned_code;
+  RequestFilter request_filter;  // set for each decision (TargetVecEnv::request_filter)
 };
 
 // One task step's outcome (before truncation, which the template decides).
@@ -168,8 +176,10 @@ class TargetVecEnv {
 
   // Resets environment i from its own RNG stream; writes its observation row (if not null).
   void reset_env(int i, float* obs_row) {
-    task().begin_episode(i);
     State& s = envs_[i];
+    if (!s.request_pinned && !request_mix_.empty())  // the episode's request, before its start is drawn
+      s.request_index = static_cast<int>(request_mix_.pick(s.rng.uniform()));
+    task().begin_episode(i);
     s.autoreset_pending = false;
     s.episode_frames = 0;
     s.steps = 0;
@@ -193,6 +203,41 @@ class TargetVecEnv {
     s.target_x = s.root.x + dx;
     s.target_z = s.root.z + dz;
   }
+
+  // Requests (tags.hpp). The observation ends with request_dim() floats: the code of env i's
+  // request over the config's request_groups (0 without them).
+  int request_dim() const { return request_code_.dim(); }
+  const RequestCode& request_code() const { return request_code_; }
+  const RequestMix& request_mix() const { return request_mix_; }
+  // Pins env i's request: from its next decision on, env i matches only frames of the clips
+  // carrying it, and its episodes start there; "" unpins (the env draws a request per episode
+  // again when the config has request_groups, else plays every clip). Throws
+  // std::invalid_argument naming an unknown group or tag, or when it selects no valid frame
+  // (listing the tags available); env i is then unchanged.
+  void set_request(int i, const std::string& text) {
+    State& s = envs_[i];
+    if (text.find_first_not_of(" \t") == std::string::npos) {
+      s.request_pinned = false;
+      s.request_index = -1;
+      s.pinned_request = RequestSelection{};
+      s.pinned_code.clear();
+      return;
+    }
+    RequestSelection sel = select_request(db_, text);
+    std::vector<float> code(static_cast<size_t>(request_dim()));
+    request_code_.encode(sel.request, code.data());
+    s.pinned_request = std::move(sel);
+    s.pinned_code = std::move(code);
+    s.request_pinned = true;
+  }
+  // Env i's request now (a pinned one, or the episode's draw; every clip: request.text "").
+  const RequestSelection& request(int i) const {
+    const State& s = envs_[i];
+    if (s.request_pinned) return s.pinned_request;
+    if (s.request_index >= 0) return request_mix_.selections[static_cast<size_t>(s.request_index)];
+    return every_clip_;
+  }
+  bool request_pinned(int i) const { return envs_[i].request_pinned; }
 
   // Moves env i's target (world meters; finite, else std::invalid_argument).
   void set_target(int i, float x, float z) {
@@ -282,6 +327,9 @@ class TargetVecEnv {
     target_env_check(db, matcher, num_envs, config);
     trajectory_action_box(db, config.action_limit_std, low_, high_);
     clip_filter_ = ClipCostFilter(db, config.clip_costs);
+    request_code_ = RequestCode(db, config.request_groups);
+    request_mix_ = mmrl::request_mix(db, request_code_, config.request_any);
+    every_clip_.valid_frames = db.valid_frames;
     for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
   }
 
@@ -310,6 +358,7 @@ class TargetVecEnv {
         }
         TaskStep r = task().advance(env, actions + i * Task::kActionDim);
         r.reward -= config_.transition_pose_weight * s.last_pose_jump;
+        if (s.last_transition) r.reward -= config_.transition_penalty;
         s.steps += 1;
         s.episode_return += r.reward;
         s.last_step_frames = r.frames_played;
@@ -358,7 +407,7 @@ class TargetVecEnv {
   // Draws env i's episode start (frame, root, target in the square of half_extent meters).
   void draw_start(int i, float half_extent) {
     State& s = envs_[i];
-    draw_episode_start(s.rng, db_.valid_frames, config_.random_heading, half_extent, config_.min_target_distance,
+    draw_episode_start(s.rng, request(i).valid_frames, config_.random_heading, half_extent, config_.min_target_distance,
                        &s.frame, &s.root, &s.target_x, &s.target_z);
   }
 
@@ -372,7 +421,24 @@ class TargetVecEnv {
 
   // The candidate filter of env i's next match (a task hides it to add its own rules): the
   // config's clip costs (decision.hpp's ClipCostFilter), or none.
-  const CandidateFilter* candidate_filter(int) const { return clip_filter_.get(); }
+  // Env i's request over them (RequestFilter) when it restricts the clips.
+  const CandidateFilter* candidate_filter(int i) { return request_filter(i); }
+  // The base every task's filter builds on: env i's request (if it restricts the clips) over
+  // the clip costs (if any).
+  const CandidateFilter* request_filter(int i) {
+    const RequestSelection& r = request(i);
+    if (!r.restricts()) return clip_filter_.get();
+    envs_[i].request_filter.set(db_, r.clip_mask.data(), clip_filter_.get());
+    return &envs_[i].request_filter;
+  }
+  // The request code of env i (request_dim() floats) into out.
+  void observe_request(int i, float* out) const {
+    const State& s = envs_[i];
+    const float* code = s.request_pinned ? s.pinned_code.data()
+                        : s.request_index >= 0 ? request_mix_.codes[static_cast<size_t>(s.request_index)].data()
+                                               : nullptr;
+    for (int k = 0; k < request_dim(); ++k) out[k] = code ? code[k] : 0.0f;
+  }
   // How the filter's shortlist is drawn (decision.hpp's Shortlist; k = 0: no shortlist, the
   // filter runs in the exact search, the clip costs' rule). A task with a costly filter hides it.
   Shortlist candidate_shortlist() const { return {}; }
@@ -399,6 +465,9 @@ class TargetVecEnv {
   std::vector<State> envs_;
   float low_[kTrajectoryDim], high_[kTrajectoryDim];
   ClipCostFilter clip_filter_;
+  RequestCode request_code_;
+  RequestMix request_mix_;
+  RequestSelection every_clip_;  // the request of an env without one: every valid frame
   bool next_step_autoreset_ = false;
   ThreadPool pool_;
 

@@ -82,8 +82,10 @@ ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int n
 }
 
 const CandidateFilter* ObstacleVecEnv::candidate_filter(int i) {
-  if (!config_.path_filter) return clip_filter_.get();
+  const CandidateFilter* base = request_filter(i);
+  if (!config_.path_filter) return base;
   const ObstacleEnvState& s = envs_[i];
+  path_filters_[i].set_base(base);
   path_filters_[i].prepare(field_, i, s.root, s.max_speed > 0, frame_dt_);
   return &path_filters_[i];
 }
@@ -142,8 +144,11 @@ void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
     f.prepare(field_, i, st.root, st.max_speed > 0, frame_dt_);
     // A frame too close to its clip's end to be matched has no continuation: the next decision
     // must jump, which the observation tells as a hit right away.
-    const int hit = db_.valid[st.frame] ? f.first_hit(st.frame) : 0;
-    st.continuation_hit = hit < 0 ? -1 : db_.valid[st.frame] ? kPathSampleFrames[hit] : 0;
+    st.continuation_hit = 0;
+    if (db_.valid[st.frame]) {
+      const int hit = f.first_hit(st.frame);
+      st.continuation_hit = hit < 0 ? -1 : kPathSampleFrames[hit];
+    }
   }
 }
 
@@ -163,6 +168,7 @@ void ObstacleVecEnv::observe(int i, float* obs) const {
     c[kTrajectoryDim] = hits ? 1.0f : 0.0f;
     c[kTrajectoryDim + 1] = static_cast<float>(hits ? s.continuation_hit : config_.path_horizon) * frame_dt_;
   }
+  observe_request(i, obs + request_offset());
 }
 
 void ObstacleVecEnv::begin_episode(int i) {

@@ -14,6 +14,7 @@ void PlaneVecEnv::observe(int i, float* obs) const {
   const TargetEnvState& s = envs_[i];
   observe_pose(s, obs);
   observe_goal(s, obs + kPoseDim);
+  observe_request(i, obs + kObsDim);
 }
 
 void PlaneVecEnv::begin_episode(int i) { draw_start(i, config_.target_half_extent); }

@@ -36,6 +36,17 @@ def register_cli(sub) -> None:
     b.add_argument("--role", action="append", metavar="ROLE=JOINT",
                    help="override a joint role, e.g. --role left_foot=LeftAnkle (repeatable)")
     add_import_arguments(b)
+    t = b.add_argument_group("tags (docs/styles.md; the known datasets' naming and a top-level mmrl_tags.csv are read "
+                             "unless --no-auto-tags)")
+    t.add_argument("--tag-folder", metavar="GROUP", default=None,
+                   help="tag each clip GROUP=<the folder its file sits in>, e.g. --tag-folder style")
+    t.add_argument("--tag-pattern", metavar="PATTERN", action="append", default=[],
+                   help="tag clips by their file names: {group} takes a part up to the next '_', {group:a|b} one "
+                        "of the words, * anything; it must match the whole name without extension, e.g. "
+                        "'dataset-2_{content}_{style}_*' (repeatable)")
+    t.add_argument("--tags", metavar="FILE", action="append", default=[],
+                   help="a sidecar file of tags: CSV lines 'file,tag tag ...' or JSON {file: [tags]} (repeatable)")
+    t.add_argument("--no-auto-tags", action="store_true", help="only the tags the options above give")
     b.set_defaults(func=cmd_build)
 
     i = dsub.add_parser("info", help="print clips, frames, skeleton roles and feature statistics")
@@ -58,16 +69,48 @@ def import_options(args: argparse.Namespace) -> dict:
     return {"up": None if args.up == "auto" else args.up, "fps": args.fps or None}
 
 
+def tag_rules(args: argparse.Namespace):
+    """The TagRules of ``mmrl db build``'s tag options (ValueError on a bad pattern or group)."""
+    from ..motion.tags import TagRules, compile_pattern
+
+    for p in args.tag_pattern:
+        try:
+            compile_pattern(p)
+        except ValueError as e:
+            raise InputError(f"--tag-pattern: {e}") from None
+    return TagRules(folder=args.tag_folder, patterns=tuple(args.tag_pattern), sidecars=tuple(args.tags),
+                    auto=not args.no_auto_tags)
+
+
 def cmd_build(args: argparse.Namespace) -> int:
     from ..motion.database import Database
 
     t0 = time.perf_counter()
     db = Database.from_bvh(args.data, mirror=args.mirror, scale=args.scale, roles=parse_roles(args.role),
-                           progress=True, **import_options(args))
+                           progress=True, tags=tag_rules(args), **import_options(args))
     t1 = time.perf_counter()
     db.save(args.output)
     print(f"{db!r}\nbuilt in {t1 - t0:.2f} s, saved to {args.output} in {time.perf_counter() - t1:.2f} s")
+    for line in tag_lines(db):
+        print(line)
     return 0
+
+
+def tag_lines(db) -> list:
+    """``mmrl db info``'s lines on tags: each with its clips and frames, by group."""
+    from ..motion.tags import tag_summary
+
+    rows = tag_summary(db)
+    if not rows:
+        return ["tags         none (mmrl db build --tag-folder / --tag-pattern / --tags; docs/styles.md)"]
+    lines = [f"tags         {len(rows)} in {len({t.partition('=')[0] for t, _, _ in rows})} groups "
+             f"(request them as 'group=value & group=value')"]
+    for tag, clips, frames in rows:
+        lines.append(f"  {tag:<28} {clips:>5} clips {frames:>8} frames ({frames / db.fps / 60:.1f} min)")
+    untagged = int((~db.clip_tags.any(axis=1)).sum())
+    if untagged:
+        lines.append(f"  (untagged: {untagged} clips)")
+    return lines
 
 
 def source_lines(db) -> list:
@@ -97,6 +140,8 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"frames       {db.num_frames} at {db.fps:g} fps = {db.minutes:.1f} min; "
           f"{int(db.valid_mask.sum())} valid matches")
     for line in source_lines(db):
+        print(line)
+    for line in tag_lines(db):
         print(line)
     print(f"skeleton     {db.num_joints} joints")
     for role, joint in db.roles.items():

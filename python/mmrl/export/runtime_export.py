@@ -136,6 +136,9 @@ def controller_sections(db, policy, task_name: str, task_config,
     out["db.roles"] = np.array(state["roles"], np.int32)
     out["db.scalars"] = np.array([state["fps"], state["source_scale"]], np.float32)
     out["db.valid"] = np.ascontiguousarray(db.valid_mask, np.uint8)
+    if state["tag_names"]:  # tags on clips (optional; docs/runtime.md)
+        out["db.tag_names"] = list(state["tag_names"])
+        out["db.clip_tags"] = np.ascontiguousarray(state["clip_tags"], np.uint8)
     out.update(policy_sections(policy))
     out["task.name"] = [task_name]
     out["task.core"] = [_task_core(task_name)]
@@ -148,6 +151,11 @@ def controller_sections(db, policy, task_name: str, task_config,
         from ..character import clip_cost_array
 
         out["task.clip_costs"] = clip_cost_array(clip_costs, db)
+    from ..motion.tags import request_group_list
+
+    groups = request_group_list(getattr(task_config, "request_groups", ""))
+    if groups:  # the tag groups the policy observes a request code of (docs/styles.md)
+        out["task.request_groups"] = groups
     out.update(_numbers("character", dict(CHARACTER_DEFAULTS, **(character or {}))))
     return out
 
@@ -185,6 +193,9 @@ def read_controller(path: "str | os.PathLike[str]") -> ControllerContents:
     state = {k: _require(path, s, f"db.{k}") for k in _DB_TEXT + _DB_ARRAYS}
     state = {k: (np.ascontiguousarray(v) if isinstance(v, np.ndarray) else v) for k, v in state.items()}
     state["roles"] = [int(r) for r in _require(path, s, "db.roles")]
+    if "db.tag_names" in s:
+        state["tag_names"] = list(s["db.tag_names"])
+        state["clip_tags"] = np.ascontiguousarray(_require(path, s, "db.clip_tags"))
     fps, scale = (float(v) for v in _require(path, s, "db.scalars"))
     state.update(fps=fps, source_scale=scale)
     try:

@@ -131,6 +131,7 @@ class Database:
         weights: Optional[Union[Mapping[str, float], Sequence[float]]] = None,
         progress: bool = False,
         num_workers: Optional[int] = None,
+        tags: "Optional[TagRules]" = None,
     ) -> "Database":
         """Build a database from BVH files.
 
@@ -146,6 +147,9 @@ class Database:
             weights: block weights by name (see ``BLOCK_NAMES``) or as a 5-sequence.
             progress: show a progress bar while parsing.
             num_workers: parsing threads (default: all cores).
+            tags: where the clips' tags come from (:class:`mmrl.motion.tags.TagRules`; default:
+                the automatic rules only, the known datasets' naming and an ``mmrl_tags.csv``
+                sidecar at the top of a folder).
 
         Warns:
             MotionImportWarning: per file whose motion looks implausible after import
@@ -175,15 +179,22 @@ class Database:
         finally:
             if bar is not None:
                 bar.close()
-        return cls.from_motions(motions, mirror=mirror, roles=roles, weights=weights, fps=fps)
+        from .tags import TagRules, clip_tags_for_files
+
+        roots = [Path(p) for p in ([paths] if isinstance(paths, (str, os.PathLike)) else list(paths))]
+        clip_tags = clip_tags_for_files(files, roots, tags if tags is not None else TagRules())
+        return cls.from_motions(motions, mirror=mirror, roles=roles, weights=weights, fps=fps, clip_tags=clip_tags)
 
     @classmethod
     def from_motions(cls, motions: Sequence["_core.Motion"], *, mirror: bool = False,
                      roles: Optional[Mapping[str, str]] = None,
                      weights: Optional[Union[Mapping[str, float], Sequence[float]]] = None,
-                     fps: Optional[float] = DEFAULT_FPS) -> "Database":
+                     fps: Optional[float] = DEFAULT_FPS,
+                     clip_tags: Optional[Tuple[Sequence[str], np.ndarray]] = None) -> "Database":
         """Build a database from parsed motions (see :func:`mmrl.load_bvh`); motions at
-        another rate than ``fps`` are resampled (``None`` keeps their rate)."""
+        another rate than ``fps`` are resampled (``None`` keeps their rate). ``clip_tags``:
+        ``(tag names, (len(motions), T) 0/1 matrix)``, the tags of each motion (a mirrored copy
+        gets its original's)."""
         if fps is not None and not (0 < fps < float("inf")):
             raise ValueError(f"fps must be positive, got {fps!r}")
         motions = list(motions)
@@ -191,6 +202,12 @@ class Database:
             motions = [m.resampled(fps) if abs(m.fps - fps) > 1e-4 * fps else m for m in motions]
         w = _weights_list(weights, [DEFAULT_WEIGHTS[n] for n in BLOCK_NAMES])
         core = _core.Database.build(motions, bool(mirror), dict(roles or {}), w)
+        if clip_tags is not None and len(clip_tags[0]):
+            names, matrix = list(clip_tags[0]), np.asarray(clip_tags[1])
+            if matrix.shape != (len(motions), len(names)):
+                raise ValueError(f"clip_tags: expected a ({len(motions)}, {len(names)}) matrix, got {matrix.shape}")
+            matrix = np.ascontiguousarray(np.vstack([matrix, matrix]) if mirror else matrix, np.uint8)
+            core.set_tags(names, matrix)
         src_fps = [m.source_fps for m in motions] * (2 if mirror else 1)
         src_up = [m.up_axis for m in motions] * (2 if mirror else 1)
         return cls(core, src_fps, src_up)
@@ -204,6 +221,10 @@ class Database:
     parents = property(lambda self: list(self._db.parents))
     roles = property(lambda self: dict(self._db.roles), doc="Role name -> joint name.")
     clip_names = property(lambda self: list(self._db.clip_names))
+    tag_names = property(lambda self: list(self._db.tag_names),
+                         doc="The tags clips carry, ``group=value`` (mmrl.motion.tags); [] when untagged.")
+    clip_tags = property(lambda self: self._db.clip_tags.view(np.bool_),
+                         doc="(C, T) bool: clip c carries tag t.")
     features = property(lambda self: self._db.features)
     normalized_features = property(lambda self: self._db.normalized_features)
     valid_mask = property(lambda self: self._db.valid_mask.view(np.bool_))
@@ -295,7 +316,9 @@ class Database:
         """Write the database to one versioned ``.npz`` file, atomically."""
         path = Path(path)
         s = self._state()
-        arrays = {k: np.asarray(v) for k, v in s.items() if k not in ("joint_names", "channels", "clip_names", "roles", "fps", "source_scale")}
+        arrays = {k: np.asarray(v) for k, v in s.items()
+                  if k not in ("joint_names", "channels", "clip_names", "tag_names", "roles", "fps", "source_scale")}
+        arrays["tag_names"] = np.array(s["tag_names"], dtype=np.str_).reshape(-1)
         arrays["joint_names"] = np.array(s["joint_names"], dtype=np.str_)
         arrays["channels"] = np.array(s["channels"], dtype=np.str_)
         arrays["clip_names"] = np.array(s["clip_names"], dtype=np.str_)
@@ -341,6 +364,8 @@ class Database:
             state["joint_names"] = [str(x) for x in state["joint_names"]]
             state["channels"] = [str(x) for x in state["channels"]]
             state["clip_names"] = [str(x) for x in state["clip_names"]]
+            if "tag_names" in state:
+                state["tag_names"] = [str(x) for x in np.asarray(state["tag_names"]).reshape(-1)]
             state["roles"] = [int(x) for x in state["roles"]]
             state["fps"] = float(state["fps"])
             state["source_scale"] = float(state["source_scale"])

@@ -19,9 +19,13 @@ from ..motion.database import POSE_DIM, TRAJECTORY_DIM, Database
 #: (the obstacles task's with and without ``observe_continuation``'s 14 floats after g_t).
 _OBSTACLE_GOAL = sum(size for name, size in _core.ObstacleVecEnv.layout if name != "goal")
 OBSERVATION_DIMS = (POSE_DIM + 2, _OBSTACLE_GOAL + 2, _OBSTACLE_GOAL + 2 + TRAJECTORY_DIM + 2)
-#: Where g_t starts in each of them.
-_GOAL_OFFSET = {POSE_DIM + 2: POSE_DIM, _OBSTACLE_GOAL + 2: _OBSTACLE_GOAL,
-                _OBSTACLE_GOAL + 2 + TRAJECTORY_DIM + 2: _OBSTACLE_GOAL}
+
+
+def goal_offset(obs_dim: int) -> int:
+    """Where g_t starts in a task's observation of ``obs_dim`` floats: after the pose features on
+    the plane task, after the maps and the pose on the moving-obstacles task, whatever optional
+    segments (``observe_continuation``, a request code) follow it."""
+    return _OBSTACLE_GOAL if int(obs_dim) >= _OBSTACLE_GOAL + 2 else POSE_DIM
 #: Frames ahead of the three trajectory samples (+10, +20, +30), from the C++ feature layout.
 TRAJECTORY_FRAMES = tuple(_core.TRAJECTORY_OFFSETS)
 _LAST_POSITION = _core.TRAJECTORY_POSITION_COLUMNS[2]  # x of the +30-frame position (z next)
@@ -89,7 +93,7 @@ class JoystickPolicy:
 
     def raw_trajectory(self, obs: np.ndarray) -> np.ndarray:
         """(N, 12) trajectory in meters / unit directions, character frame."""
-        start = _GOAL_OFFSET.get(obs.shape[1], obs.shape[1] - 2)
+        start = goal_offset(obs.shape[1])
         g = obs[:, start:start + 2].astype(np.float64)
         dist = np.linalg.norm(g, axis=1, keepdims=True)
         d = np.where(dist > 1e-6, g / np.maximum(dist, 1e-6), np.array([[0.0, 1.0]]))
@@ -101,11 +105,12 @@ class JoystickPolicy:
         return out
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """Actions (N, 12) in the env's normalized units for observations (N, 17), (N, 529) or (N, 543)."""
+        """Actions (N, 12) in the env's normalized units for observations (N, 17), (N, 529) or (N, 543),
+        each possibly followed by a request code (docs/styles.md)."""
         obs = np.asarray(obs)
-        if obs.ndim != 2 or obs.shape[1] not in OBSERVATION_DIMS:
+        if obs.ndim != 2 or obs.shape[1] < OBSERVATION_DIMS[0]:
             raise ValueError(f"obs: expected shape (N, D) with D in {OBSERVATION_DIMS} (plane, obstacles), "
-                             f"got {obs.shape}")
+                             f"or one of them and a request code, got {obs.shape}")
         if not np.isfinite(obs).all():
             raise ValueError("obs: contains NaN or inf")
         return ((self.raw_trajectory(obs) - self._mean) / self._scale).astype(np.float32)

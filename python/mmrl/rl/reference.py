@@ -21,7 +21,7 @@ from .policies import TRAJECTORY_FRAMES, JoystickPolicy, frame_speeds
 
 #: What each joystick of the line reports (evaluate_full_path's keys).
 LINE_KEYS = ("success_rate", "mean_time_to_target_s", "foot_sliding_ik_off_cm_per_s", "foot_sliding_cm_per_s",
-             "transitions_per_s", "pose_jump_p99_cm")
+             "transitions_per_s", "pose_jump_p99_cm", "mean_speed_m_per_s")
 #: Frames slower than this (m/s) are stops and idles: no joystick reaches a target at their pace.
 MIN_GAIT_SPEED = 0.3
 
@@ -71,12 +71,35 @@ def line_value(line: Sequence[Dict[str, Any]], time_to_target_s: Optional[float]
     return float(np.interp(float(time_to_target_s), t, v))  # np.interp holds the end values outside
 
 
+def line_value_at_speed(line: Sequence[Dict[str, Any]], speed_m_per_s: Optional[float],
+                        key: str = "foot_sliding_ik_off_cm_per_s") -> Optional[float]:
+    """The line's ``key`` at a mean root speed (m/s): linear between the joysticks around it by
+    their *measured* mean speeds over the same episodes, the end values outside; None when the
+    speed or the joysticks' speeds are missing."""
+    pts = sorted((r["mean_speed_m_per_s"], r[key]) for r in line
+                 if r.get("mean_speed_m_per_s") is not None and r.get(key) is not None)
+    if not pts or speed_m_per_s is None:
+        return None
+    s = np.array([p[0] for p in pts], np.float64)
+    v = np.array([p[1] for p in pts], np.float64)
+    return float(np.interp(float(speed_m_per_s), s, v))
+
+
 def against_line(result: Dict[str, Any], line: Sequence[Dict[str, Any]]) -> Dict[str, Any]:
     """Where a policy's evaluation sits against the line: the line's IK-off sliding at the
-    policy's time to target, the policy's ratio to it, and whether it is at or below it."""
-    ref = line_value(line, result.get("mean_time_to_target_s"))
+    policy's time to target (the issue's reading), the policy's ratio to it, and whether it is
+    at or below it; and the same at the policy's mean root speed (``..._at_speed``: the joysticks
+    read by how fast they actually moved, which a joystick that circles before it reaches a
+    target does not confuse with slowness)."""
     ours = result.get("foot_sliding_ik_off_cm_per_s")
-    ratio = None if ref is None or ours is None or ref <= 0 else float(ours / ref)
+
+    def ratio(ref):
+        return None if ref is None or ours is None or ref <= 0 else float(ours / ref)
+
+    ref = line_value(line, result.get("mean_time_to_target_s"))
+    at_speed = line_value_at_speed(line, result.get("mean_speed_m_per_s"))
     return {"joystick_line": list(line), "joystick_line_sliding_ik_off_cm_per_s": ref,
-            "sliding_ik_off_vs_joystick_line": ratio,
-            "at_or_below_joystick_line": None if ratio is None else bool(ours <= ref)}
+            "sliding_ik_off_vs_joystick_line": ratio(ref),
+            "at_or_below_joystick_line": None if ratio(ref) is None else bool(ours <= ref),
+            "joystick_line_at_speed_sliding_ik_off_cm_per_s": at_speed,
+            "sliding_ik_off_vs_joystick_line_at_speed": ratio(at_speed)}

@@ -34,6 +34,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..character import clip_cost_array
+from ..motion.tags import request_group_list
 from ..motion.database import Database
 from ..motion.sources import resolve_database
 
@@ -72,6 +73,10 @@ class TaskConfig:
     """Reward term: minus this weight times the squared normalized, weighted distance between
     the pose features of the clip's continuation and of the matched frame (what a transition
     asks the blend to hide; 0 when the clip continues). 0 is the paper's reward."""
+    transition_penalty: float = 0.0
+    """Reward term: minus this at every decision whose match is a transition. In the reward's
+    own units (the plane task pays at most 1 per step before the success bonus), so it means
+    the same on every database. 0 is the paper's reward."""
 
     clip_costs: str = ""
     """Costs added to the match cost of chosen clips, the decision's candidate filter (one C++
@@ -80,6 +85,17 @@ class TaskConfig:
     names (``fnmatch``; a clip's file name, with or without its extension, matches too), each
     COST >= 0 in squared normalized feature distance or ``inf`` (never play those clips). Costs of patterns matching the same clip add up; a pattern that matches
     no clip is an error. Empty: no filter."""
+
+    request_groups: str = ""
+    """Tag groups the policy is conditioned on (docs/styles.md), comma-separated (``"style,gait"``;
+    ``mmrl train --tags``): each episode draws a request over them (``request_any``), matching
+    keeps to the clips carrying it, and the observation ends with its code (per group, one float
+    per value, 1 for the requested ones; all 0 where the request leaves the group free). Empty:
+    no request code; matching uses every clip unless a request is set (``set_request``)."""
+    request_any: float = 0.125
+    """Per conditioned group, the probability that an episode's request leaves it free; the
+    other requests are uniform over the group's values (combinations that select no valid
+    frame are left out)."""
 
     #: Fields the trainer reads and the C++ core never sees (``Task.training_config``).
     training_only: ClassVar[Tuple[str, ...]] = ()
@@ -104,6 +120,8 @@ class TaskConfig:
             value = getattr(self, f.name)
             if f.name == "clip_costs":
                 value = clip_cost_array(value, db).tolist() if value else []
+            elif f.name == "request_groups":
+                value = request_group_list(value)
             setattr(c, f.name, value)
         return c
 
@@ -345,6 +363,33 @@ class TargetVectorEnv(VectorEnv):
         keeping its target and episode; returns its new observation."""
         self._core.set_state(int(i), int(frame), float(x), float(z), float(yaw))
         return self.observe(i)
+
+    def set_request(self, i: int, request: str) -> np.ndarray:
+        """Pin env i's request over the database's tags (``"style=elderly & gait=walk"``; ``""``
+        unpins): from its next decision on, its matches and episode starts keep to the clips
+        carrying it, and its observation carries the request's code. Returns its new observation.
+
+        Raises:
+            ValueError: an unknown group or tag, or a request that selects no valid frame (the
+                message lists the tags available).
+        """
+        if not isinstance(request, str):
+            raise TypeError(f"request: expected a string such as 'style=elderly', got {type(request).__name__}")
+        self._core.set_request(int(i), request)
+        return self.observe(i)
+
+    def request(self, i: int) -> str:
+        """Env i's request now, canonical ('' = every clip)."""
+        return self._core.request(int(i))
+
+    @property
+    def request_dim(self) -> int:
+        """Floats of the request code at the end of each observation (0 without request_groups)."""
+        return int(self._core.request_dim)
+
+    def request_mix(self) -> list:
+        """The requests an episode draws: (text, probability) pairs ([] without request_groups)."""
+        return list(self._core.request_mix())
 
     def seconds_per_step(self) -> float:
         return self.config.frames_per_step / self.db.fps

@@ -18,6 +18,7 @@
 //               the path options, whether or not path_filter is on) and the seconds until that
 //               first hit (path_horizon / fps when clear); a frame too close to its clip's end
 //               to be matched (no continuation: the next decision jumps) reads (1, 0)
+//   With request_groups: the request's code last (request_offset(), vecenv.hpp's request_dim).
 // action       12-d trajectory feature in normalized units, clipped to the box of
 //              mean +- action_limit_std * std (as the plane task)
 // reward       exp(-|g_t|) after the step
@@ -168,7 +169,9 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   static constexpr int kObsDim = kGoalOffset + 2;  // the paper's observation
   static constexpr int kContinuationOffset = kObsDim;
   static constexpr int kContinuationDim = kTrajectoryDim + 2;
-  int obs_dim() const { return kObsDim + (config_.observe_continuation ? kContinuationDim : 0); }
+  // Where the request code (vecenv.hpp's request_dim floats) starts: after the optional segments.
+  int request_offset() const { return kObsDim + (config_.observe_continuation ? kContinuationDim : 0); }
+  int obs_dim() const { return request_offset() + request_dim(); }
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
 

@@ -55,8 +55,13 @@ class ObstaclePathFilter final : public CandidateFilter {
   // the env's rule when `moving` (frame_dt seconds per frame) and frozen otherwise.
   void prepare(const ObstacleField& field, int env, const RootState& root, bool moving, float frame_dt);
 
+  // The filter under this one (a request's clips and the clip costs; may be null).
+  void set_base(const CandidateFilter* base) { base_ = base; }
+  const CandidateFilter* fallback() const override { return base_; }
+
   float extra_cost(int64_t row) const override {
     const float base = base_ ? base_->extra_cost(row) : 0.0f;
+    if (!(base < std::numeric_limits<float>::infinity())) return base;  // refused below: no path test
     const int s = first_hit(row);
     if (s < 0) return base;
     return base + hit_cost_[s];

@@ -1,7 +1,8 @@
 // The plane task (paper, section 3) on the batched target-reaching env (vecenv.hpp, which
 // owns the pool, the RNGs, the valid frames, the autoreset and the bookkeeping):
 //   observation  [c_t (15): normalized pose features of the current frame,
-//                 g_t (2): target (x, z) in the character frame, meters]
+//                 g_t (2): target (x, z) in the character frame, meters,
+//                 with request_groups: the request's code (vecenv.hpp's request_dim floats)]
 //   action       12-d trajectory feature in the database's normalized units, clipped to a
 //                per-dimension box of mean +- action_limit_std * std over valid frames
 //   reward       exp(-|g_t|) after the step, + success_bonus on success
@@ -31,7 +32,7 @@ class PlaneVecEnv : public TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvS
   static constexpr int kObsDim = kPoseDim + 2;
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "plane";  // the name a controller file gives this core
-  int obs_dim() const { return kObsDim; }
+  int obs_dim() const { return kObsDim + request_dim(); }  // with request_groups: the request's code last
 
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
   // Throws std::invalid_argument on a bad config.

@@ -13,6 +13,7 @@
 // Each v(name, member pointer) call names a field as Python's config dataclass names it.
 #pragma once
 
+#include <string>
 #include <vector>
 
 #include "mmrl/decision.hpp"
@@ -33,9 +34,19 @@ struct TaskConfig {
   // features of the continuation and of the matched frame: what a transition asks the blend
   // to hide; 0 without a transition). 0: the paper's reward.
   float transition_pose_weight = 0.0f;
+  // Reward - transition_penalty at each decision whose match is a transition (not the
+  // continuation), in the reward's own units (the plane task's reward per step is at most 1
+  // before the success bonus), so it means the same on every database. 0: the paper's reward.
+  float transition_penalty = 0.0f;
   // Per clip, added to the match cost of its frames (+inf: never played); empty: none. The
   // candidate filter of decision.hpp's ClipCostFilter.
   std::vector<float> clip_costs;
+  // Tag groups the policy is conditioned on (tags.hpp's RequestCode): the observation ends
+  // with the request's code, and each episode draws a request over these groups (RequestMix).
+  // Empty: no request code, and every episode plays every clip unless a request is set.
+  std::vector<std::string> request_groups;
+  // Per group, the probability that an episode's request leaves it free (any value).
+  float request_any = 0.125f;
 };
 
 // The base's fields, in declaration order.
@@ -51,13 +62,16 @@ void visit_task_config_fields(Visit&& v) {
   v("random_heading", &TaskConfig::random_heading);
   v("transition_cost", &TaskConfig::transition_cost);
   v("transition_pose_weight", &TaskConfig::transition_pose_weight);
+  v("transition_penalty", &TaskConfig::transition_penalty);
   v("clip_costs", &TaskConfig::clip_costs);
+  v("request_groups", &TaskConfig::request_groups);
+  v("request_any", &TaskConfig::request_any);
 }
 
 // Checks the base's numbers (std::invalid_argument naming the field): frames_per_step in
 // [1, kMaxFramesPerStep], success_radius, max_steps and action_limit_std positive,
 // target_half_extent finite and larger than min_target_distance >= 0, success_bonus finite,
-// transition_cost and transition_pose_weight finite and >= 0. (clip_costs needs the database:
+// transition_cost, transition_pose_weight and transition_penalty finite and >= 0. (clip_costs needs the database:
 // ClipCostFilter checks it.)
 void check_task_config(const TaskConfig& c);
 
