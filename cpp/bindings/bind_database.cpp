@@ -151,8 +151,50 @@ void bind_layout_constants(py::module_& m) {
   m.attr("MAX_FRAMES_PER_STEP") = kMaxFramesPerStep;
 }
 
+// The tags of a database (tags.hpp): its properties, set_tags, and the request functions.
+void bind_tags(py::module_& m, py::class_<Database>& c) {
+  c.def_property_readonly("tag_names", [](const Database& db) { return db.tag_names; })
+      .def_property_readonly("clip_tags",
+                             [](py::object self) {
+                               const Database& db = self.cast<const Database&>();
+                               return make_view(db.clip_tags.data(),
+                                                {db.num_clips(), static_cast<int>(db.tag_names.size())}, self);
+                             })
+      .def(
+          "set_tags",
+          [](Database& db, const std::vector<std::string>& names, const py::array& tags) {
+            StateArray<uint8_t> a = take<uint8_t>(py::dict(py::arg("clip_tags") = tags), "clip_tags");
+            const std::vector<int64_t> want = {db.num_clips(), static_cast<int64_t>(names.size())};
+            if (a.shape != want)
+              throw py::value_error("clip_tags: expected shape (" + std::to_string(want[0]) + ", " +
+                                    std::to_string(want[1]) + ")");
+            std::vector<uint8_t> values(a.values.begin(), a.values.end());
+            check_tags(names, values, db.num_clips());
+            db.tag_names = names;
+            db.clip_tags = std::move(values);
+          },
+          py::arg("names"), py::arg("clip_tags"),
+          "Sets the tags (names 'group=value', a (C, T) uint8 0/1 matrix); only on a database nothing uses yet.");;
+  m.def(
+      "parse_request",
+      [](const Database& db, const std::string& text) { return parse_request(db, text).text; }, py::arg("db"),
+      py::arg("request"), "The canonical text of a tag request (ValueError naming what is unknown).");
+  m.def(
+      "select_request",
+      [](const Database& db, const std::string& text) {
+        const RequestSelection s = select_request(db, text);
+        py::array_t<uint8_t> mask(db.num_clips());
+        for (int c = 0; c < db.num_clips(); ++c) mask.mutable_at(c) = s.restricts() ? s.clip_mask[c] : 1;
+        return py::make_tuple(s.request.text, mask, py::array_t<int64_t>(s.valid_frames.size(), s.valid_frames.data()));
+      },
+      py::arg("db"), py::arg("request"),
+      "(canonical text, (C,) uint8 clip mask, valid frames) of a request; ValueError when it selects no valid frame.");
+  m.def("tags_available", &tags_available, py::arg("db"), "What tags db offers, as the error messages list them.");
+}
+
 void bind_database(py::module_& m) {
-  py::class_<Database>(m, "Database", "Flat per-frame arrays of a motion database (see mmrl.Database).")
+  py::class_<Database> db_class(m, "Database", "Flat per-frame arrays of a motion database (see mmrl.Database).");
+  db_class
       .def_static(
           "build",
           [](const std::vector<const Motion*>& clips, bool mirror, const std::map<std::string, std::string>& roles,
@@ -225,44 +267,8 @@ void bind_database(py::module_& m) {
             out.set_weights(weights_from(w));
             return out;
           },
-          py::arg("weights"), "A new Database with other block weights (same mean and block scales).")
-      .def_property_readonly("tag_names", [](const Database& db) { return db.tag_names; })
-      .def_property_readonly("clip_tags",
-                             [](py::object self) {
-                               const Database& db = self.cast<const Database&>();
-                               return make_view(db.clip_tags.data(),
-                                                {db.num_clips(), static_cast<int>(db.tag_names.size())}, self);
-                             })
-      .def(
-          "set_tags",
-          [](Database& db, const std::vector<std::string>& names, const py::array& tags) {
-            StateArray<uint8_t> a = take<uint8_t>(py::dict(py::arg("clip_tags") = tags), "clip_tags");
-            const std::vector<int64_t> want = {db.num_clips(), static_cast<int64_t>(names.size())};
-            if (a.shape != want)
-              throw py::value_error("clip_tags: expected shape (" + std::to_string(want[0]) + ", " +
-                                    std::to_string(want[1]) + ")");
-            std::vector<uint8_t> values(a.values.begin(), a.values.end());
-            check_tags(names, values, db.num_clips());
-            db.tag_names = names;
-            db.clip_tags = std::move(values);
-          },
-          py::arg("names"), py::arg("clip_tags"),
-          "Sets the tags (names 'group=value', a (C, T) uint8 0/1 matrix); only on a database nothing uses yet.");
-  m.def(
-      "parse_request",
-      [](const Database& db, const std::string& text) { return parse_request(db, text).text; }, py::arg("db"),
-      py::arg("request"), "The canonical text of a tag request (ValueError naming what is unknown).");
-  m.def(
-      "select_request",
-      [](const Database& db, const std::string& text) {
-        const RequestSelection s = select_request(db, text);
-        py::array_t<uint8_t> mask(db.num_clips());
-        for (int c = 0; c < db.num_clips(); ++c) mask.mutable_at(c) = s.restricts() ? s.clip_mask[c] : 1;
-        return py::make_tuple(s.request.text, mask, py::array_t<int64_t>(s.valid_frames.size(), s.valid_frames.data()));
-      },
-      py::arg("db"), py::arg("request"),
-      "(canonical text, (C,) uint8 clip mask, valid frames) of a request; ValueError when it selects no valid frame.");
-  m.def("tags_available", &tags_available, py::arg("db"), "What tags db offers, as the error messages list them.");
+          py::arg("weights"), "A new Database with other block weights (same mean and block scales).");
+  bind_tags(m, db_class);
   bind_layout_constants(m);
 }
 

@@ -24,7 +24,7 @@ from typing import Any, Dict, List, Optional
 
 import numpy as np
 
-from . import metrics
+from . import _core, metrics
 from .character import Character
 from .motion.database import POSE_DIM, Database
 from .rl.policies import goal_offset
@@ -149,15 +149,22 @@ class FullPath:
         scene: also record the task's scene (obstacles, sensor maps, hit points) per step;
         continuous: at an episode's end keep the character where it is (the caller then
             calls :meth:`continue_from_character`) instead of moving it to the env's new start;
+        request: a request over the database's tags (``"style=elderly"``, docs/styles.md),
+            pinned on the env before its first episode, so episodes start and play inside it;
         the rest: :class:`~mmrl.character.Character` options.
     """
 
     def __init__(self, task: Task, db: Database, *, config=None, stage: Optional[int] = None, seed: int = 0,
                  ik: bool = True, foot_locking: bool = True, inertialization_halflife: float = 0.1,
-                 fast: bool = False, record: bool = True, scene: bool = False, continuous: bool = False):
+                 fast: bool = False, record: bool = True, scene: bool = False, continuous: bool = False,
+                 request: str = ""):
         self.task, self.db = task, db
         self.continuous = bool(continuous)
         self.env = task.make_vector_env(1, db=db, config=config, num_threads=1)
+        self.request = ""
+        self.request_clips: Optional[np.ndarray] = None  # (C,) bool of the request's clips; None: every clip
+        if request:
+            self.set_request(request)
         self.config = self.env.config
         self.stage = apply_stage(task, self.env, stage)
         self.ctrl = Character(db, frames_per_step=self.config.frames_per_step,
@@ -175,6 +182,14 @@ class FullPath:
         self.ctrl.reset(int(s["frame"]), (float(s["x"]), float(s["z"])), float(s["yaw"]))
         self.target = np.array(s["target"], np.float64)
         self.episode_steps = 0
+
+    def set_request(self, request: str) -> None:
+        """Pin a request (``""`` for every clip) from the next decision on (ValueError listing the
+        tags available when it names an unknown one or selects nothing)."""
+        self.obs = self.env.set_request(0, request)
+        self.request = self.env.request(0)
+        self.request_clips = (None if not self.request else
+                              np.asarray(_core.select_request(self.db._db, self.request)[1], bool))
 
     def set_target(self, x: float, z: float) -> None:
         """Move the current episode's target (world meters)."""
@@ -265,6 +280,8 @@ class EpisodeSummary:
         self.quality = metrics.QualityAccumulator()
         self.transitions = self.frames = 0
         self.distance = 0.0  # meters the root travelled over the shown frames
+        self.request_clips: Optional[np.ndarray] = None  # set by a caller that evaluates under a request
+        self.inside = self.shown = 0  # shown frames inside the request's clips, and all shown frames
         self.costs: List[np.ndarray] = []
 
     def add(self, ep: Dict[str, Any], rec: Dict[str, np.ndarray], frames: int) -> None:
@@ -272,6 +289,10 @@ class EpisodeSummary:
         if not self.fast:
             ep.update(self.quality.add(self.db, rec))
         self.transitions += int(rec["transitions"].sum())
+        if self.request_clips is not None:
+            shown = np.asarray(rec["frames"])[: int(frames) + 1]
+            self.inside += int(self.request_clips[self.db.frame_clip[shown]].sum())
+            self.shown += int(shown.size)
         roots = np.asarray(rec["roots"], np.float64)[: int(frames) + 1]
         self.distance += float(np.hypot(*np.diff(roots[:, :2], axis=0).T).sum()) if len(roots) > 1 else 0.0
         self.frames += int(frames)
@@ -289,6 +310,8 @@ class EpisodeSummary:
         out.update(self.quality.result())
         out["transitions_per_s"] = metrics.rate_per_second(self.transitions, self.frames, self.db.fps)
         out["mean_speed_m_per_s"] = metrics.rate_per_second(self.distance, self.frames, self.db.fps)
+        if self.request_clips is not None:
+            out["request_fidelity"] = self.inside / self.shown if self.shown else None
         costs = np.concatenate(self.costs) if self.costs else np.zeros(0)
         out["matched_cost_mean"] = float(costs.mean()) if costs.size else None
         out["mean_steps"] = float(np.mean([e["steps"] for e in results]))
@@ -305,12 +328,14 @@ class EpisodeSummary:
 def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, seed: int = 0, config=None,
                        stage: Optional[int] = None, ik: bool = True, foot_locking: bool = True,
                        inertialization_halflife: float = 0.1, fast: bool = False,
-                       target_distance: Optional[float] = None) -> Dict[str, Any]:
+                       target_distance: Optional[float] = None, request: str = "") -> Dict[str, Any]:
     """Run ``episodes`` full-path episodes of ``task`` (back to back in one env, so the same
     seed gives the same episodes for every policy).
 
     ``target_distance`` (meters) puts every target at that distance from the start in a
-    uniformly random direction instead of the task's own draw.
+    uniformly random direction instead of the task's own draw. ``request`` (docs/styles.md)
+    keeps every episode inside the clips carrying it; the result then has ``request`` and
+    ``request_fidelity``, the fraction of shown frames from those clips.
 
     Returns success_rate, mean_time_to_target_s (successful episodes), the task's outcome
     rates, the quality metrics of :mod:`mmrl.metrics` over all shown frames of all episodes
@@ -319,9 +344,10 @@ def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, 
     """
     episodes = _check_episodes(episodes)
     run = FullPath(task, db, config=config, stage=stage, seed=seed, ik=ik, foot_locking=foot_locking,
-                   inertialization_halflife=inertialization_halflife, fast=fast, record=True)
+                   inertialization_halflife=inertialization_halflife, fast=fast, record=True, request=request)
     rng = np.random.default_rng(seed)
     summary = EpisodeSummary(task, db, fast, run.stage)
+    summary.request_clips = run.request_clips
     for _ in range(episodes):
         start = np.array(run.ctrl.root[:2], np.float64)
         if target_distance is not None:
@@ -338,12 +364,15 @@ def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, 
         for key in task.outcomes:
             ep.setdefault(key, bool(out.get(key, False)))
         summary.add(ep, run.last_recording, frames)
-    return summary.summary()
+    out = summary.summary()
+    if run.request:
+        out["request"] = run.request
+    return out
 
 
 def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int = 0, config=None,
            stage: Optional[int] = None, continuous: Optional[bool] = None, ik: bool = True,
-           foot_locking: bool = True, inertialization_halflife: float = 0.1) -> Dict[str, np.ndarray]:
+           foot_locking: bool = True, inertialization_halflife: float = 0.1, request: str = "") -> Dict[str, np.ndarray]:
     """Drive the character for ``seconds`` of shown frames, for video and export.
 
     ``continuous`` (default: tasks without a scene): when an episode ends the character
@@ -363,7 +392,7 @@ def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int
     continuous = task.scene is None if continuous is None else bool(continuous)
     run = FullPath(task, db, config=config, stage=stage, seed=seed, ik=ik, foot_locking=foot_locking,
                    inertialization_halflife=inertialization_halflife, record=True, scene=True,
-                   continuous=continuous)
+                   continuous=continuous, request=request)
     low, high = run.env.single_action_space.low, run.env.single_action_space.high
     total = max(2, int(round(seconds * db.fps)))
     log = _FollowLog(run)

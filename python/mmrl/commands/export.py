@@ -68,10 +68,13 @@ def cmd_export(args: argparse.Namespace) -> int:
             raise InputError(f"--check-observations must be >= 1, got {args.check_observations}")
         env = task.make_vector_env(1, db=db, config=config, num_threads=1)
         low, high = env.single_action_space.low, env.single_action_space.high
+        request_tags = env.request_tags
         env.close()
-        export_onnx(policy, args.onnx, low, high)
+        export_onnx(policy, args.onnx, low, high, request_tags)
         obs = sample_observations(task, db, config, policy, args.check_observations)
         error = check_onnx(args.onnx, policy, obs, low, high)
+        if request_tags:
+            print(f"{args.onnx}: inputs 'obs' and 'request' ({len(request_tags)} floats: {', '.join(request_tags)})")
         print(f"wrote {args.onnx}: onnxruntime vs torch over {len(obs)} observations: max |difference| "
               f"{error['clipped_action']:.1e} (the env's clipped action), {error['action']:.1e} (raw action; "
               f"{error['action_relative']:.1e} relative)")

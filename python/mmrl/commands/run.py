@@ -40,6 +40,9 @@ def add_shared_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--episodes", type=int, default=20, help="evaluation episodes (default: 20)")
     p.add_argument("--no-ik", action="store_true", help="switch off foot locking and leg IK")
     p.add_argument("--no-inertialization", action="store_true", help="hard switches at transitions")
+    p.add_argument("--request", default="", metavar="TAGS",
+                   help="keep the character to the clips carrying these tags, e.g. \"style=elderly\" or "
+                        "\"style=elderly & gait=walk\" (docs/styles.md; 'mmrl db info' lists the tags)")
 
 
 def register_cli(sub) -> None:
@@ -50,6 +53,9 @@ def register_cli(sub) -> None:
                    help="also run N joysticks at speeds from the data's slowest walk to its fastest run on the "
                    "same episodes, and report the policy's IK-off foot sliding against that line at its own time "
                    "to target (default 5 on the plane task, 0 = none elsewhere)")
+    e.add_argument("--per-request", nargs="?", const="", default=None, metavar="GROUPS",
+                   help="evaluate once per value of these tag groups (comma-separated; default: the run's "
+                        "--tags groups, else every group of the database) and print a table by request")
     e.set_defaults(func=cmd_eval)
 
     r = sub.add_parser("render", help="render a policy following a sequence of targets to MP4, GIF or a "
@@ -92,6 +98,7 @@ class Setup:
         self.policy, self.policy_name = self._policy(args, run)
         self.options = dict(ik=not args.no_ik, foot_locking=not args.no_ik,
                             inertialization_halflife=0.0 if args.no_inertialization else 0.1)
+        self.request = check_request(self.db, getattr(args, "request", "") or "")
 
     def _policy(self, args, run):
         from ..rl.policies import JoystickPolicy
@@ -101,6 +108,18 @@ class Setup:
         if run is not None:
             return run.policy(), str(run.checkpoint)
         return JoystickPolicy.preset(self.db, "joystick"), "joystick"
+
+
+def check_request(db, request: str) -> str:
+    """``request`` in canonical form, or InputError naming what is wrong and the tags available."""
+    from .. import _core
+
+    if not request.strip():
+        return ""
+    try:
+        return _core.select_request(db._db, request)[0]
+    except ValueError as e:
+        raise InputError(f"--request: {e}") from None
 
 
 def _check_stage(task, stage: Optional[int]) -> Optional[int]:
@@ -121,7 +140,7 @@ def _follow(args):
         raise InputError("--seconds must be positive")
     s = Setup(args)
     return s, follow(s.task, s.db, s.policy, seconds=args.seconds, seed=args.seed, config=s.config, stage=s.stage,
-                     **s.options)
+                     request=s.request, **s.options)
 
 
 # ---------------------------------------------------------------------- commands
@@ -131,19 +150,22 @@ def cmd_eval(args: argparse.Namespace) -> int:
     if args.episodes < 1:
         raise InputError("--episodes must be >= 1")
     s = Setup(args)
+    if args.per_request is not None:
+        return _eval_per_request(args, s)
     t0 = time.perf_counter()
     res = evaluate_full_path(s.task, s.db, s.policy, episodes=args.episodes, seed=args.seed, config=s.config,
-                             stage=s.stage, **s.options)
+                             stage=s.stage, request=s.request, **s.options)
     line = (5 if s.task.name == "plane" else 0) if args.line is None else args.line
     if line:
         from ..rl.reference import against_line, joystick_line, joystick_speeds
 
         try:
-            speeds = joystick_speeds(s.db, line)
+            speeds = joystick_speeds(s.db, line, request=s.request)
         except ValueError as e:
             raise InputError(f"--line {line}: {e}") from None
         res.update(against_line(res, joystick_line(s.task, s.db, speeds=speeds, episodes=args.episodes,
-                                                   seed=args.seed, config=s.config, stage=s.stage, **s.options)))
+                                                   seed=args.seed, config=s.config, stage=s.stage,
+                                                   request=s.request, **s.options)))
     res.update({"policy": s.policy_name, "env": s.task.name, "seed": args.seed, "ik": not args.no_ik,
                 "inertialization": not args.no_inertialization, "wall_time_s": time.perf_counter() - t0})
     res["episode_results"] = res.pop("episode_results")  # keep the per-episode list last
@@ -153,10 +175,12 @@ def cmd_eval(args: argparse.Namespace) -> int:
         return 0
     fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
     where = f" (stage {res['stage']})" if "stage" in res else ""
-    print(f"{s.policy_name} on {s.task.name}{where}: {args.episodes} episodes")
+    print(f"{s.policy_name} on {s.task.name}{where}: {args.episodes} episodes"
+          + (f", request {s.request!r}" if s.request else ""))
     rates = [k for k in res if k.endswith("_rate") and k != "success_rate"]
     for k in ["success_rate", *rates, "mean_time_to_target_s", "foot_sliding_cm_per_s", "foot_sliding_ik_off_cm_per_s",
-              "transitions_per_s", "pose_jump_p99_cm", "max_pose_jump_cm", "matched_cost_mean"]:
+              "transitions_per_s", "pose_jump_p99_cm", "max_pose_jump_cm", "matched_cost_mean", "mean_speed_m_per_s",
+              "request_fidelity"]:
         if k in res:
             print(f"  {k:<32} {fmt(res[k])}")
     floor = res.get("raw_mocap") or {}
@@ -175,6 +199,56 @@ def cmd_eval(args: argparse.Namespace) -> int:
             where = "at or below" if res["at_or_below_joystick_line"] else "above"
             print(f"  against the line at its time to target: {fmt(res.get('foot_sliding_ik_off_cm_per_s'))} vs "
                   f"{fmt(ref)} cm/s ({ratio:.2f}x, {where} the line)")
+    return 0
+
+
+def _eval_per_request(args: argparse.Namespace, s: "Setup") -> int:
+    """``mmrl eval --per-request``: one evaluation per tag value of the groups, on the same seed."""
+    from .. import _core
+    from ..motion.tags import request_group_list
+    from ..rollout import evaluate_full_path
+
+    groups = request_group_list(args.per_request) or request_group_list(getattr(s.config, "request_groups", ""))
+    if not groups:
+        groups = sorted({t.partition("=")[0] for t in s.db.tag_names})
+    if not groups:
+        raise InputError(f"--per-request: {_core.tags_available(s.db._db)}")
+    base = s.request
+    requests = []
+    for g in groups:
+        values = [t for t in s.db.tag_names if t.partition("=")[0] == g]
+        if not values:
+            raise InputError(f"--per-request: no tag group {g!r}; {_core.tags_available(s.db._db)}")
+        for t in values:
+            requests.append(f"{base} & {t}" if base else t)
+    rows = []
+    for req in requests:
+        try:
+            canon = _core.select_request(s.db._db, req)[0]
+        except ValueError as e:  # e.g. a combination with the base request that selects nothing
+            rows.append({"request": req, "error": str(e)})
+            continue
+        res = evaluate_full_path(s.task, s.db, s.policy, episodes=args.episodes, seed=args.seed, config=s.config,
+                                 stage=s.stage, request=canon, **s.options)
+        res.pop("episode_results", None)
+        rows.append(res)
+    if args.json:
+        json.dump({"policy": s.policy_name, "env": s.task.name, "seed": args.seed, "per_request": rows}, sys.stdout)
+        sys.stdout.write("\n")
+        return 0
+    f = lambda v, p=2: "n/a" if v is None else f"{v:.{p}f}"  # noqa: E731
+    print(f"{s.policy_name} on {s.task.name}: {args.episodes} episodes per request")
+    print("| request | success | time to target (s) | mean speed (m/s) | sliding IK off | sliding IK on | "
+          "transitions/s | pose jump p99 (cm) | frames inside |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for r in rows:
+        if "error" in r:
+            print(f"| {r['request']} | {r['error']} |")
+            continue
+        print(f"| {r['request']} | {100 * r['success_rate']:.0f}% | {f(r['mean_time_to_target_s'])} | "
+              f"{f(r.get('mean_speed_m_per_s'))} | {f(r.get('foot_sliding_ik_off_cm_per_s'), 1)} | "
+              f"{f(r.get('foot_sliding_cm_per_s'), 1)} | {f(r.get('transitions_per_s'))} | "
+              f"{f(r.get('pose_jump_p99_cm'), 1)} | {f(100 * r['request_fidelity'], 1) + '%' if r.get('request_fidelity') is not None else 'n/a'} |")
     return 0
 
 

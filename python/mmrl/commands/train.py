@@ -35,6 +35,10 @@ def register_cli(sub) -> None:
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a PPOConfig field or a task option, e.g. --set learning_rate=3e-4 "
                         "--set max_steps=150 (repeatable)")
+    t.add_argument("--tags", metavar="GROUPS", default=None,
+                   help="condition one policy on requests over these tag groups of the database, e.g. --tags "
+                        "style or --tags style,gait (task option request_groups; docs/styles.md): each episode "
+                        "draws a request, matching keeps to its clips, and the policy observes it")
     presets = sorted({p for n in tasks for p in get_task(n).presets} | {"paper-rllib"})
     t.add_argument("--preset", choices=presets or None, default=None,
                    help="a task's named set of options; " + "; ".join(
@@ -92,6 +96,10 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
         if saved and args.preset is not None:
             raise InputError("--preset: a resumed run keeps its configuration (change options with --set)")
         sets = [f"{k}={v}" for k, v in task.presets[preset].items()] + sets
+    if getattr(args, "tags", None):
+        if saved:
+            raise InputError("--tags: a resumed run keeps its request groups")
+        sets.append(f"request_groups={args.tags}")
     options = task_flag_options(task, args, saved, sets)
     ppo_over, task_over = split_overrides(sets, cfg, task_cfg)
     apply_values(cfg, ppo_over)

@@ -41,6 +41,8 @@ def register_cli(sub) -> None:
     p.add_argument("--trace", metavar="FILE", help="append one JSON line per decision step to FILE")
     p.add_argument("--seed", type=int, default=0, help="random seed of the start (and obstacles) (default: 0)")
     p.add_argument("--stage", type=int, default=None, metavar="K", help="curriculum stage (default: the last)")
+    p.add_argument("--request", default="", metavar="TAGS",
+                   help="the request to start with, e.g. \"style=elderly\" (switchable in the page; docs/styles.md)")
     p.set_defaults(func=cmd_play)
 
 
@@ -107,8 +109,11 @@ def cmd_play(args: argparse.Namespace) -> int:
     if task is None:
         raise InputError(f"{args.run}: not a training run (no config.json)")
     _check_stage(task, args.stage)
-    session = LiveSession(task, run.database(), run.policy(), config=run.task_config(task), stage=args.stage,
-                          seed=args.seed, trace=args.trace)
+    from .run import check_request
+
+    db = run.database()
+    session = LiveSession(task, db, run.policy(), config=run.task_config(task), stage=args.stage,
+                          seed=args.seed, trace=args.trace, request=check_request(db, args.request))
     session.policy_name = args.policy
     scene = _serve(args, f"mmrl play {run.path.name}")
     app = PlayApp(scene, session)

@@ -12,6 +12,15 @@ needs nothing else:
                               (mean +- action_limit_std * std of the database's trajectory
                               features): what the matcher receives as the query's trajectory half
 
+A policy conditioned on requests (``mmrl train --tags``, docs/styles.md) takes them as a second
+input, so an engine sets the request apart from the observation:
+
+    input  ``obs``            (B, obs_dim - R): the observation without its request code
+    input  ``request``        (B, R) float32: the code, one float per tag of the conditioned
+                              groups, 1 for the requested values (all 0 leaves a group free);
+                              the model's metadata ``mmrl.request_tags`` lists the R tags in
+                              order (JSON)
+
 Export uses torch's TorchScript exporter (``dynamo=False``): it needs only ``onnx``, where the
 dynamo exporter of torch 2.x also needs ``onnxscript``. Checking needs ``onnxruntime``; both
 are the ``mmrl[onnx]`` extra.
@@ -21,7 +30,7 @@ from __future__ import annotations
 import io
 import os
 import warnings
-from typing import Optional
+from typing import Optional, Sequence
 
 import numpy as np
 
@@ -72,25 +81,60 @@ def policy_graph_module(policy, action_low: Optional[np.ndarray] = None, action_
     return PolicyGraph().eval().to("cpu"), obs_dim
 
 
+class _WithRequest:
+    """``(obs, request) -> policy(cat(obs, request))``: the graph with the request as its own input."""
+
+    @staticmethod
+    def wrap(module):
+        from torch import nn
+        import torch
+
+        class Graph(nn.Module):
+            def __init__(self):
+                super().__init__()
+                self.inner = module
+
+            def forward(self, obs, request):
+                return self.inner(torch.cat([obs, request], dim=1))
+
+        return Graph().eval()
+
+
 def export_onnx(policy, path: "str | os.PathLike[str]", action_low: Optional[np.ndarray] = None,
-                action_high: Optional[np.ndarray] = None) -> None:
-    """Write ``policy`` (see :func:`policy_graph_module`) as an ONNX file, atomically."""
+                action_high: Optional[np.ndarray] = None, request_tags: Sequence[str] = ()) -> None:
+    """Write ``policy`` (see :func:`policy_graph_module`) as an ONNX file, atomically.
+    ``request_tags``: the tags of the request code that ends the policy's observation, in order
+    (the env's ``request_tags``); they become the ``request`` input."""
     require_extra("onnx", "onnx", "ONNX export")
+    import json
+
     import torch
 
     module, obs_dim = policy_graph_module(policy, action_low, action_high)
+    r = len(request_tags)
+    if r >= obs_dim:
+        raise InputError(f"request_tags: {r} tags for an observation of {obs_dim}")
+    args = (torch.zeros(1, obs_dim),)
+    names = ["obs"]
+    if r:
+        module = _WithRequest.wrap(module)
+        args, names = (torch.zeros(1, obs_dim - r), torch.zeros(1, r)), ["obs", "request"]
     buffer = io.BytesIO()
     with warnings.catch_warnings():
         # The TorchScript exporter is deprecated in favour of the dynamo one, which needs onnxscript.
         warnings.simplefilter("ignore")
-        torch.onnx.export(module, (torch.zeros(1, obs_dim),), buffer, dynamo=False, opset_version=OPSET,
-                          input_names=["obs"], output_names=["action", "clipped_action"],
-                          dynamic_axes={"obs": {0: "batch"}, "action": {0: "batch"}, "clipped_action": {0: "batch"}})
-    data = buffer.getvalue()
+        torch.onnx.export(module, args, buffer, dynamo=False, opset_version=OPSET,
+                          input_names=names, output_names=["action", "clipped_action"],
+                          dynamic_axes={**{n: {0: "batch"} for n in names}, "action": {0: "batch"},
+                                        "clipped_action": {0: "batch"}})
     import onnx
 
-    onnx.checker.check_model(onnx.load_from_string(data))
-    atomic_write_bytes(path, data)
+    model = onnx.load_from_string(buffer.getvalue())
+    if r:
+        entry = model.metadata_props.add()
+        entry.key, entry.value = "mmrl.request_tags", json.dumps(list(request_tags))
+    onnx.checker.check_model(model)
+    atomic_write_bytes(path, model.SerializeToString())
 
 
 def check_onnx(path: "str | os.PathLike[str]", policy, observations: np.ndarray,
@@ -110,7 +154,13 @@ def check_onnx(path: "str | os.PathLike[str]", policy, observations: np.ndarray,
     options = ort.SessionOptions()
     options.intra_op_num_threads = 1
     session = ort.InferenceSession(os.fspath(path), options, providers=["CPUExecutionProvider"])
-    action, clipped = session.run(["action", "clipped_action"], {"obs": obs})
+    inputs = {i.name: i for i in session.get_inputs()}
+    if "request" in inputs:  # a request-conditioned policy: the code is the observation's last R floats
+        r = int(inputs["request"].shape[1])
+        feeds = {"obs": obs[:, :-r], "request": obs[:, -r:]}
+    else:
+        feeds = {"obs": obs}
+    action, clipped = session.run(["action", "clipped_action"], feeds)
     ref = policy.act(obs)
     out = {"action": float(np.max(np.abs(action - ref))),
            "action_relative": float(np.max(np.abs(action - ref) / np.maximum(1.0, np.abs(ref)))),

@@ -26,13 +26,18 @@ LINE_KEYS = ("success_rate", "mean_time_to_target_s", "foot_sliding_ik_off_cm_pe
 MIN_GAIT_SPEED = 0.3
 
 
-def joystick_speeds(db: Database, count: int = 5) -> List[float]:
+def joystick_speeds(db: Database, count: int = 5, request: str = "") -> List[float]:
     """``count`` speeds (m/s), evenly spaced from the data's slowest walk to its fastest run: the
     5th and 95th percentiles of the valid frames' speeds over their next second (frames below
-    ``MIN_GAIT_SPEED`` left out)."""
+    ``MIN_GAIT_SPEED`` left out); with a ``request``, of the valid frames of its clips only."""
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or not 2 <= count <= 20:
         raise ValueError(f"count: expected an int in [2, 20], got {count!r}")
     speed = frame_speeds(db)
+    if request:
+        from .. import _core
+
+        clips = np.asarray(_core.select_request(db._db, request)[1], bool)
+        speed = speed[clips[db.frame_clip[db.valid_mask]]]
     moving = speed[speed >= MIN_GAIT_SPEED]
     if moving.size < 10:
         raise ValueError(f"the database has {moving.size} frames moving at {MIN_GAIT_SPEED} m/s or more over "

@@ -35,6 +35,7 @@ from gymnasium.vector.utils import batch_space
 
 from ..character import clip_cost_array
 from ..motion.tags import request_group_list
+from .requests import RequestMethods
 from ..motion.database import Database
 from ..motion.sources import resolve_database
 
@@ -166,7 +167,7 @@ def parse_autoreset_mode(mode) -> AutoresetMode:
 
 
 # ----------------------------------------------------------------------------- vector env
-class TargetVectorEnv(VectorEnv):
+class TargetVectorEnv(RequestMethods, VectorEnv):
     """N characters of one task stepped together by a batched C++ core.
 
     Subclasses set ``core_type`` (the ``_core`` class), ``config_type`` (a TaskConfig
@@ -363,33 +364,6 @@ class TargetVectorEnv(VectorEnv):
         keeping its target and episode; returns its new observation."""
         self._core.set_state(int(i), int(frame), float(x), float(z), float(yaw))
         return self.observe(i)
-
-    def set_request(self, i: int, request: str) -> np.ndarray:
-        """Pin env i's request over the database's tags (``"style=elderly & gait=walk"``; ``""``
-        unpins): from its next decision on, its matches and episode starts keep to the clips
-        carrying it, and its observation carries the request's code. Returns its new observation.
-
-        Raises:
-            ValueError: an unknown group or tag, or a request that selects no valid frame (the
-                message lists the tags available).
-        """
-        if not isinstance(request, str):
-            raise TypeError(f"request: expected a string such as 'style=elderly', got {type(request).__name__}")
-        self._core.set_request(int(i), request)
-        return self.observe(i)
-
-    def request(self, i: int) -> str:
-        """Env i's request now, canonical ('' = every clip)."""
-        return self._core.request(int(i))
-
-    @property
-    def request_dim(self) -> int:
-        """Floats of the request code at the end of each observation (0 without request_groups)."""
-        return int(self._core.request_dim)
-
-    def request_mix(self) -> list:
-        """The requests an episode draws: (text, probability) pairs ([] without request_groups)."""
-        return list(self._core.request_mix())
 
     def seconds_per_step(self) -> float:
         return self.config.frames_per_step / self.db.fps

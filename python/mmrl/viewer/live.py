@@ -40,9 +40,10 @@ class LiveSession:
     """One character, its task's env and the policies it can switch between."""
 
     def __init__(self, task, db, policy, *, config=None, stage: Optional[int] = None, seed: int = 0,
-                 trace: Optional[str] = None, window_steps: int = 50):
+                 trace: Optional[str] = None, window_steps: int = 50, request: str = ""):
         self.task, self.db = task, db
-        self.run = FullPath(task, db, config=config, stage=stage, seed=seed, record=False, continuous=True)
+        self.run = FullPath(task, db, config=config, stage=stage, seed=seed, record=False, continuous=True,
+                            request=request)
         self.config = self.run.config
         self.policies = {"trained": policy, "joystick": JoystickPolicy.preset(db, "joystick")}
         self.policy_name = "trained"
@@ -89,6 +90,19 @@ class LiveSession:
         with self._lock:
             self._pending["options"] = (self.ik if ik is None else bool(ik),
                                         self.inertialization if inertialization is None else bool(inertialization))
+
+    def set_request(self, request: str) -> None:
+        """A request over the database's tags ("" for every clip): checked now (ValueError listing
+        the tags available), applied at the next decision, like a new target."""
+        from .. import _core
+
+        canon = _core.select_request(self.db._db, request)[0] if request.strip() else ""
+        with self._lock:
+            self._pending["request"] = canon
+
+    @property
+    def request(self) -> str:
+        return self.run.request
 
     def move_obstacle(self, index: int, x: float, z: float) -> None:
         with self._lock:
@@ -139,6 +153,8 @@ class LiveSession:
             self._new_controller()
         if self.has_obstacles and ("moves" in pending or "pause" in pending):
             self._edit_obstacles(pending.get("moves", {}), pending.get("pause"))
+        if "request" in pending:
+            self.run.set_request(pending["request"])
         if "target" in pending:
             self.run.set_target(*pending["target"])
             self.timing["click_to_decision"].append(time.perf_counter() - pending["target_set_at"])

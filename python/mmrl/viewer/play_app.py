@@ -49,6 +49,11 @@ class PlayApp:
             help_text += "; **shift+click** picks an obstacle to drag"
         s.text(f"**{sess.task.name}** · {help_text}")
         self.policy_menu = s.dropdown("policy", ["trained", "joystick"], sess.policy_name)
+        if sess.db.tag_names:  # a request switches the character at its next decision (docs/styles.md)
+            options = ["any"] + list(sess.db.tag_names)
+            self.request_menu = s.dropdown("request", options, sess.request if sess.request in options else "any")
+            self.request_menu.on_change(
+                lambda: sess.set_request("" if self.request_menu.value == "any" else str(self.request_menu.value)))
         self.ik_box = s.checkbox("IK + foot locking", True)
         self.inert_box = s.checkbox("inertialization", True)
         self.follow_box = s.checkbox("camera follows", True)
