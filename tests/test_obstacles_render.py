@@ -102,8 +102,12 @@ def test_joystick_reads_the_target_of_obstacle_observations(db):
     joy = JoystickPolicy.preset(db, "joystick")
     obs = np.random.default_rng(0).normal(size=(5, 529)).astype(np.float32)
     np.testing.assert_array_equal(joy.act(obs), joy.act(obs[:, -17:]))
+    # A request code (docs/styles.md) may follow either observation: the goal stays where it was.
+    coded = np.concatenate([obs, np.ones((5, 9), np.float32)], 1)
+    np.testing.assert_array_equal(joy.act(coded), joy.act(obs))
+    np.testing.assert_array_equal(joy.act(coded[:, -26:]), joy.act(obs[:, -17:]))
     with pytest.raises(ValueError, match="expected shape"):
-        joy.act(obs[:, :100])
+        joy.act(obs[:, :10])  # shorter than any task's observation
 
 
 def test_evaluate_obstacles_counts_outcomes(db):

@@ -314,3 +314,27 @@ def test_html_export_of_20_seconds(tmp_path):
     check_offline(page)  # no script, style or font from the network
     with pytest.raises(RuntimeError, match="network"):
         check_offline('<script src="https://cdn.example/x.js"></script>')
+
+
+def test_limbs_are_closed_capsules_turned_onto_their_bones():
+    """The body's capsules (docs/styles.md: the body shows the style): a closed surface (every edge
+    in two faces) of the asked length and radius, and rotations taking +Z onto each bone."""
+    from mmrl.viewer.draw import capsule_mesh, limb_radii, rotation_from_z
+
+    v, f = capsule_mesh(0.4, 0.05)
+    edges = {}
+    for a, b, c in f:
+        for e in ((a, b), (b, c), (c, a)):
+            key = tuple(sorted(int(x) for x in e))
+            edges[key] = edges.get(key, 0) + 1
+    assert set(edges.values()) == {2}
+    np.testing.assert_allclose([v[:, 2].min(), v[:, 2].max()], [-0.05, 0.45], atol=1e-6)
+    np.testing.assert_allclose(np.hypot(v[:, 0], v[:, 1]).max(), 0.05, atol=1e-6)
+    d = np.array([[0, 0, 1], [1, 0, 0], [0, -1, 0], [0, 0, -1], [0.3, 0.4, -0.5]], np.float64)
+    q = rotation_from_z(d)
+    w, x, y, z = q.T
+    # The rotated +Z axis: the third column of each rotation matrix.
+    rz = np.column_stack([2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y)])
+    np.testing.assert_allclose(rz, d / np.linalg.norm(d, axis=1, keepdims=True), atol=1e-9)
+    r = limb_radii(np.array([0.4, 0.1, 0.1]), np.array([False, False, True]), 0.2)
+    np.testing.assert_allclose(r, [0.06, 0.025, 0.2 / 3])

@@ -1,7 +1,8 @@
 """What the browser viewer draws for one frame, on a :class:`~mmrl.viewer.scene.Scene`.
 
 The same shown values as the MP4 renderer (:func:`mmrl.viz.render.recording_frame`): the figure
-as bones colored by side (:func:`mmrl.viz.render.skeleton_bones`, :func:`mmrl.viz.render.joint_sides`),
+as shaded limbs, one capsule per bone sized from its length (:func:`limb_radii`), colored by side
+(:func:`mmrl.viz.render.skeleton_bones`, :func:`mmrl.viz.render.joint_sides`), and a head,
 the target as a ring of the success radius, obstacles as low boxes, the sensor map (occupied
 cells orange), the policy's three trajectory points with their facing directions (green, red
 when inside an obstacle) and the matched frame's three (blue), in ``mmrl play`` the played clip's
@@ -43,6 +44,52 @@ def ring(center_xz, radius: float, n: int = 32) -> np.ndarray:
     return np.stack([p[:-1], p[1:]], 1)
 
 
+def capsule_mesh(length: float, radius: float, sides: int = 10, cap_rings: int = 3):
+    """Vertices (V, 3) and faces (F, 3) of a capsule along +Z from 0 to ``length`` meters: a
+    cylinder of ``radius`` closed by half spheres around both ends."""
+    a = np.linspace(0, 2 * np.pi, sides, endpoint=False)
+    rings = []  # (z, radius) from the bottom pole's first ring to the top pole's last
+    for k in range(cap_rings, 0, -1):
+        t = np.pi / 2 * k / (cap_rings + 1)
+        rings.append((-radius * np.sin(t), radius * np.cos(t)))
+    rings += [(0.0, radius), (length, radius)]
+    for k in range(1, cap_rings + 1):
+        t = np.pi / 2 * k / (cap_rings + 1)
+        rings.append((length + radius * np.sin(t), radius * np.cos(t)))
+    verts = [[0.0, 0.0, -radius]]
+    for z, r in rings:
+        verts += [[r * np.cos(x), r * np.sin(x), z] for x in a]
+    verts.append([0.0, 0.0, length + radius])
+    faces = [[0, 1 + (i + 1) % sides, 1 + i] for i in range(sides)]
+    for k in range(len(rings) - 1):
+        b, c = 1 + k * sides, 1 + (k + 1) * sides
+        for i in range(sides):
+            j = (i + 1) % sides
+            faces += [[b + i, b + j, c + j], [b + i, c + j, c + i]]
+    top, last = len(verts) - 1, 1 + (len(rings) - 1) * sides
+    faces += [[last + i, last + (i + 1) % sides, top] for i in range(sides)]
+    return np.asarray(verts, np.float32), np.asarray(faces, np.uint32)
+
+
+def limb_radii(lengths: np.ndarray, torso: np.ndarray, hip_width: float) -> np.ndarray:
+    """Radius (m) of each bone's capsule: limbs a sixth of their length (2.5 to 6 cm); the torso's
+    bones (hips to head) a third of the hip width, so a short spine segment is not a thread."""
+    r = np.clip(np.asarray(lengths, np.float64) / 6.0, 0.025, 0.06)
+    return np.where(np.asarray(torso, bool), np.clip(hip_width / 3.0, 0.04, 0.12), r)
+
+
+def rotation_from_z(d: np.ndarray) -> np.ndarray:
+    """(N, 4) unit quaternions (w, x, y, z) turning +Z onto each of the (N, 3) directions."""
+    d = np.asarray(d, np.float64)
+    n = np.linalg.norm(d, axis=1, keepdims=True)
+    d = np.where(n > 1e-9, d / np.maximum(n, 1e-9), [0.0, 0.0, 1.0])
+    w = 1.0 + d[:, 2]
+    q = np.column_stack([w, -d[:, 1], d[:, 0], np.zeros(len(d))])  # (1 + z.d, z x d)
+    flip = w < 1e-6  # straight down: half a turn about X
+    q[flip] = [0.0, 1.0, 0.0, 0.0]
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
 def box_mesh(corners: np.ndarray, height: float = OBSTACLE_HEIGHT):
     """Vertices (8n, 3) and faces (10n, 3) of boxes ``height`` m high over (n, 4, 2) ground corners
     (sides and top; the bottom lies on the ground)."""
@@ -70,16 +117,44 @@ class Painter:
         self.bone_colors = np.array([SIDE_COLORS[side[j]] for j, _ in self.bones], np.float32).reshape(-1, 3)
         names = [n.lower() for n in joint_names]
         self.head = next((j for j, n in enumerate(names) if "head" in n), None)
+        self.parents = np.asarray(parents, np.int64)
+        self.names = names
+        self.limbs: Optional[np.ndarray] = None  # per bone (length, radius), from the first pose shown
         self.feet = None if feet is None else np.asarray(feet, np.int64)
         self.success_radius = float(success_radius)
 
+    def _limb_sizes(self, p: np.ndarray) -> np.ndarray:
+        """(B, 2) length and radius of each bone's capsule, from the first pose shown (bone lengths
+        do not change: the skeleton is rigid, and leg IK keeps them)."""
+        lengths = np.linalg.norm(p[self.bones[:, 0]] - p[self.bones[:, 1]], axis=1)
+        torso_joints = set()
+        j = self.head
+        while j is not None and j >= 0:  # the chain from the head up to the root
+            torso_joints.add(int(j))
+            j = int(self.parents[j]) if self.parents[j] >= 0 else None
+        torso = np.array([int(a) in torso_joints and int(b) in torso_joints for a, b in self.bones], bool)
+        legs = [j for j, n in enumerate(self.names) if ("upleg" in n or "thigh" in n or "upperleg" in n)]
+        hip_width = float(np.linalg.norm(p[legs[0]] - p[legs[1]])) if len(legs) >= 2 else 0.2
+        return np.column_stack([lengths, limb_radii(lengths, torso, hip_width)])
+
     def figure(self, positions: np.ndarray) -> None:
-        p = np.asarray(positions, np.float32)
-        bones = np.stack([p[self.bones[:, 0]], p[self.bones[:, 1]]], 1)
-        self.scene.lines(self.root + "/figure/bones", bones, self.bone_colors, thickness=0.045)
+        """The body as one shaded capsule per bone (created once, then only moved), and the head."""
+        p = np.asarray(positions, np.float64)
+        if self.limbs is None:
+            self.limbs = self._limb_sizes(p)
+            for b, (length, radius) in enumerate(self.limbs):
+                v, f = capsule_mesh(float(length), float(radius))
+                self.scene.body_part(f"{self.root}/figure/limb{b}", v, f, self.bone_colors[b])
+            if self.head is not None:
+                size = float(np.median(self.limbs[:, 1])) * 2.2
+                v, f = capsule_mesh(size * 0.4, size)
+                self.scene.body_part(f"{self.root}/figure/head", v, f, (0.8, 0.78, 0.74))
+        start, end = p[self.bones[:, 1]], p[self.bones[:, 0]]  # parent -> joint
+        q = rotation_from_z(end - start)
+        for b in range(len(self.bones)):
+            self.scene.move(f"{self.root}/figure/limb{b}", start[b], q[b])
         if self.head is not None:
-            head = p[self.head][None] + [0, 0.06, 0]
-            self.scene.points(self.root + "/figure/head", head, (0.7, 0.7, 0.72), size=0.16)
+            self.scene.move(f"{self.root}/figure/head", p[self.head] + [0, 0.05, 0], (1.0, 0.0, 0.0, 0.0))
 
     def contacts(self, positions: np.ndarray, contacts: Optional[np.ndarray]) -> None:
         if self.feet is None or contacts is None:

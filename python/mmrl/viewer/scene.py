@@ -206,6 +206,24 @@ class Scene:
                                                    flat_shading=True, side="double")
         self._nodes[name] = ("mesh", handle, f.shape[0])
 
+    def body_part(self, name: str, vertices: np.ndarray, faces: np.ndarray, color) -> None:
+        """A smooth-shaded mesh in its own frame (vertices (V, 3) meters, faces (F, 3)), placed
+        later by :meth:`move`: the limbs of the figure, sent once."""
+        self.remove(name)
+        rgb = tuple(int(255 * c) for c in color)
+        handle = self.server.scene.add_mesh_simple(name, np.asarray(vertices, np.float32),
+                                                   np.asarray(faces, np.uint32), color=rgb, flat_shading=False)
+        self._nodes[name] = ("part", handle, 0)
+
+    def move(self, name: str, position: Sequence[float], wxyz: Sequence[float]) -> None:
+        """Places a node made by :meth:`body_part`: its origin at ``position`` (world meters),
+        turned by the unit quaternion ``wxyz``."""
+        node = self._nodes.get(name)
+        if node is None:
+            raise KeyError(f"no scene node {name!r}")
+        node[1].position = tuple(float(v) for v in position)
+        node[1].wxyz = tuple(float(v) for v in wxyz)
+
     def frame(self, name: str, position: Sequence[float]) -> None:
         """A parent node at ``position`` (world meters): its children move with it."""
         node = self._nodes.get(name)
