@@ -39,7 +39,7 @@ def controller(tmp_path_factory):
     return path
 
 
-def reference_trace(path, characters, decisions):
+def reference_trace(path, characters, decisions, request=""):
     """The example's loop through the binding (the same start frames, origins and target rule)."""
     c = _core.RuntimeController.load(str(path))
     db = mmrl.default_database()
@@ -50,6 +50,8 @@ def reference_trace(path, characters, decisions):
         origin = np.array([2.0 * (i % 8), 2.0 * (i // 8)], np.float32)
         ch = _core.RuntimeCharacter(c, float(origin[0]), float(origin[1]), 0.0, int(valid[(i * 97) % len(valid)]))
         ch.set_target(*(origin + np.float32(TARGETS[0])))
+        if request:
+            ch.set_request(request)
         chars.append([ch, origin, 0])
     for _ in range(decisions):
         for i, entry in enumerate(chars):
@@ -91,6 +93,24 @@ def test_example_writes_the_play_trace(controller, tmp_path):
         session.step()
     session.close()
     assert set(lines[0]) == set(json.loads(play.read_text().splitlines()[0])) | {"character"}
+
+
+def test_example_keeps_to_a_request(controller, tmp_path):
+    trace = tmp_path / "walk.jsonl"
+    targets = ";".join(f"{x},{z}" for x, z in TARGETS)
+    done = subprocess.run([str(example_binary()), str(controller), "--characters", "2", "--decisions", "100",
+                           "--targets", targets, "--request", "gait=run", "--trace", str(trace)],
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(line) for line in trace.read_text().splitlines()]
+    ref = reference_trace(controller, 2, 100, request="gait=run")
+    assert [(x["character"], x["frame"]) for x in lines] == [(x["character"], x["frame"]) for x in ref]
+    db = mmrl.default_database()
+    run = db.clip_tags[:, db.tag_names.index("gait=run")]
+    assert run[db.frame_clip[[x["frame"] for x in lines]]].all()
+    bad = subprocess.run([str(example_binary()), str(controller), "--request", "gait=fly"], capture_output=True,
+                         text=True, timeout=60)
+    assert bad.returncode == 2 and "no tag 'gait=fly'" in bad.stderr and "gait=run|walk" in bad.stderr
 
 
 def test_example_refuses_a_bad_file_with_one_line(tmp_path):

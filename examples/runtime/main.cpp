@@ -11,7 +11,8 @@
 // within the task's success_radius of its target moves it on to the next (the list repeats).
 //
 // usage: mmrl_runtime_example CONTROLLER [--characters N] [--decisions D] [--targets "x,z;x,z;..."]
-//                             [--trace FILE]
+//                             [--trace FILE] [--request "style=elderly"]
+// --request: every character keeps to the clips carrying these tags (docs/styles.md).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -27,7 +28,7 @@
 namespace {
 
 struct Options {
-  std::string controller, trace;
+  std::string controller, trace, request;
   int characters = 1;
   long decisions = 100;
   std::vector<std::pair<float, float>> targets = {{0.0f, 4.0f}, {4.0f, 4.0f}, {4.0f, -2.0f}, {-3.0f, 0.0f}};
@@ -61,6 +62,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--decisions") o.decisions = std::stol(value());
     else if (a == "--targets") o.targets = parse_targets(value());
     else if (a == "--trace") o.trace = value();
+    else if (a == "--request") o.request = value();
     else if (!a.empty() && a[0] == '-') throw std::invalid_argument("unknown option " + a);
     else if (o.controller.empty()) o.controller = a;
     else throw std::invalid_argument("one controller file only");
@@ -95,6 +97,7 @@ int run(const Options& o) {
     chars.push_back(std::make_unique<mmrl::RuntimeCharacter>(controller, origin[i].first, origin[i].second, 0.0f,
                                                              valid[(static_cast<size_t>(i) * 97) % valid.size()]));
     chars[i]->set_target(origin[i].first + o.targets[0].first, origin[i].second + o.targets[0].second);
+    if (!o.request.empty()) chars[i]->set_request(o.request);
   }
   std::unique_ptr<FILE, int (*)(FILE*)> trace(o.trace.empty() ? nullptr : std::fopen(o.trace.c_str(), "w"),
                                               &std::fclose);
