@@ -6,7 +6,7 @@
 ``all.npz`` is ``mmrl db build ../shared/data/bandai-namco-2 -o all.npz`` (the Bandai-Namco clips
 are tagged style, content and gait automatically). The bench:
 
-1. trains one policy ``mmrl train plane --db all.npz --tags style,gait --seconds S`` (reused if
+1. trains one policy ``mmrl train plane --db all.npz --tags style --seconds S`` (reused if
    OUT/multi exists);
 2. evaluates it per request, ``style=S`` and ``style=S & gait=walk`` for each of the seven styles,
    on the same episodes (``--episodes``, evaluation seed ``--eval-seed``): success, time to
@@ -166,11 +166,13 @@ def main() -> None:
     p.add_argument("--db", required=True, help="all shared data, built by 'mmrl db build' (tagged)")
     p.add_argument("--out", default="runs/styles")
     p.add_argument("--seconds", type=float, default=180.0, help="the multi-style policy's training budget")
-    p.add_argument("--tags", default="style,gait", help="the groups the policy is conditioned on")
+    p.add_argument("--tags", default="style", help="the groups the policy is conditioned on")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--eval-seed", type=int, default=1)
     p.add_argument("--no-specialists", action="store_true")
+    p.add_argument("--data", default=None, help="the shared data folder (DATA/<style>/*.bvh), when the database's "
+                   "clip paths do not resolve from here")
     p.add_argument("--switch-seconds", type=float, default=2.0)
     p.add_argument("--figure", default="docs/styles.png")
     args = p.parse_args()
@@ -222,6 +224,8 @@ def main() -> None:
             clips = [n for n, on in zip(db.clip_names, db.clip_tags[:, db.tag_names.index(f"style={style}")]) if on]
             sdb_path = out / f"only-{style}.npz"
             if not sdb_path.exists():
+                if args.data:  # the clips again from where they are now (a database keeps the paths it was built from)
+                    clips = [str(Path(args.data) / style / Path(c).name) for c in clips]
                 sdb = mmrl.Database.from_bvh(clips)
                 sdb.save(sdb_path)
             sdb = mmrl.Database.load(sdb_path)

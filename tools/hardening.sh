@@ -23,7 +23,7 @@ tsan_build=${HARDENING_TSAN_BUILD:-build/hardening-tsan}
 # The extension's tests that drive C++ code (parsing, the database, the search, both envs,
 # the controller, the runtime loader, threads, the fuzz regressions) for the ci subset.
 PY_SUBSET="test_bvh.py test_database.py test_core_envs.py test_search.py test_obstacles.py test_controller.py
-           test_runtime_file.py test_threads.py test_fuzz_regressions.py test_import_axes_fps.py"
+           test_runtime_file.py test_threads.py test_fuzz_regressions.py test_import_axes_fps.py test_capi.py"
 
 # Sanitizer settings. LeakSanitizer runs at the exit of every C++ test process; a UBSan
 # finding aborts (the builds also pass -fno-sanitize-recover).
@@ -59,7 +59,7 @@ step_asan() {
 # would report those (the C++ tests above check leaks).
 step_asan_python() {
   [ -f "$asan_build/CMakeCache.txt" ] || step_asan
-  cmake --build "$asan_build" -j"$jobs" --target _core >/dev/null
+  cmake --build "$asan_build" -j"$jobs" --target _core mmrl_runtime_c >/dev/null
   local pkg libasan files
   pkg=$(pwd)/$asan_build/pkg
   rm -rf "$pkg" && mkdir -p "$pkg"
@@ -71,7 +71,8 @@ step_asan_python() {
   libasan="$(gcc -print-file-name=libasan.so) $(gcc -print-file-name=libstdc++.so.6)"
   files=$PY_SUBSET
   [ "$mode" = full ] && files=.
-  (export PYTHONPATH=$pkg LD_PRELOAD="$libasan"
+  # test_capi.py loads the C interface's ASan build (every call and error path under ASan).
+  (export PYTHONPATH=$pkg LD_PRELOAD="$libasan" MMRL_CAPI_LIB=$(pwd)/$asan_build/libmmrl_runtime_c.so
    export ASAN_OPTIONS=detect_leaks=0:alloc_dealloc_mismatch=0:detect_odr_violation=0
    cd tests
    python -c "import mmrl; assert mmrl.__file__.startswith('$pkg'), mmrl.__file__"

@@ -112,8 +112,9 @@ ControllerFile ControllerFile::parse(std::vector<uint8_t> bytes, const std::stri
   if (endian != kControllerEndianMarker) cf.fail("bad endianness marker");
   const uint32_t version = load_le<uint32_t>(d + 8);
   if (version != kControllerVersion)
-    cf.fail("controller file version " + std::to_string(version) + ", this runtime reads version " +
-            std::to_string(kControllerVersion) + "; export it again with 'mmrl export'");
+    throw ControllerVersionError(cf.path() + ": controller file version " + std::to_string(version) +
+                                 ", this runtime reads version " + std::to_string(kControllerVersion) +
+                                 "; export it again with 'mmrl export'");
   if (crc32(d, 44) != load_le<uint32_t>(d + 44)) cf.fail("corrupt header (checksum mismatch)");
   for (uint32_t k = 48; k < kControllerHeaderSize; ++k)
     if (d[k] != 0) cf.fail("corrupt header (reserved bytes are not zero)");

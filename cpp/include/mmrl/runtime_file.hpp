@@ -20,6 +20,11 @@ class ControllerFileError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+// A well-formed file of another format version (the C interface reports it apart).
+class ControllerVersionError : public ControllerFileError {
+ public:
+  using ControllerFileError::ControllerFileError;
+};
 
 constexpr char kControllerMagic[9] = "MMRLCTRL";
 constexpr uint32_t kControllerVersion = 1;
