@@ -155,3 +155,16 @@ def test_obstacles_take_requests_too():
         obs, *_ = env.step(joy.act(obs))
         assert run[db.frame_clip[env.current_frames()[0]]]
         np.testing.assert_array_equal(obs[0, -2:], [1, 0])
+
+
+def test_the_default_network_takes_other_hidden_sizes(tmp_path):
+    out = tmp_path / "wide"
+    assert main(["train", "plane", "--steps", "2048", "--set", "hidden=48,24", "--out", str(out), "--no-progress"]) == 0
+    policy = mmrl.load_policy(out / "latest.pt")
+    widths = [m.out_features for m in policy.model.actor if hasattr(m, "out_features")]
+    assert widths == [48, 24, 12]
+    path = tmp_path / "wide.mmrl"
+    assert main(["export", str(out), "-o", str(path)]) == 0  # the runtime reads any dense widths
+    ch = _core.RuntimeCharacter(_core.RuntimeController.load(str(path)), 0.0, 0.0, 0.0)
+    obs = np.asarray(ch.observe(), np.float32)
+    np.testing.assert_allclose(_core.RuntimeController.load(str(path)).act(obs), policy.act(obs[None])[0], atol=1e-5)

@@ -210,6 +210,10 @@ class PPOConfig:
     """Rewrite ``latest.pt`` whenever this many env steps passed since the last
     save (and always at the end of training)."""
 
+    hidden: tuple[int, ...] = (32, 32)
+    """Hidden layer sizes of the default network (``PlaneActorCritic``, tanh; tasks with their
+    own network ignore it). A policy conditioned on many requests (docs/styles.md) may want more."""
+
     snapshot_steps: tuple[int, ...] = ()
     """Also keep ``snapshot_<N>.pt`` the first time the global step reaches each
     N, e.g. (20_000, 100_000, 533_000, 1_000_000) for the paper's Figure 4."""
@@ -220,6 +224,9 @@ class PPOConfig:
         if self.reward_norm not in ("scale", "value", "none"):
             raise ValueError(f"PPOConfig: reward_norm must be 'scale', 'value' or 'none', got {self.reward_norm!r}")
         self.snapshot_steps = tuple(int(s) for s in self.snapshot_steps)
+        self.hidden = tuple(int(s) for s in self.hidden)
+        if not self.hidden or min(self.hidden) < 1:
+            raise ValueError(f"PPOConfig: hidden must be one or more positive layer sizes, got {self.hidden}")
         if self.obs_norm_exclude is not None:
             self.obs_norm_exclude = (int(self.obs_norm_exclude[0]), int(self.obs_norm_exclude[1]))
 
@@ -336,7 +343,7 @@ def _make_learner(envs: gym.vector.VectorEnv, cfg: PPOConfig, policy_factory: Op
 
     if policy_factory is None:
         from .networks import PlaneActorCritic
-        model = PlaneActorCritic(obs_dim, act_dim, init_log_std=cfg.init_log_std).to(device)
+        model = PlaneActorCritic(obs_dim, act_dim, hidden=cfg.hidden, init_log_std=cfg.init_log_std).to(device)
     else:
         model = policy_factory(obs_dim, act_dim).to(device)
     # The fused Adam kernel (CPU and CUDA, torch >= 2.4) is ~7x cheaper per step
