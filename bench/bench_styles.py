@@ -219,7 +219,6 @@ def main() -> None:
             result["lines"][req] = line
             print(f"{req}: {json.dumps(row)}", flush=True)
     if not args.no_specialists:
-        base = config.replace(request_groups="")
         for style in styles:
             clips = [n for n, on in zip(db.clip_names, db.clip_tags[:, db.tag_names.index(f"style={style}")]) if on]
             sdb_path = out / f"only-{style}.npz"

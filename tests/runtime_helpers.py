@@ -54,3 +54,21 @@ def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0
     out["targets_reached"] = t
     out["py_matches"], out["rt_matches"] = np.array(out["py_matches"]), np.array(out["rt_matches"])
     return out
+
+
+def built_artifact(env_var: str, pattern: str, what: str):
+    """A file CMake builds (the runtime example, the C interface's library): $env_var, else
+    build/*/<pattern> beside the checkout. Missing: a failure in CI, a skip elsewhere."""
+    import os
+    from pathlib import Path
+
+    import pytest
+
+    root = Path(__file__).resolve().parents[1]
+    env = os.environ.get(env_var)
+    for path in ([Path(env)] if env else sorted(root.glob(f"build/*/{pattern}"))):
+        if path.is_file():
+            return path
+    if os.environ.get("CI"):
+        pytest.fail(f"{pattern} is not built ({what})")
+    pytest.skip(f"{pattern} is not built; build it with cmake ({what})")

@@ -5,7 +5,6 @@ symbols. CI builds the library (.ci/run's cmake build) and runs this file again 
 build (tools/hardening.sh, $MMRL_CAPI_LIB); elsewhere the tests look in build/*/ and skip if it is
 not built."""
 import ctypes as C
-import os
 import shutil
 import subprocess
 import threading
@@ -19,10 +18,9 @@ import mmrl
 from mmrl import _core
 from mmrl.export.runtime_export import write_controller
 from mmrl.tasks.plane import PlaneConfig
-from runtime_helpers import drive_both
+from runtime_helpers import built_artifact, drive_both
 from test_runtime import random_plane_policy
 
-ROOT = Path(__file__).resolve().parents[1]
 OK, INVALID, FILE, VERSION, NULL, SMALL = 0, 1, 2, 3, 4, 5
 
 
@@ -33,14 +31,7 @@ class Decision(C.Structure):
 
 
 def library_path() -> Path:
-    env = os.environ.get("MMRL_CAPI_LIB")
-    found = [Path(env)] if env else sorted(ROOT.glob("build/*/libmmrl_runtime_c.so"))
-    for path in found:
-        if path.is_file():
-            return path
-    if os.environ.get("CI"):
-        pytest.fail("libmmrl_runtime_c is not built (cmake builds it with MMRL_BUILD_CAPI=ON)")
-    pytest.skip("libmmrl_runtime_c is not built; build it with cmake (MMRL_BUILD_CAPI=ON)")
+    return built_artifact("MMRL_CAPI_LIB", "libmmrl_runtime_c.so", "MMRL_BUILD_CAPI=ON")
 
 
 @pytest.fixture(scope="module")

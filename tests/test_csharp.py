@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 import mmrl
-from mmrl import _core
 from mmrl.export.runtime_export import write_controller
 from mmrl.tasks.plane import PlaneConfig
 from test_capi import library_path

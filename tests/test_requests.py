@@ -3,8 +3,6 @@
 ONNX graph's request input, ``mmrl play``'s live switch, the runtime file's request groups and the
 moving-obstacles task with a request. On the package's synthetic data (tags content and gait)."""
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -15,7 +13,7 @@ from mmrl.cli import main
 from mmrl.export.runtime_export import read_controller
 from mmrl.rl.policies import JoystickPolicy
 from mmrl.runs import RunDir
-from mmrl.tasks.plane import PlaneConfig, PlaneVectorEnv
+from mmrl.tasks.plane import PlaneVectorEnv
 from runtime_helpers import drive_both
 
 

@@ -3,7 +3,6 @@
 driven through the runtime's binding. CI builds it (.ci/run); elsewhere the test looks in
 build/*/ or $MMRL_RUNTIME_EXAMPLE and skips if it is not built."""
 import json
-import os
 import subprocess
 from pathlib import Path
 
@@ -15,21 +14,14 @@ from mmrl import _core
 from mmrl.export.runtime_export import write_controller
 from mmrl.tasks.plane import PlaneConfig
 from mmrl.viewer.live import LiveSession
+from runtime_helpers import built_artifact
 from test_runtime import random_plane_policy
 
-ROOT = Path(__file__).resolve().parents[1]
 TARGETS = [(0.0, 3.0), (3.0, 3.0), (3.0, -2.0), (-2.0, 0.0)]
 
 
 def example_binary() -> Path:
-    env = os.environ.get("MMRL_RUNTIME_EXAMPLE")
-    found = [Path(env)] if env else sorted(ROOT.glob("build/*/mmrl_runtime_example"))
-    for path in found:
-        if path.is_file():
-            return path
-    if os.environ.get("CI"):
-        pytest.fail("mmrl_runtime_example is not built (cmake builds it with MMRL_BUILD_EXAMPLES=ON)")
-    pytest.skip("mmrl_runtime_example is not built; build it with cmake (MMRL_BUILD_EXAMPLES=ON)")
+    return built_artifact("MMRL_RUNTIME_EXAMPLE", "mmrl_runtime_example", "MMRL_BUILD_EXAMPLES=ON")
 
 
 @pytest.fixture(scope="module")

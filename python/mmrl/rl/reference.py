@@ -62,18 +62,23 @@ def joystick_line(task, db: Database, *, speeds: Optional[Sequence[float]] = Non
     return rows
 
 
+def _read_line(line: Sequence[Dict[str, Any]], by: str, at: Optional[float], key: str) -> Optional[float]:
+    """The line's ``key`` at ``at`` on its ``by`` axis: linear between the joysticks around it,
+    the end values outside; None when ``at`` or the joysticks' values are missing."""
+    pts = sorted((r[by], r[key]) for r in line if r.get(by) is not None and r.get(key) is not None)
+    if not pts or at is None:
+        return None
+    x = np.array([p[0] for p in pts], np.float64)
+    v = np.array([p[1] for p in pts], np.float64)
+    return float(np.interp(float(at), x, v))  # np.interp holds the end values outside
+
+
 def line_value(line: Sequence[Dict[str, Any]], time_to_target_s: Optional[float],
                key: str = "foot_sliding_ik_off_cm_per_s") -> Optional[float]:
     """The line's ``key`` at ``time_to_target_s``: linear between the joysticks around that time,
     the fastest one's below the fastest time, the slowest one's above the slowest; None when no
     joystick reached a target or the time is None."""
-    pts = sorted((r["mean_time_to_target_s"], r[key]) for r in line
-                 if r.get("mean_time_to_target_s") is not None and r.get(key) is not None)
-    if not pts or time_to_target_s is None:
-        return None
-    t = np.array([p[0] for p in pts], np.float64)
-    v = np.array([p[1] for p in pts], np.float64)
-    return float(np.interp(float(time_to_target_s), t, v))  # np.interp holds the end values outside
+    return _read_line(line, "mean_time_to_target_s", time_to_target_s, key)
 
 
 def line_value_at_speed(line: Sequence[Dict[str, Any]], speed_m_per_s: Optional[float],
@@ -81,13 +86,7 @@ def line_value_at_speed(line: Sequence[Dict[str, Any]], speed_m_per_s: Optional[
     """The line's ``key`` at a mean root speed (m/s): linear between the joysticks around it by
     their *measured* mean speeds over the same episodes, the end values outside; None when the
     speed or the joysticks' speeds are missing."""
-    pts = sorted((r["mean_speed_m_per_s"], r[key]) for r in line
-                 if r.get("mean_speed_m_per_s") is not None and r.get(key) is not None)
-    if not pts or speed_m_per_s is None:
-        return None
-    s = np.array([p[0] for p in pts], np.float64)
-    v = np.array([p[1] for p in pts], np.float64)
-    return float(np.interp(float(speed_m_per_s), s, v))
+    return _read_line(line, "mean_speed_m_per_s", speed_m_per_s, key)
 
 
 def against_line(result: Dict[str, Any], line: Sequence[Dict[str, Any]]) -> Dict[str, Any]:
