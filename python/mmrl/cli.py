@@ -12,7 +12,8 @@ from typing import List, Optional
 # Modules that contribute subcommands, in help order. A module that is missing (a partial
 # install) is skipped rather than breaking the whole command line.
 COMMAND_MODULES = ["mmrl.commands.db", "mmrl.motion.data", "mmrl.commands.train", "mmrl.commands.run",
-                   "mmrl.commands.export", "mmrl.commands.view"]
+                   "mmrl.commands.export", "mmrl.commands.view",
+                   "mmrl.commands.compress"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -56,8 +57,9 @@ def user_errors() -> tuple:
     from .motion.database import DatabaseFileError
     from .errors import InputError
     from .rl.ppo import CheckpointError
+    from .compress.train import CompressedFileError
 
-    return (InputError, BVHError, JointRoleError, DatabaseFileError, CheckpointError, ChecksumError, DownloadError,
+    return (InputError, CompressedFileError, BVHError, JointRoleError, DatabaseFileError, CheckpointError, ChecksumError, DownloadError,
             FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError, PermissionError)
 
 

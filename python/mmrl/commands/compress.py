@@ -1,0 +1,70 @@
+"""``mmrl compress``: train the networks of a compressed controller (learned motion matching)."""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ..errors import InputError
+from .common import add_data_options, database_from_args, split_overrides, apply_values
+
+
+def register_cli(sub) -> None:
+    c = sub.add_parser("compress", help="train a compressed controller's networks from a database or a run "
+                       "(learned motion matching; docs/compressed.md)")
+    c.add_argument("source", nargs="?", metavar="RUN_OR_DB",
+                   help="a training run directory or a database .npz (or use --db / --data; default: synthetic)")
+    add_data_options(c)
+    c.add_argument("-o", "--output", required=True, help="output compressed.pt (metrics beside it)")
+    c.add_argument("--seconds", type=float, default=None, help="wall-clock budget (default: --iterations only)")
+    c.add_argument("--iterations", type=int, default=None, help="iterations (default 50,000)")
+    c.add_argument("--resume", action="store_true", help="continue the training saved in OUTPUT")
+    c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--device", default="auto", help="torch device: auto, cpu, cuda")
+    c.add_argument("--no-progress", action="store_true")
+    c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a CompressConfig field, e.g. --set latent=16 --set hidden=256,256")
+    c.set_defaults(func=cmd_compress)
+
+
+def _database(args):
+    from ..motion.database import Database
+    from ..runs import RunDir
+
+    if args.source is None:
+        return database_from_args(args)
+    if args.db or args.data:
+        raise InputError("compress: give RUN_OR_DB or --db/--data, not both")
+    p = Path(args.source)
+    if p.is_dir():
+        return RunDir(p).database()
+    if p.suffix == ".npz":
+        return Database.load(p)
+    raise InputError(f"{p}: expected a run directory or a database .npz")
+
+
+def cmd_compress(args: argparse.Namespace) -> int:
+    from ..compress.train import CompressConfig, load_compressed, train_compressed
+
+    db = _database(args)
+    out = Path(args.output)
+    cfg = CompressConfig(seed=args.seed, device=args.device)
+    if args.resume:
+        if not out.is_file():
+            raise InputError(f"--resume: {out} does not exist")
+        saved = load_compressed(out, db)["config"]
+        apply_values(cfg, {k: v for k, v in saved.items() if hasattr(cfg, k)})
+    (over,) = split_overrides(args.set, cfg)
+    apply_values(cfg, over)
+    if args.iterations is not None:
+        if args.iterations < 1:
+            raise InputError("--iterations must be >= 1")
+        cfg.iterations = args.iterations
+    if args.seconds is not None and not args.seconds > 0:
+        raise InputError("--seconds must be positive")
+    if out.exists() and not args.resume:
+        raise InputError(f"{out} exists; pass --resume to continue it, or another -o")
+    res = train_compressed(db, out, cfg, seconds=args.seconds, resume=args.resume, progress=not args.no_progress)
+    held = res.get("holdout_joint_error_cm")
+    print(f"wrote {out}: {res['iteration']} iterations; joint error {res.get('joint_error_cm', float('nan')):.2f} cm "
+          f"on training frames" + ("" if held is None else f", {held:.2f} cm on held-back clips"))
+    return 0
