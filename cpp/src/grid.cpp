@@ -50,6 +50,7 @@ ObstacleField::ObstacleField(int num_envs, const ObstacleFieldConfig& config) : 
         "max_margin >= 0, all finite");
   const size_t slots = static_cast<size_t>(num_envs) * config.num_obstacles;
   count_.assign(num_envs, 0);
+  generation_.assign(num_envs, 0);
   for (auto* v : {&cx_, &cz_, &vx_, &vz_, &hx_, &hz_, &angle_, &cos_, &sin_, &ex_, &ez_}) v->assign(slots, 0.0f);
   stamp_.assign(slots, 0);
   query_id_.assign(num_envs, 0);
@@ -90,6 +91,7 @@ float ObstacleField::distance(int env, int k, float x, float z) const {
 void ObstacleField::spawn(int env, Rng& rng, float max_speed, const ClearDisc* clear, int num_clear) {
   const float h = config_.square_half;
   const int n = config_.num_obstacles;
+  ++generation_[env];
   count_[env] = n;
   for (int k = 0; k < n; ++k) {
     const size_t a = at(env, k);
@@ -134,6 +136,7 @@ void ObstacleField::set(int env, int n, const float* centres, const float* half_
     if (!(half_sizes[2 * k] >= 0 && half_sizes[2 * k] <= side) || !(half_sizes[2 * k + 1] >= 0 && half_sizes[2 * k + 1] <= side))
       throw std::invalid_argument("obstacle half sizes must be in [0, max_side / 2]");
   }
+  ++generation_[env];
   count_[env] = n;
   for (int k = 0; k < n; ++k) {
     const size_t a = at(env, k);
@@ -161,6 +164,7 @@ inline void bounce_step(float& c, float& v, float dt, float h) {
 }  // namespace
 
 void ObstacleField::move(int env, float dt) {
+  ++generation_[env];
   const float h = config_.square_half;
   const size_t b = at(env, 0), e = b + count_[env];
   for (size_t a = b; a < e; ++a) {

@@ -73,6 +73,9 @@ class ObstacleField {
   int num_envs() const { return num_envs_; }
   int capacity() const { return config_.num_obstacles; }
   int count(int env) const { return count_[env]; }
+  // Changes each time env's obstacles change (spawn, set, move): a cache of anything derived
+  // from them (the path filter's prepared obstacles) is still good while it stays the same.
+  uint64_t generation(int env) const { return generation_[env]; }
 
   // Draws env's obstacles (see the header comment): positions uniform in the square,
   // redrawn while they come within any of the clear discs (at most 1000 tries each; an
@@ -129,6 +132,7 @@ class ObstacleField {
   ObstacleFieldConfig config_;
   int num_envs_;
   std::vector<int> count_;
+  std::vector<uint64_t> generation_;
   // Per obstacle slot: centre, velocity, half sizes, angle, cos/sin, world box half extents.
   std::vector<float> cx_, cz_, vx_, vz_, hx_, hz_, angle_, cos_, sin_, ex_, ez_;
   // Grid: cells_ per side over [-grid_half_, grid_half_]^2; per env cell_start_ (cells + 1)

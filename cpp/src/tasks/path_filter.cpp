@@ -37,10 +37,17 @@ void ObstaclePathFilter::init(const Database& db, int capacity, const PathFilter
   scratch_x_.assign(kPathSampleFrames[kPathSamples - 1], 0.0f);
   scratch_z_.assign(kPathSampleFrames[kPathSamples - 1], 0.0f);
   kept_ = 0;
+  prepared_ = false;
 }
 
 void ObstaclePathFilter::prepare(const ObstacleField& field, int env, const RootState& root, bool moving,
                                  float frame_dt) {
+  // The same obstacles seen from the same root: what the last call prepared still holds (with
+  // observe_continuation the observation's test and the next decision's search see one state).
+  const PreparedFor key{&field, env, field.generation(env), root.x, root.z, root.yaw, moving, frame_dt};
+  if (prepared_ && key == prepared_for_) return;
+  prepared_for_ = key;
+  prepared_ = true;
   root_x_ = root.x;
   root_z_ = root.z;
   cos_yaw_ = std::cos(root.yaw);

@@ -82,6 +82,21 @@ class ObstaclePathFilter final : public CandidateFilter {
   int samples_ = 0, capacity_ = 0, kept_ = 0;
   float hit_cost_[kPathSamples] = {};
   float root_x_ = 0, root_z_ = 0, cos_yaw_ = 1, sin_yaw_ = 0;
+  // What the last prepare() was for (prepare skips a call for the same state).
+  struct PreparedFor {
+    const ObstacleField* field = nullptr;
+    int env = -1;
+    uint64_t generation = 0;
+    float x = 0, z = 0, yaw = 0;
+    bool moving = false;
+    float frame_dt = 0;
+    bool operator==(const PreparedFor& o) const {
+      return field == o.field && env == o.env && generation == o.generation && x == o.x && z == o.z &&
+             yaw == o.yaw && moving == o.moving && frame_dt == o.frame_dt;
+    }
+  };
+  PreparedFor prepared_for_;
+  bool prepared_ = false;
   std::vector<float> cx_, cz_;  // samples_ x capacity_, sample-major: kept obstacles' centres
   std::vector<float> ocos_, osin_, hx_, hz_, bound2_;  // per kept obstacle
   std::vector<float> scratch_x_, scratch_z_;           // one obstacle's positions per frame
