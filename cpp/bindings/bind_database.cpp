@@ -185,7 +185,9 @@ void bind_tags(py::module_& m, py::class_<Database>& c) {
         const RequestSelection s = select_request(db, text);
         py::array_t<uint8_t> mask(db.num_clips());
         for (int c = 0; c < db.num_clips(); ++c) mask.mutable_at(c) = s.restricts() ? s.clip_mask[c] : 1;
-        return py::make_tuple(s.request.text, mask, py::array_t<int64_t>(s.valid_frames.size(), s.valid_frames.data()));
+        py::array_t<int64_t> starts(s.num_start_frames());
+        for (int64_t k = 0; k < s.num_start_frames(); ++k) starts.mutable_at(k) = s.start_frame(k);
+        return py::make_tuple(s.request.text, mask, starts);
       },
       py::arg("db"), py::arg("request"),
       "(canonical text, (C,) uint8 clip mask, valid frames) of a request; ValueError when it selects no valid frame.");

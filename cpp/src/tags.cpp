@@ -122,11 +122,38 @@ TagRequest parse_request(const Database& db, const std::string& text) {
   return r;
 }
 
+int64_t RequestSelection::start_frame(int64_t k) const {
+  const size_t c = static_cast<size_t>(std::upper_bound(starts_before.begin() + 1, starts_before.end(), k) -
+                                       (starts_before.begin() + 1));
+  return first_start[c] + (k - starts_before[c]);
+}
+
+namespace {
+
+// Fills the per-clip start runs of s from db.valid over the clips s allows.
+void index_starts(const Database& db, RequestSelection& s) {
+  for (int c = 0; c < db.num_clips(); ++c) {
+    if (s.restricts() && !s.clip_mask[static_cast<size_t>(c)]) continue;
+    int64_t first = -1, count = 0;
+    for (int64_t f = db.clip_ranges[c * 2]; f < db.clip_ranges[c * 2 + 1]; ++f)
+      if (db.valid[f]) {
+        if (first < 0) first = f;
+        if (f != first + count) throw std::logic_error("a clip's valid frames are not one run");
+        ++count;
+      }
+    if (count == 0) continue;
+    s.first_start.push_back(first);
+    s.starts_before.push_back(s.starts_before.back() + count);
+  }
+}
+
+}  // namespace
+
 RequestSelection select_request(const Database& db, const TagRequest& request) {
   RequestSelection s;
   s.request = request;
   if (request.terms.empty()) {
-    s.valid_frames = db.valid_frames;
+    index_starts(db, s);
     return s;
   }
   const size_t C = static_cast<size_t>(db.num_clips()), T = db.tag_names.size();
@@ -140,9 +167,8 @@ RequestSelection select_request(const Database& db, const TagRequest& request) {
     }
     s.clip_mask[c] = ok ? 1 : 0;
   }
-  for (int64_t f : db.valid_frames)
-    if (s.clip_mask[static_cast<size_t>(db.frame_clip[f])]) s.valid_frames.push_back(f);
-  if (s.valid_frames.empty())
+  index_starts(db, s);
+  if (s.num_start_frames() == 0)
     throw std::invalid_argument("request '" + request.text + "' selects no frame that can be matched (no clip carries all of it, "
                                 "or its clips are shorter than the trajectory's second); " + tags_available(db));
   return s;

@@ -45,13 +45,19 @@ struct TagRequest {
 // listing the tags available; a group named twice is an error).
 TagRequest parse_request(const Database& db, const std::string& text);
 
-// A request resolved on a database: the clips it allows and the valid frames of those clips
-// (episode starts). An empty clip mask means every clip.
+// A request resolved on a database: the clips it allows, and the valid frames of those clips
+// (episode starts) kept per clip, O(clips) in memory: a clip's valid frames are one run
+// (Database::index_clips), so the k-th start frame is found from per-clip counts. An empty clip
+// mask means every clip. Every env (and every runtime character) holds one or more of these.
 struct RequestSelection {
   TagRequest request;
-  std::vector<uint8_t> clip_mask;     // C, or empty for every clip
-  std::vector<int64_t> valid_frames;  // ascending
+  std::vector<uint8_t> clip_mask;          // C, or empty for every clip
+  std::vector<int64_t> first_start;        // per allowed clip with valid frames: its first valid frame
+  std::vector<int64_t> starts_before{0};   // per such clip, valid frames before it; last: the total
   bool restricts() const { return !clip_mask.empty(); }
+  int64_t num_start_frames() const { return starts_before.back(); }
+  // The k-th of the valid frames of the allowed clips, ascending (0 <= k < num_start_frames()).
+  int64_t start_frame(int64_t k) const;
 };
 
 // Resolves a request (std::invalid_argument when it selects no valid frame, listing the tags).

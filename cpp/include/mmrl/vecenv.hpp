@@ -131,10 +131,11 @@ inline void draw_target_offset(Rng& rng, float half_extent, float min_target_dis
   } while (std::hypot(*dx, *dz) < min_target_distance);
 }
 
-inline void draw_episode_start(Rng& rng, const std::vector<int64_t>& valid_frames, bool random_heading,
+// starts: the frames to start from (tags.hpp: the valid frames of a request's clips, or of all).
+inline void draw_episode_start(Rng& rng, const RequestSelection& starts, bool random_heading,
                                float half_extent, float min_target_distance, int64_t* frame, RootState* root,
                                float* target_x, float* target_z) {
-  *frame = valid_frames[rng.below(valid_frames.size())];
+  *frame = starts.start_frame(static_cast<int64_t>(rng.below(static_cast<uint64_t>(starts.num_start_frames()))));
   *root = RootState{};
   root->yaw = random_heading ? rng.uniform(-kPi, kPi) : 0.0f;
   draw_target_offset(rng, half_extent, min_target_distance, target_x, target_z);
@@ -329,7 +330,7 @@ class TargetVecEnv {
     clip_filter_ = ClipCostFilter(db, config.clip_costs);
     request_code_ = RequestCode(db, config.request_groups);
     request_mix_ = mmrl::request_mix(db, request_code_, config.request_any);
-    every_clip_.valid_frames = db.valid_frames;
+    every_clip_ = select_request(db, TagRequest{});
     for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
   }
 
@@ -407,7 +408,7 @@ class TargetVecEnv {
   // Draws env i's episode start (frame, root, target in the square of half_extent meters).
   void draw_start(int i, float half_extent) {
     State& s = envs_[i];
-    draw_episode_start(s.rng, request(i).valid_frames, config_.random_heading, half_extent, config_.min_target_distance,
+    draw_episode_start(s.rng, request(i), config_.random_heading, half_extent, config_.min_target_distance,
                        &s.frame, &s.root, &s.target_x, &s.target_z);
   }
 
@@ -431,12 +432,14 @@ class TargetVecEnv {
     envs_[i].request_filter.set(db_, r.clip_mask.data(), clip_filter_.get());
     return &envs_[i].request_filter;
   }
-  // The request code of env i (request_dim() floats) into out.
+  // The request code of env i (request_dim() floats) into out: all 0 without a request.
   void observe_request(int i, float* out) const {
     const State& s = envs_[i];
-    const float* code = s.request_pinned ? s.pinned_code.data()
-                        : s.request_index >= 0 ? request_mix_.codes[static_cast<size_t>(s.request_index)].data()
-                                               : nullptr;
+    const float* code = nullptr;
+    if (s.request_pinned)
+      code = s.pinned_code.data();
+    else if (s.request_index >= 0)
+      code = request_mix_.codes[static_cast<size_t>(s.request_index)].data();
     for (int k = 0; k < request_dim(); ++k) out[k] = code ? code[k] : 0.0f;
   }
   // How the filter's shortlist is drawn (decision.hpp's Shortlist; k = 0: no shortlist, the
@@ -467,7 +470,7 @@ class TargetVecEnv {
   ClipCostFilter clip_filter_;
   RequestCode request_code_;
   RequestMix request_mix_;
-  RequestSelection every_clip_;  // the request of an env without one: every valid frame
+  RequestSelection every_clip_;  // the request of an env without one: every clip
   bool next_step_autoreset_ = false;
   ThreadPool pool_;
 
