@@ -196,19 +196,12 @@ def save_compressed(path, comp, decomp, data: CompressData, cfg: CompressConfig,
 def load_compressed(path, db=None) -> Dict[str, Any]:
     """A compressed file's contents (tensors and plain values only: never unpickles code).
     With ``db``, refuses a file made for another database, naming the difference."""
-    import pickle
-
-    import torch
+    from ..rl.checkpoints import load_plain_torch_file
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such compressed-controller file")
-    try:
-        state = torch.load(path, map_location="cpu", weights_only=True)
-    except pickle.UnpicklingError as e:
-        raise CompressedFileError(f"{path}: refused: not only tensors and plain values ({e})") from None
-    except Exception as e:  # truncated or foreign files raise several types
-        raise CompressedFileError(f"{path}: corrupt or unreadable compressed file ({e})") from None
+    state = load_plain_torch_file(path, CompressedFileError, "{path}: corrupt or unreadable compressed file ({error})")
     if not isinstance(state, dict) or state.get("format") != FORMAT:
         raise CompressedFileError(f"{path}: not an mmrl compressed-controller file")
     if state.get("version") != VERSION:

@@ -25,6 +25,7 @@ from ..io import atomic_open
 from .networks import network_class, registered_networks
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint",
+           "load_plain_torch_file",
            "build_network", "capture_rng_state", "restore_rng_state", "save_due_checkpoints"]
 
 CHECKPOINT_FORMAT = "mmrl-ppo-checkpoint"
@@ -48,22 +49,31 @@ def save_checkpoint(state: dict, path: str | os.PathLike) -> Path:
     return path
 
 
+def load_plain_torch_file(path: Path, error_type: type, unreadable: str, map_location: Any = "cpu") -> Any:
+    """``torch.load(path, weights_only=True)``: tensors and plain values only, never code. A file
+    holding pickled Python objects raises ``error_type`` saying it is refused (naming the object's
+    class); any other failure (corrupt, truncated, foreign) raises ``error_type`` with
+    ``unreadable`` (formatted with ``path`` and ``error``)."""
+    try:
+        return torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as error:
+        if "Weights only load failed" not in str(error):
+            raise error_type(unreadable.format(path=path, error=error)) from error
+        found = re.search(r"Unsupported global: GLOBAL (\S+)", str(error))
+        what = f" ({found.group(1)})" if found else ""
+        raise error_type(f"{path}: refused: it holds pickled Python objects{what}, not only tensors and plain "
+                         f"values; mmrl never unpickles them, since loading them could run code") from None
+    except Exception as error:  # torch raises several types for truncated or foreign files
+        raise error_type(unreadable.format(path=path, error=error)) from error
+
+
 def load_checkpoint(path: str | os.PathLike, map_location: Any = "cpu") -> dict:
     """Load and validate a checkpoint; raise ``CheckpointError`` naming the file otherwise."""
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f"{path}: no such checkpoint file")
-    try:
-        state = torch.load(path, map_location=map_location, weights_only=True)
-    except pickle.UnpicklingError as error:
-        if "Weights only load failed" not in str(error):
-            raise CheckpointError(f"{path}: not a readable checkpoint (corrupt or truncated?): {error}") from error
-        found = re.search(r"Unsupported global: GLOBAL (\S+)", str(error))
-        what = f" ({found.group(1)})" if found else ""
-        raise CheckpointError(f"{path}: refused: it holds pickled Python objects{what}, not only tensors and plain "
-                              f"values; mmrl never unpickles them, since loading them could run code") from None
-    except Exception as error:  # torch raises several types for truncated or foreign files
-        raise CheckpointError(f"{path}: not a readable checkpoint (corrupt or truncated?): {error}") from error
+    state = load_plain_torch_file(path, CheckpointError, "{path}: not a readable checkpoint (corrupt or truncated?): "
+                                  "{error}", map_location)
     if not isinstance(state, dict) or state.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointError(f"{path}: not an mmrl PPO checkpoint")
     if state.get("version") != CHECKPOINT_VERSION:
