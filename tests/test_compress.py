@@ -42,20 +42,28 @@ def test_pose_rows_give_back_the_database_poses(db):
     local = np.stack([c[:, None] * d[..., 0] - s[:, None] * d[..., 2], d[..., 1],
                       s[:, None] * d[..., 0] + c[:, None] * d[..., 2]], -1)
     y = pose_targets(db)
-    assert y.shape == (db.num_frames, 9 * db.num_joints + 3)
+    assert y.shape == (db.num_frames, 9 * db.num_joints + 5)
     fk = _positions(torch.as_tensor(y[frames], dtype=torch.float64), list(db.parents), db.num_joints).numpy()
     np.testing.assert_allclose(fk, local, atol=2e-4)
-    np.testing.assert_array_equal(y[:, -3:], np.asarray(db.root_deltas, np.float32))
+    np.testing.assert_array_equal(y[:, -5:-2], np.asarray(db.root_deltas, np.float32))
+    np.testing.assert_array_equal(y[:, -2:], np.asarray(db.contacts, np.float32))
+
+
+#: Small networks and stages for the tests (the defaults train for an hour).
+QUICK = dict(stepper_iterations=150, projector_iterations=150, stepper_hidden=(64, 64), projector_hidden=(64, 64),
+             stepper_window=8)
 
 
 def test_a_short_training_reproduces_held_back_clips(db, tmp_path):
     torch.set_num_threads(1)
-    cfg = CompressConfig(iterations=600, hidden=(128, 128), latent=16, holdout_every=4, checkpoint_every=300)
+    cfg = CompressConfig(iterations=600, hidden=(128, 128), latent=16, holdout_every=4, checkpoint_every=300, **QUICK)
     out = tmp_path / "c.pt"
     res = train_compressed(db, out, cfg, progress=False)
-    assert res["iteration"] == 600 and (tmp_path / "c-metrics" / "metrics.csv").is_file()
+    assert res["stage"] == "done" and (tmp_path / "c-metrics" / "metrics.csv").is_file()
     assert res["holdout_joint_error_cm"] < HOLDOUT_TOLERANCE_CM
     state = load_compressed(out, db)
+    assert (state["decompressor_iterations"], state["stepper_iterations"], state["projector_iterations"]) == \
+        (600, 150, 150)
     data = CompressData.from_database(db, cfg.holdout_every)
     comp, decomp, _ = networks_from(state, data.y.shape[1])
     frames = data.holdout_frames
@@ -67,16 +75,36 @@ def test_a_short_training_reproduces_held_back_clips(db, tmp_path):
 
 
 def test_seeded_and_resumed_runs_agree(tmp_path):
+    """A run stopped inside the stepper stage (a checkpoint) and resumed ends bit for bit where one
+    that never stopped does: networks, Adam and the sampler's RNG are all in the file."""
     db = mmrl.default_database()
-    cfg = CompressConfig(iterations=400, hidden=(32, 32), latent=8, checkpoint_every=200, batch=64)
+    cfg = CompressConfig(iterations=200, hidden=(32, 32), latent=8, checkpoint_every=50, batch=64,
+                         **{**QUICK, "stepper_iterations": 100, "projector_iterations": 100})
     a, b = tmp_path / "a.pt", tmp_path / "b.pt"
     train_compressed(db, a, cfg, progress=False)
-    half = CompressConfig(**{**cfg.__dict__, "iterations": 200})
-    train_compressed(db, b, half, progress=False)
+    import mmrl.compress.train as train_mod
+
+    calls = {"n": 0}
+    real = train_mod.stepper_losses
+
+    def stop_after_checkpoint(*args, **kwargs):  # a kill right after the stepper's first checkpoint
+        calls["n"] += 1
+        if calls["n"] > 50:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    train_mod.stepper_losses = stop_after_checkpoint
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            train_compressed(db, b, cfg, progress=False)
+    finally:
+        train_mod.stepper_losses = real
+    mid = load_compressed(b)
+    assert (mid["stage"], mid["iteration"]) == ("stepper", 50)
     train_compressed(db, b, cfg, resume=True, progress=False)
     sa, sb = load_compressed(a), load_compressed(b)
-    assert sa["iteration"] == sb["iteration"] == 400
-    for key in ("compressor", "decompressor"):
+    assert sa["stage"] == sb["stage"] == "done"
+    for key in ("compressor", "decompressor", "stepper", "projector"):
         for name, tensor in sa[key].items():
             torch.testing.assert_close(tensor, sb[key][name], rtol=0, atol=0, msg=f"{key}.{name}")
 
@@ -84,7 +112,9 @@ def test_seeded_and_resumed_runs_agree(tmp_path):
 def test_bad_files_are_refused_with_the_reason(tmp_path, capsys):
     db = mmrl.default_database()
     out = tmp_path / "c.pt"
-    assert main(["compress", "-o", str(out), "--iterations", "20", "--set", "hidden=16,16", "--no-progress"]) == 0
+    assert main(["compress", "-o", str(out), "--iterations", "20", "--set", "hidden=16,16", "--no-progress",
+                 "--set", "stepper_iterations=10", "--set", "projector_iterations=10", "--set", "stepper_hidden=16",
+                 "--set", "projector_hidden=16"]) == 0
     assert "held-back clips" in capsys.readouterr().out
     assert main(["compress", "-o", str(out), "--iterations", "20"]) == 2  # it exists: --resume or another -o
     assert "--resume" in capsys.readouterr().err
@@ -112,3 +142,119 @@ def test_bad_files_are_refused_with_the_reason(tmp_path, capsys):
         load_compressed(evil)
     assert "code ran" not in capsys.readouterr().out
     assert main(["compress", str(bad), "-o", str(tmp_path / "x.pt")]) == 2  # not a run or a database
+
+
+# ----------------------------------------------------------------------------- playing it
+@pytest.fixture(scope="module")
+def trained(db, tmp_path_factory):
+    """A small compressed controller of each skeleton, trained to the end."""
+    torch.set_num_threads(1)
+    out = tmp_path_factory.mktemp("compressed") / "c.pt"
+    cfg = CompressConfig(iterations=300, hidden=(64, 64), latent=8, checkpoint_every=1000, **QUICK)
+    train_compressed(db, out, cfg, progress=False)
+    return out
+
+
+def test_the_core_networks_equal_torch(db, trained):
+    from mmrl.compress.model import CompressedController
+
+    cc = CompressedController(trained, db)
+    nets = cc.networks
+    rng = np.random.default_rng(3)
+    s = rng.standard_normal((64, cc.core.state_dim)).astype(np.float32)
+    q = rng.standard_normal((64, 27)).astype(np.float32)
+    with torch.no_grad():
+        z = torch.as_tensor(s[:, 27:]) * torch.as_tensor(cc.z_std) + torch.as_tensor(cc.z_mean)
+        pose = nets["decompressor"](torch.cat([torch.as_tensor(s[:, :27]), z], 1)) * torch.as_tensor(cc.y_std) + \
+            torch.as_tensor(cc.y_mean)
+        step = torch.as_tensor(s) + nets["stepper"](torch.as_tensor(s))
+        proj = nets["projector"](torch.as_tensor(q))
+    np.testing.assert_allclose(cc.decode(s), pose.numpy(), atol=2e-5, rtol=1e-5)
+    np.testing.assert_allclose(cc.core.step(s), step.numpy(), atol=2e-5, rtol=1e-5)
+    np.testing.assert_allclose(cc.core.project(q), proj.numpy(), atol=2e-5, rtol=1e-5)
+    assert cc.core.num_frame_states == db.num_frames
+    assert cc.memory_bytes == 4 * (sum(p.numel() for n in ("decompressor", "stepper", "projector")
+                                       for p in nets[n].parameters()) + 2 * cc.core.pose_dim + 2 * 8)
+
+
+def test_the_full_path_plays_the_projector_and_the_stepper(db, trained):
+    """Each decision against its rule computed here with torch: the continuation unless the
+    projection is closer to the query by more than the transition cost; the rows shown are the
+    chosen state stepped and decoded; the character's root is the env's, frame by frame."""
+    from mmrl.compress.model import CompressedController
+    from mmrl.rl.policies import JoystickPolicy
+    from mmrl.rollout import FullPath, policy_actions
+    from mmrl.tasks import get_task
+
+    cc = CompressedController(trained, db)
+    task = get_task("plane")
+    run = FullPath(task, db, compressed=cc, seed=1, ik=False, foot_locking=False, inertialization_halflife=0.0)
+    pol = JoystickPolicy(db)
+    env = run.env._core
+    # An episode starts from its database frame's state: the frame's features and its
+    # compressor latent, normalized.
+    frame = int(run.env.env_state(0)["frame"])
+    data = CompressData.from_database(db, 0)
+    with torch.no_grad():
+        z = cc.networks["compressor"]((torch.as_tensor(data.y[frame:frame + 1]) - torch.as_tensor(cc.y_mean)) /
+                                      torch.as_tensor(cc.y_std)).numpy()[0]
+    np.testing.assert_array_equal(env.compressed_state(0)[:27], db.normalized_features[frame])
+    np.testing.assert_allclose(env.compressed_state(0)[27:], (z - cc.z_mean) / cc.z_std, atol=1e-5)
+    low, high = run.env.single_action_space.low, run.env.single_action_space.high
+    transitions = 0
+    for _ in range(60):
+        before = env.compressed_state(0).copy()
+        action = policy_actions(pol, run.obs[None]).reshape(-1)
+        query = np.concatenate([before[:15], np.clip(action, low, high)]).astype(np.float32)
+        proj = cc.core.project(query[None])[0]
+        stay, jump = ((query - before[:27]) ** 2).sum(), ((query - proj[:27]) ** 2).sum()
+        out = run.step(action)
+        transition = bool(run.env._step_transitions[0])
+        if abs(stay - jump) > 1e-3:
+            assert transition == (jump < stay), (stay, jump)
+        transitions += transition
+        chosen = env.compressed_chosen(0)
+        np.testing.assert_array_equal(chosen, proj if transition else before)
+        rows, states = [], chosen[None].copy()
+        for _k in range(run.config.frames_per_step + 1):
+            rows.append(cc.decode(states)[0])
+            states = cc.core.step(states)
+        np.testing.assert_allclose(env.compressed_rows(0), np.array(rows), atol=1e-5)
+        if not out["done"]:
+            assert run.root_error()[1] == 0.0  # the character's root is the env's
+            # IK and inertialization off: the joints below the roots show the decoded rotations.
+            J = db.num_joints
+            last = rows[-1][:6 * J].reshape(J, 3, 2)
+            from mmrl.compress.pose import quat_to_matrix
+
+            shown = quat_to_matrix(out["res"].local_rotations[-1])[..., :2]
+            child = [j for j, p in enumerate(db.parents) if p >= 0 and j != db.joint_names.index(db.roles["hips"])]
+            a = last[child] / np.linalg.norm(last[child][..., 0], axis=-1)[..., None, None]
+            np.testing.assert_allclose(shown[child][..., 0], a[..., 0], atol=1e-4)
+    assert transitions > 0
+    rec = run.recording()
+    assert (rec["frames"] == -1).all() and rec["natural_motion"].shape[0] == rec["positions"].shape[0] - 1
+
+
+def test_a_compressed_controller_is_refused_with_the_reason(db, trained, tmp_path):
+    from mmrl.compress.model import CompressedController
+    from mmrl.rollout import FullPath
+    from mmrl.tasks import get_task
+
+    cc = CompressedController(trained, db)
+    with pytest.raises(ValueError, match="keeps to no tags"):
+        FullPath(get_task("plane"), db, compressed=cc, request="gait=walk")
+    with pytest.raises(ValueError, match="does not play compressed controllers"):
+        FullPath(get_task("obstacles"), db, compressed=cc)
+    state = load_compressed(trained)
+    state["stage"], state["iteration"] = "projector", 5
+    partial = tmp_path / "partial.pt"
+    torch.save(state, partial)
+    with pytest.raises(CompressedFileError, match="partial.pt: its training stopped in the projector stage"):
+        CompressedController(partial, db)
+    broken = dict(load_compressed(trained))
+    broken["stepper"] = {k: v[:, :3] if v.ndim == 2 else v for k, v in broken["stepper"].items()}
+    bad = tmp_path / "bad-stepper.pt"
+    torch.save(broken, bad)
+    with pytest.raises(CompressedFileError, match="stepper does not fit"):
+        CompressedController(bad, db)

@@ -76,6 +76,27 @@ void bind_character(py::module_& m) {
           },
           py::arg("match"), py::arg("cost"),
           "Plays a decision made elsewhere (the env's last_step_match): frames match+1 .. match+F, as step does.")
+      .def(
+          "reset_row",
+          [](Character& c, const py::handle& row, float x, float z, float yaw) {
+            auto r = check_array<float>(row, "row", {c.pose_row_dim()});
+            check_finite(r.data(), r.size(), "row");
+            if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw))
+              throw py::value_error("position and yaw must be finite");
+            c.reset_row(r.data(), RootState{x, z, yaw});
+          },
+          py::arg("row"), py::arg("x"), py::arg("z"), py::arg("yaw"),
+          "A compressed controller's start: shows a pose row (9 J + 5) at the world root.")
+      .def(
+          "play_rows",
+          [](Character& c, const py::handle& rows, bool transition, float cost) {
+            auto r = check_array<float>(rows, "rows", {c.options().frames_per_step + 1, c.pose_row_dim()});
+            check_finite(r.data(), r.size(), "rows");
+            py::gil_scoped_release release;
+            c.play_rows(r.data(), transition, cost);
+          },
+          py::arg("rows"), py::arg("transition"), py::arg("cost"),
+          "Plays a compressed controller's decision (the env's compressed_rows): rows 1.. are shown.")
       .def_property_readonly("num_joints", &Character::num_joints)
       .def_property(
           "transition_cost", [](const Character& c) { return c.options().transition_cost; },

@@ -8,6 +8,7 @@
 #include <string>
 #include <type_traits>
 
+#include "bind_compressed.hpp"
 #include "bindings.hpp"
 #include "mmrl/vecenv.hpp"
 #include "py_matcher.hpp"
@@ -204,6 +205,50 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
           },
           py::arg("index"), py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"),
           "Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.")
+      .def(
+          "set_compressed",
+          [](Wrapper& s, PyCompressed* model) {
+            if (model == nullptr) {
+              s.env.set_compressed(nullptr, nullptr);
+              return;
+            }
+            if (model->num_frame_states != s.env.database().num_frames)
+              throw py::value_error("set_compressed: the model has " + std::to_string(model->num_frame_states) +
+                                    " frame states, the database " + std::to_string(s.env.database().num_frames) +
+                                    " frames");
+            s.env.set_compressed(&model->model, model->frame_states.data());
+          },
+          py::arg("model"), py::keep_alive<1, 2>(),
+          "Plays a compressed controller (CompressedModel with the database's frame states) instead of the database, "
+          "from the next episode start (every env restarts its state from its frame now); None: the database again.")
+      .def(
+          "compressed_rows",
+          [](const Wrapper& s, int i) {
+            const int e = checked_env_index(s, i);
+            const CompressedModel* m = s.env.compressed();
+            if (m == nullptr) throw py::value_error("compressed_rows: no compressed controller is set");
+            const py::ssize_t F = s.env.config().frames_per_step + 1, P = m->pose_dim();
+            return py::array_t<float>({F, P}, s.env.compressed_rows(e));
+          },
+          py::arg("index"), "Env i's last decision's pose rows (frames_per_step + 1, pose_dim): row 0 the chosen state.")
+      .def(
+          "compressed_state",
+          [](const Wrapper& s, int i) {
+            const int e = checked_env_index(s, i);
+            const CompressedModel* m = s.env.compressed();
+            if (m == nullptr) throw py::value_error("compressed_state: no compressed controller is set");
+            return py::array_t<float>(m->state_dim(), s.env.compressed_state(e));
+          },
+          py::arg("index"), "Env i's compressed state shown now (state_dim).")
+      .def(
+          "compressed_chosen",
+          [](const Wrapper& s, int i) {
+            const int e = checked_env_index(s, i);
+            const CompressedModel* m = s.env.compressed();
+            if (m == nullptr) throw py::value_error("compressed_chosen: no compressed controller is set");
+            return py::array_t<float>(m->state_dim(), s.env.compressed_chosen(e));
+          },
+          py::arg("index"), "The state env i's last decision chose (the projection or the continuation; state_dim).")
       .def(
           "draw_target_around_root",
           [](Wrapper& s, int i, float half_extent) {

@@ -1,5 +1,6 @@
 // The mmrl._core extension module. Bindings only: convert, check, forward; no logic.
 // Each concept registers itself from its own bind_*.cpp file.
+#include "bind_compressed.hpp"
 #include "bindings.hpp"
 
 PYBIND11_MODULE(_core, m) {
@@ -7,6 +8,7 @@ PYBIND11_MODULE(_core, m) {
   mmrl::bind_bvh(m);
   mmrl::bind_database(m);
   mmrl::bind_search(m);
+  mmrl::bind_compressed(m);
   mmrl::bind_plane(m);
   mmrl::bind_character(m);
   mmrl::bind_obstacles(m);

@@ -1,5 +1,7 @@
 #include "mmrl/character.hpp"
 
+#include "mmrl/compressed.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -18,6 +20,40 @@ inline void store3(const Vec3& v, float* p) {
 inline float smoothstep(float x) { return x * x * (3.0f - 2.0f * x); }
 
 }  // namespace
+
+void database_frame_pose(const Database& db, int64_t f, FramePose& out) {
+  const int J = db.num_joints;
+  if (static_cast<int>(out.rotations.size()) != J) out.resize(J);
+  const size_t o = static_cast<size_t>(f) * J;
+  const float yaw = db.root_yaws[f];
+  const Quat to_local = quat_from_yaw(-yaw);
+  const Vec3 c = load3(&db.root_positions[f * 3]);
+  for (int j = 0; j < J; ++j) {
+    const Quat r = quat_load(&db.bone_rotations[(o + j) * 4]);
+    const Vec3 t = load3(&db.bone_translations[(o + j) * 3]);
+    if (db.skeleton.parents[j] < 0) {
+      out.rotations[j] = (to_local * r).normalized();
+      out.translations[j] = world_to_local_dir(t - c, yaw);
+    } else {
+      out.rotations[j] = r;
+      out.translations[j] = t;
+    }
+  }
+  for (int k = 0; k < 3; ++k) out.root_delta[k] = db.root_deltas[static_cast<size_t>(f) * 3 + k];
+  out.contacts[0] = db.contacts[static_cast<size_t>(f) * 2];
+  out.contacts[1] = db.contacts[static_cast<size_t>(f) * 2 + 1];
+}
+
+void compressed_frame_pose(const float* row, FramePose& out) {
+  const int J = static_cast<int>(out.rotations.size());
+  for (int j = 0; j < J; ++j) {
+    out.rotations[j] = rotation_from_6d(row + 6 * j);
+    out.translations[j] = load3(row + 6 * J + 3 * j);
+  }
+  for (int k = 0; k < 3; ++k) out.root_delta[k] = row[9 * J + k];
+  out.contacts[0] = row[9 * J + 3] > 0.5f;
+  out.contacts[1] = row[9 * J + 4] > 0.5f;
+}
 
 void database_pose_global(const Database& db, int64_t frame, float* positions, float* rotations_scratch) {
   const size_t o = static_cast<size_t>(frame) * db.num_joints;
@@ -52,6 +88,7 @@ Character::Character(const Database& db, const Matcher& matcher, const Character
   for (int j = 0; j < J_; ++j) blended[j] = !above_hips_[j];
   inertializer_.reset(J_, db.roles.hips, blended, options.inertialization_halflife);
   for (BlendPose* p : {&src_, &dst_, &anim_, &shown_, &scratch_}) p->resize(J_);
+  for (FramePose* p : {&fp_a_, &fp_b_, &fp_shown_, &fp_shown_prev_}) p->resize(J_);
   src_vel_.resize(J_);
   dst_vel_.resize(J_);
   loc_t_.assign(J_, Vec3::Zero());
@@ -93,32 +130,38 @@ void Character::reset(int64_t frame, const RootState& root) {
     locked_[s] = released_in_contact_[s] = false;
     lock_weight_[s] = 0;
   }
-  if (options_.poses) show_frame(frame, false);
+  if (options_.poses) show_database_frame(frame, false);
 }
 
-void Character::blend_pose_of(int64_t f, BlendPose& pose) const {
-  const size_t o = static_cast<size_t>(f) * J_;
-  const float* t = &db_.bone_translations[o * 3];
-  const float* r = &db_.bone_rotations[o * 4];
-  for (int j = 0; j < J_; ++j) pose.rotations[j] = quat_load(r + j * 4);
-  // The hips' transform in the database world, then in frame f's character frame.
+void Character::reset_row(const float* row, const RootState& root) {
+  frame_ = -1;
+  root_ = root;
+  last_match_ = -1;
+  last_transition_ = false;
+  inertializer_.clear();
+  for (int s = 0; s < 2; ++s) {
+    locked_[s] = released_in_contact_[s] = false;
+    lock_weight_[s] = 0;
+  }
+  compressed_frame_pose(row, fp_shown_);
+  fp_shown_prev_ = fp_shown_;
+  if (options_.poses) show_frame(fp_shown_, false);
+}
+
+void Character::blend_pose_of(const FramePose& fp, BlendPose& pose) const {
+  for (int j = 0; j < J_; ++j) pose.rotations[j] = fp.rotations[j];
+  // The hips' transform in the frame's character frame (the roots are given in it).
   Vec3 gp = Vec3::Zero();
   Quat gr = Quat::Identity();
   for (int a : hips_chain_) {
-    gp = gp + gr * load3(t + a * 3);
-    gr = gr * pose.rotations[a];
+    gp = gp + gr * fp.translations[a];
+    gr = gr * fp.rotations[a];
   }
-  const float yaw = db_.root_yaws[f];
-  const Vec3 c = load3(&db_.root_positions[f * 3]);
-  pose.hips_position = world_to_local_dir(gp - c, yaw);
-  pose.hips_rotation = (quat_from_yaw(-yaw) * gr).normalized();
+  pose.hips_position = gp;
+  pose.hips_rotation = gr.normalized();
 }
 
-void Character::blend_velocity_of(int64_t f, BlendVelocity& vel) {
-  // Forward difference inside the clip (backward at its last frame).
-  const int clip = db_.frame_clip[f];
-  const bool forward = f + 1 < db_.clip_ranges[clip * 2 + 1];
-  const int64_t a = forward ? f : f - 1, b = forward ? f + 1 : f;
+void Character::blend_velocity(const FramePose& a, const FramePose& b, BlendVelocity& vel) {
   blend_pose_of(a, scratch_);
   // dst_/src_ may be in use by the caller; use anim_ as the second scratch.
   blend_pose_of(b, anim_);
@@ -127,6 +170,16 @@ void Character::blend_velocity_of(int64_t f, BlendVelocity& vel) {
     vel.angular[j] = quat_to_rotation_vector(anim_.rotations[j] * scratch_.rotations[j].conjugate()) * fps;
   vel.hips_angular = quat_to_rotation_vector(anim_.hips_rotation * scratch_.hips_rotation.conjugate()) * fps;
   vel.hips_linear = (anim_.hips_position - scratch_.hips_position) * fps;
+}
+
+void Character::blend_velocity_of(int64_t f, BlendVelocity& vel) {
+  // Forward difference inside the clip (backward at its last frame).
+  const int clip = db_.frame_clip[f];
+  const bool forward = f + 1 < db_.clip_ranges[clip * 2 + 1];
+  const int64_t a = forward ? f : f - 1, b = forward ? f + 1 : f;
+  database_frame_pose(db_, a, fp_a_);
+  database_frame_pose(db_, b, fp_b_);
+  blend_velocity(fp_a_, fp_b_, vel);
 }
 
 void Character::forward_kinematics_joint(int j) {
@@ -172,23 +225,24 @@ void Character::solve_leg(int side, const Vec3& target) {
   forward_kinematics();
 }
 
-void Character::show_frame(int64_t f, bool decay) {
-  blend_pose_of(f, anim_);
+void Character::show_database_frame(int64_t f, bool decay) {
+  database_frame_pose(db_, f, fp_a_);
+  show_frame(fp_a_, decay);
+}
+
+void Character::show_frame(const FramePose& fp, bool decay) {
+  blend_pose_of(fp, anim_);
   if (decay) {
     inertializer_.update(dt_, anim_, shown_);
   } else {
     shown_ = anim_;
   }
-  // World placement: the root joints by W * C_f^-1, the hips at W.
+  // World placement: the root joints and the hips (given in the character frame) by W.
   const Quat world_yaw = quat_from_yaw(root_.yaw);
   const Vec3 world_origin(root_.x, 0.0f, root_.z);
-  const Quat map_rot = quat_from_yaw(root_.yaw - db_.root_yaws[f]);
-  const Vec3 c = load3(&db_.root_positions[f * 3]);
-  const size_t o = static_cast<size_t>(f) * J_;
   const auto& parents = db_.skeleton.parents;
   const int hips = db_.roles.hips;
   for (int j = 0; j < J_; ++j) {
-    const Vec3 t = load3(&db_.bone_translations[(o + j) * 3]);
     const int p = parents[j];
     if (j == hips) {
       const Vec3 gp = world_origin + world_yaw * shown_.hips_position;
@@ -201,10 +255,10 @@ void Character::show_frame(int64_t f, bool decay) {
         loc_t_[j] = glob_r_[p].conjugate() * (gp - glob_t_[p]);
       }
     } else if (p < 0) {
-      loc_t_[j] = world_origin + map_rot * (t - c);
-      loc_r_[j] = (map_rot * shown_.rotations[j]).normalized();
+      loc_t_[j] = world_origin + world_yaw * fp.translations[j];
+      loc_r_[j] = (world_yaw * shown_.rotations[j]).normalized();
     } else {
-      loc_t_[j] = t;
+      loc_t_[j] = fp.translations[j];
       loc_r_[j] = shown_.rotations[j];
     }
     forward_kinematics_joint(j);  // the hips' local transform above needs its parent's global
@@ -213,7 +267,7 @@ void Character::show_frame(int64_t f, bool decay) {
   // The ankles before locking and IK (solve_leg of one side leaves the other ankle alone).
   for (int side = 0; side < 2; ++side) store3(glob_t_[db_.roles.foot[side]], &cur_anim_feet_[side * 3]);
 
-  lock_feet(f, decay);
+  lock_feet(fp, decay);
 
   for (int j = 0; j < J_; ++j) {
     store3(glob_t_[j], &cur_gpos_[j * 3]);
@@ -223,11 +277,11 @@ void Character::show_frame(int64_t f, bool decay) {
   }
 }
 
-// Foot locking and IK on frame f's pose (glob_t_ holds the animated pose; decay false: a reset).
-void Character::lock_feet(int64_t f, bool decay) {
+// Foot locking and IK on a frame's pose (glob_t_ holds the animated pose; decay false: a reset).
+void Character::lock_feet(const FramePose& fp, bool decay) {
   const bool locking = options_.ik && options_.foot_locking;
   for (int side = 0; side < 2; ++side) {
-    const bool contact = db_.contacts[static_cast<size_t>(f) * 2 + side] != 0;
+    const bool contact = fp.contacts[side] != 0;
     const Vec3 animated = glob_t_[db_.roles.foot[side]];
     if (!locking || !decay) {
       locked_[side] = released_in_contact_[side] = false;
@@ -281,38 +335,70 @@ void Character::step(const float* trajectory) {
 void Character::play(int64_t j, float cost) {
   if (j < 0 || j >= db_.num_frames || !db_.valid[j])
     throw std::invalid_argument("play: frame " + std::to_string(j) + " is not a valid match of the database");
+  if (frame_ < 0) throw std::invalid_argument("play: the character plays a compressed controller (play_rows)");
   last_cost_ = cost;
   last_transition_ = (j != frame_);
   last_match_ = j;
   if (options_.poses && last_transition_ && inertializer_.enabled()) {
     blend_velocity_of(frame_, src_vel_);
     blend_velocity_of(j, dst_vel_);
-    blend_pose_of(frame_, src_);
-    blend_pose_of(j, dst_);
+    database_frame_pose(db_, frame_, fp_a_);
+    blend_pose_of(fp_a_, src_);
+    database_frame_pose(db_, j, fp_a_);
+    blend_pose_of(fp_a_, dst_);
     inertializer_.transition(src_, src_vel_, dst_, dst_vel_);
   }
   const int F = options_.frames_per_step;
-  const size_t JJ = static_cast<size_t>(J_);
   for (int k = 0; k < F; ++k) {
     root_advance(root_, &db_.root_deltas[static_cast<size_t>(j + k) * 3]);
     const int64_t f = j + k + 1;
-    played_[k] = f;
-    roots_[k * 3] = root_.x;
-    roots_[k * 3 + 1] = root_.z;
-    roots_[k * 3 + 2] = root_.yaw;
-    contacts_[k * 2] = db_.contacts[f * 2];
-    contacts_[k * 2 + 1] = db_.contacts[f * 2 + 1];
-    if (!options_.poses) continue;
-    show_frame(f, true);
-    lock_w_out_[k * 2] = cur_lock_w_[0];
-    lock_w_out_[k * 2 + 1] = cur_lock_w_[1];
-    std::copy(cur_gpos_.begin(), cur_gpos_.end(), gpos_.begin() + k * JJ * 3);
-    std::copy(cur_lpos_.begin(), cur_lpos_.end(), lpos_.begin() + k * JJ * 3);
-    std::copy(cur_grot_.begin(), cur_grot_.end(), grot_.begin() + k * JJ * 4);
-    std::copy(cur_lrot_.begin(), cur_lrot_.end(), lrot_.begin() + k * JJ * 4);
-    std::copy(cur_anim_feet_, cur_anim_feet_ + 6, anim_feet_.begin() + k * 6);
+    if (options_.poses) show_database_frame(f, true);
+    record_step_frame(k, f, &db_.contacts[f * 2]);
   }
   frame_ = j + F;
+}
+
+void Character::play_rows(const float* rows, bool transition, float cost) {
+  const int F = options_.frames_per_step;
+  const size_t P = static_cast<size_t>(pose_row_dim());
+  last_cost_ = cost;
+  last_transition_ = transition;
+  last_match_ = -1;
+  frame_ = -1;
+  if (options_.poses && transition && inertializer_.enabled()) {
+    blend_velocity(fp_shown_prev_, fp_shown_, src_vel_);  // backward: the frames shown last
+    compressed_frame_pose(rows, fp_a_);
+    compressed_frame_pose(rows + P, fp_b_);
+    blend_velocity(fp_a_, fp_b_, dst_vel_);
+    blend_pose_of(fp_shown_, src_);
+    blend_pose_of(fp_a_, dst_);
+    inertializer_.transition(src_, src_vel_, dst_, dst_vel_);
+  }
+  for (int k = 0; k < F; ++k) {
+    root_advance(root_, rows + k * P + 9 * J_);
+    std::swap(fp_shown_prev_, fp_shown_);
+    compressed_frame_pose(rows + (k + 1) * P, fp_shown_);
+    if (options_.poses) show_frame(fp_shown_, true);
+    record_step_frame(k, -1, fp_shown_.contacts);
+  }
+}
+
+void Character::record_step_frame(int k, int64_t f, const uint8_t* contacts) {
+  const size_t JJ = static_cast<size_t>(J_);
+  played_[k] = f;
+  roots_[k * 3] = root_.x;
+  roots_[k * 3 + 1] = root_.z;
+  roots_[k * 3 + 2] = root_.yaw;
+  contacts_[k * 2] = contacts[0];
+  contacts_[k * 2 + 1] = contacts[1];
+  if (!options_.poses) return;
+  lock_w_out_[k * 2] = cur_lock_w_[0];
+  lock_w_out_[k * 2 + 1] = cur_lock_w_[1];
+  std::copy(cur_gpos_.begin(), cur_gpos_.end(), gpos_.begin() + k * JJ * 3);
+  std::copy(cur_lpos_.begin(), cur_lpos_.end(), lpos_.begin() + k * JJ * 3);
+  std::copy(cur_grot_.begin(), cur_grot_.end(), grot_.begin() + k * JJ * 4);
+  std::copy(cur_lrot_.begin(), cur_lrot_.end(), lrot_.begin() + k * JJ * 4);
+  std::copy(cur_anim_feet_, cur_anim_feet_ + 6, anim_feet_.begin() + k * 6);
 }
 
 }  // namespace mmrl

@@ -184,6 +184,10 @@ class Character:
         if not np.isfinite(float(yaw)):
             raise ValueError(f"yaw must be finite, got {yaw!r}")
         self._core.reset(int(start_frame), float(pos[0]), float(pos[1]), float(yaw))
+        self.reset_common()
+
+    def reset_common(self) -> None:
+        """After a core reset: clears the counters and starts the recording with the pose shown."""
         self.transitions = 0
         self.steps = 0
         if self._record:
@@ -191,7 +195,8 @@ class Character:
                                          "local_rotations", "contacts", "lock_weights", "animated_feet")}
             self._rec["frames"].append(np.array([self.frame], np.int64))
             self._rec["roots"].append(np.array([self.root], np.float32))
-            self._rec["contacts"].append(self.db.contacts[self.frame][None].copy())
+            self._rec["contacts"].append(np.zeros((1, 2), bool) if self.frame < 0 else  # reset_row sets its own
+                                         self.db.contacts[self.frame][None].copy())
             self._rec["lock_weights"].append(np.array(self._core.current_lock_weights())[None])
             if not self.fast:
                 for key, arr in zip(("positions", "rotations", "local_translations", "local_rotations"),
@@ -257,6 +262,38 @@ class Character:
         q = np.zeros(TRAJECTORY_DIM, np.float32) if trajectory_query is None else \
             np.asarray(trajectory_query, np.float32).reshape(TRAJECTORY_DIM)
         self._core.play(int(match), float(cost))
+        return self._played(q)
+
+    # ------------------------------------------------------------------ compressed controllers
+    def reset_row(self, row: np.ndarray, position: Sequence[float] = (0.0, 0.0), yaw: float = 0.0) -> None:
+        """Start on a compressed controller's pose row (9 J + 5, mmrl.compress.pose) at
+        ``position`` facing ``yaw``; :attr:`frame` is -1 from now on (no database frame is shown).
+        Recordings then carry ``natural_motion`` (the decoded animation's own motion per shown
+        frame), which the pose-jump metric reads instead of the database's."""
+        row = np.ascontiguousarray(real_array(row, "row", (9 * self.db.num_joints + 5,), dtype=np.float32))
+        pos = real_array(position, "position", (2,), dtype=np.float64, finite=True)
+        if not np.isfinite(float(yaw)):
+            raise ValueError(f"yaw must be finite, got {yaw!r}")
+        self._core.reset_row(row, float(pos[0]), float(pos[1]), float(yaw))
+        self.reset_common()
+        if self._record:
+            J = self.db.num_joints
+            self._rec["contacts"][0] = (row[9 * J + 3:9 * J + 5] > 0.5)[None]
+            self._rec["natural_motion"] = []
+
+    def play_rows(self, rows: np.ndarray, transition: bool, cost: float,
+                  trajectory_query: Optional[np.ndarray] = None) -> StepResult:
+        """Play a compressed controller's decision: its pose rows (frames_per_step + 1, 9 J + 5),
+        the env's ``compressed_rows`` (row 0 the chosen state's pose, rows 1.. shown)."""
+        rows = np.ascontiguousarray(real_array(rows, "rows", (self.frames_per_step + 1, 9 * self.db.num_joints + 5),
+                                               dtype=np.float32))
+        q = np.zeros(TRAJECTORY_DIM, np.float32) if trajectory_query is None else \
+            np.asarray(trajectory_query, np.float32).reshape(TRAJECTORY_DIM)
+        self._core.play_rows(rows, bool(transition), float(cost))
+        if self._record and not self.fast:
+            from .compress.model import natural_motion
+
+            self._rec.setdefault("natural_motion", []).append(natural_motion(rows, self.db.parents))
         return self._played(q)
 
     def _played(self, q: np.ndarray) -> StepResult:

@@ -163,30 +163,38 @@ def body_joints(db) -> np.ndarray:
 
 
 def _jump_excess(p_now: np.ndarray, p_prev: np.ndarray, roots_now: np.ndarray, frames_now: np.ndarray, db,
-                 joints: np.ndarray) -> np.ndarray:
+                 joints: np.ndarray, natural: Optional[np.ndarray] = None) -> np.ndarray:
     """Pose jump (cm) of M frame pairs: shown positions now and before (M, J, 3), the shown
-    root (x, z, yaw) now (M, 3) and the database frame played now (M,)."""
-    f = frames_now
-    clip_start = np.asarray(db.clip_ranges)[np.asarray(db.frame_clip)[f], 0]
-    prev = np.where(f > clip_start, f - 1, f)  # the first frame of a clip has no predecessor
-    q_now = _core.database_global_positions(db._db, np.ascontiguousarray(f))[:, joints].astype(np.float64)
-    q_prev = _core.database_global_positions(db._db, np.ascontiguousarray(prev))[:, joints].astype(np.float64)
-    rp, ry = np.asarray(db.root_positions, np.float64)[f][:, [0, 2]], np.asarray(db.root_yaws, np.float64)[f]
-    dq = _to_character_frame(q_now, rp, ry) - _to_character_frame(q_prev, rp, ry)
+    root (x, z, yaw) now (M, 3) and the database frame played now (M,); or, with ``natural``
+    (M, J, 3), the played animation's own motion given directly (a compressed controller's)."""
+    if natural is None:
+        f = frames_now
+        clip_start = np.asarray(db.clip_ranges)[np.asarray(db.frame_clip)[f], 0]
+        prev = np.where(f > clip_start, f - 1, f)  # the first frame of a clip has no predecessor
+        q_now = _core.database_global_positions(db._db, np.ascontiguousarray(f))[:, joints].astype(np.float64)
+        q_prev = _core.database_global_positions(db._db, np.ascontiguousarray(prev))[:, joints].astype(np.float64)
+        rp, ry = np.asarray(db.root_positions, np.float64)[f][:, [0, 2]], np.asarray(db.root_yaws, np.float64)[f]
+        dq = _to_character_frame(q_now, rp, ry) - _to_character_frame(q_prev, rp, ry)
+    else:
+        dq = np.asarray(natural, np.float64)[:, joints]
     origin, yaw = roots_now[:, :2], roots_now[:, 2]
     dp = _to_character_frame(p_now[:, joints], origin, yaw) - _to_character_frame(p_prev[:, joints], origin, yaw)
     return 100.0 * np.linalg.norm(dp - dq, axis=-1).max(axis=-1)
 
 
-def pose_jumps(positions: np.ndarray, roots: np.ndarray, frames: np.ndarray, db, joints=None) -> np.ndarray:
+def pose_jumps(positions: np.ndarray, roots: np.ndarray, frames: np.ndarray, db, joints=None,
+               natural: Optional[np.ndarray] = None) -> np.ndarray:
     """Per-frame pose jump (T - 1,), cm, of one continuous motion: for t = 1 .. T - 1 the
     largest over ``joints`` of |(p_t - p_{t-1}) - (q_t - q_{t-1})| (see the module docstring).
 
     Args:
         positions: (T, J, 3) shown world positions, meters.
         roots: (T, 3) shown world root (x, z, yaw in radians).
-        frames: (T,) database frame shown at each t.
+        frames: (T,) database frame shown at each t (ignored with ``natural``).
         joints: default :func:`body_joints` (the hips and below).
+        natural: (T - 1, J, 3) q_t - q_{t-1} given directly, in the character frame of t: a
+            compressed controller's decoded frame against its stepper predecessor
+            (:func:`mmrl.compress.model.natural_motion`).
 
     p is the shown pose and q the database pose of the frame played at t, taken against its
     own predecessor in the database; p in the character frame of the world root at t, q in
@@ -198,11 +206,14 @@ def pose_jumps(positions: np.ndarray, roots: np.ndarray, frames: np.ndarray, db,
     if p.shape[1] != db.num_joints:
         raise ValueError(f"positions: expected the database's {db.num_joints} joints, got {p.shape[1]}")
     r = real_array(roots, "roots", (T, 3), dtype=np.float64, finite=True)
+    joints = body_joints(db) if joints is None else index_array(joints, "joints", (None,), high=db.num_joints)
+    if natural is not None:
+        natural = real_array(natural, "natural", (T - 1, db.num_joints, 3), dtype=np.float64, finite=True)
+        return np.zeros(0) if T < 2 else _jump_excess(p[1:], p[:-1], r[1:], None, db, joints, natural)
     f = as_array(frames, "frames")
     if f.shape != (T,) or not np.issubdtype(f.dtype, np.integer):
         raise ValueError(f"frames: expected {T} integer frame indices to match positions, got {f.dtype} {f.shape}")
     f = index_array(f, "frames", (T,), high=db.num_frames, what="the database's frames")
-    joints = body_joints(db) if joints is None else index_array(joints, "joints", (None,), high=db.num_joints)
     if T < 2:
         return np.zeros(0)
     return _jump_excess(p[1:], p[:-1], r[1:], f[1:], db, joints)
@@ -251,7 +262,8 @@ class QualityAccumulator:
             raise ValueError(f"recording: missing {', '.join(missing)} (a full-path Character recording)")
         contacts = np.asarray(rec["contacts"])
         out = {"sliding": foot_contact_speeds(rec["positions"], contacts, feet(db), db.fps),
-               "jumps": pose_jumps(rec["positions"], rec["roots"], rec["frames"], db),
+               "jumps": pose_jumps(rec["positions"], rec["roots"], rec["frames"], db,
+                                   natural=rec.get("natural_motion")),
                "costs": np.asarray(rec.get("costs", np.zeros(0)), np.float64).reshape(-1),
                "transitions": int(np.asarray(rec["transitions"]).astype(bool).sum()),
                "frames": int(np.asarray(rec["frames"]).shape[0]) - 1}  # shown after the reset pose

@@ -151,16 +151,30 @@ class FullPath:
             calls :meth:`continue_from_character`) instead of moving it to the env's new start;
         request: a request over the database's tags (``"style=elderly"``, docs/styles.md),
             pinned on the env before its first episode, so episodes start and play inside it;
+        compressed: a :class:`~mmrl.compress.model.CompressedController` of ``db``: the env
+            decides by its projector and plays by its stepper and decompressor (episode starts
+            stay the database frames the env draws, from their states); the character shows the
+            decoded poses. The same policy, decision interval and transition cost
+            (docs/compressed.md). Not with ``request``: a projection keeps to no tags;
         the rest: :class:`~mmrl.character.Character` options.
     """
 
     def __init__(self, task: Task, db: Database, *, config=None, stage: Optional[int] = None, seed: int = 0,
                  ik: bool = True, foot_locking: bool = True, inertialization_halflife: float = 0.1,
                  fast: bool = False, record: bool = True, scene: bool = False, continuous: bool = False,
-                 request: str = ""):
+                 request: str = "", compressed=None):
         self.task, self.db = task, db
         self.continuous = bool(continuous)
         self.env = task.make_vector_env(1, db=db, config=config, num_threads=1)
+        self.compressed = compressed
+        if compressed is not None:
+            if request:
+                raise ValueError("request: a compressed controller keeps to no tags (its projector searches every "
+                                 "clip it learned); play requests with the database")
+            if compressed.num_joints != db.num_joints:
+                raise ValueError(f"compressed: {compressed.path} has {compressed.num_joints} joints, the database "
+                                 f"{db.num_joints}")
+            self.env._core.set_compressed(compressed.core)
         self.request = ""
         self.request_clips: Optional[np.ndarray] = None  # (C,) bool of the request's clips; None: every clip
         if request:
@@ -179,7 +193,11 @@ class FullPath:
 
     def _start_episode(self) -> None:
         s = self.env.env_state(0)
-        self.ctrl.reset(int(s["frame"]), (float(s["x"]), float(s["z"])), float(s["yaw"]))
+        if self.compressed is not None:
+            row = self.compressed.decode(self.env._core.compressed_state(0)[None])[0]
+            self.ctrl.reset_row(row, (float(s["x"]), float(s["z"])), float(s["yaw"]))
+        else:
+            self.ctrl.reset(int(s["frame"]), (float(s["x"]), float(s["z"])), float(s["yaw"]))
         self.target = np.array(s["target"], np.float64)
         self.episode_steps = 0
 
@@ -203,7 +221,7 @@ class FullPath:
         ``target_half_extent``, not too close) around the character, from the env's own random
         stream (the C++ rule, not a copy of it)."""
         x, z, yaw = self.ctrl.root
-        self.env.set_state(0, self.ctrl.frame, x, z, yaw)
+        self.env.set_state(0, self.ctrl.frame, x, z, yaw)  # frame -1 (compressed): the env keeps its state
         if target is None:
             target = self.env._core.draw_target_around_root(0, float(self.config.target_half_extent))
         self.set_target(float(target[0]), float(target[1]))
@@ -220,7 +238,11 @@ class FullPath:
         obs, reward, term, trunc, info = self.env.step(a)
         # The controller plays the env's decision; it never decides again, so it cannot drift.
         match, cost = self.env.last_step_decision(0)
-        res = self.ctrl.play(match, cost, a[0])
+        if self.compressed is not None:
+            res = self.ctrl.play_rows(self.env._core.compressed_rows(0), bool(self.env._step_transitions[0]), cost,
+                                      a[0])
+        else:
+            res = self.ctrl.play(match, cost, a[0])
         self.episode_steps += 1
         done = bool(term[0] or trunc[0])
         shown = int(self.env.step_frames[0])
@@ -253,7 +275,7 @@ class FullPath:
         """The controller's recording of the current episode without its last ``trim`` shown frames."""
         rec = self.ctrl.recording()
         if trim:
-            for k in FRAME_KEYS:
+            for k in FRAME_KEYS + ("natural_motion",):  # natural_motion: one row per frame after the first
                 if k in rec:
                     rec[k] = rec[k][:-trim]
         return rec
@@ -328,7 +350,8 @@ class EpisodeSummary:
 def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, seed: int = 0, config=None,
                        stage: Optional[int] = None, ik: bool = True, foot_locking: bool = True,
                        inertialization_halflife: float = 0.1, fast: bool = False,
-                       target_distance: Optional[float] = None, request: str = "") -> Dict[str, Any]:
+                       target_distance: Optional[float] = None, request: str = "",
+                       compressed=None) -> Dict[str, Any]:
     """Run ``episodes`` full-path episodes of ``task`` (back to back in one env, so the same
     seed gives the same episodes for every policy).
 
@@ -344,7 +367,8 @@ def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, 
     """
     episodes = _check_episodes(episodes)
     run = FullPath(task, db, config=config, stage=stage, seed=seed, ik=ik, foot_locking=foot_locking,
-                   inertialization_halflife=inertialization_halflife, fast=fast, record=True, request=request)
+                   inertialization_halflife=inertialization_halflife, fast=fast, record=True, request=request,
+                   compressed=compressed)
     rng = np.random.default_rng(seed)
     summary = EpisodeSummary(task, db, fast, run.stage)
     summary.request_clips = run.request_clips
@@ -372,7 +396,8 @@ def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, 
 
 def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int = 0, config=None,
            stage: Optional[int] = None, continuous: Optional[bool] = None, ik: bool = True,
-           foot_locking: bool = True, inertialization_halflife: float = 0.1, request: str = "") -> Dict[str, np.ndarray]:
+           foot_locking: bool = True, inertialization_halflife: float = 0.1, request: str = "",
+           compressed=None) -> Dict[str, np.ndarray]:
     """Drive the character for ``seconds`` of shown frames, for video and export.
 
     ``continuous`` (default: tasks without a scene): when an episode ends the character
@@ -386,13 +411,14 @@ def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int
     ``query_points`` / ``query_directions`` (S, 3, 2) world (x, z) of the clipped action, and
     the scene's per-step keys; ``outcomes`` (E,) 0 running, 1 success, 2 other ending (a
     task outcome such as a collision), 3 truncated; ``stage``; and the quality metrics.
+    ``compressed`` plays a compressed controller (:class:`FullPath`; ``frames`` are then -1).
     """
     if not seconds > 0:
         raise ValueError(f"seconds must be positive, got {seconds!r}")
     continuous = task.scene is None if continuous is None else bool(continuous)
     run = FullPath(task, db, config=config, stage=stage, seed=seed, ik=ik, foot_locking=foot_locking,
                    inertialization_halflife=inertialization_halflife, record=True, scene=True,
-                   continuous=continuous, request=request)
+                   continuous=continuous, request=request, compressed=compressed)
     low, high = run.env.single_action_space.low, run.env.single_action_space.high
     total = max(2, int(round(seconds * db.fps)))
     log = _FollowLog(run)

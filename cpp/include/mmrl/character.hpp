@@ -25,6 +25,11 @@
 // two-bone IK (ik.hpp) moves the ankle to the target and the foot keeps its animated world
 // orientation.
 //
+// Where the frames come from. Playback shows FramePoses: a frame's pose in its own character
+// frame. The database path makes them from database frames (database_frame_pose); a
+// compressed controller (compressed.hpp) decodes them from its networks (compressed_frame_pose)
+// and plays them with play_rows: the same inertialization, foot locking and IK.
+//
 // The step allocates nothing: every buffer is sized at construction.
 #pragma once
 
@@ -51,6 +56,23 @@ struct CharacterOptions {
   std::vector<float> clip_costs;         // per clip, added to its frames' match cost (decision.hpp's ClipCostFilter)
 };
 
+// One frame's pose in its own character frame C_f: what playback shows.
+struct FramePose {
+  std::vector<Quat> rotations;      // J local rotations; a root joint's (parent -1) relative to C_f
+  std::vector<Vec3> translations;   // J local translations (meters); a root joint's in C_f
+  float root_delta[3] = {0, 0, 0};  // C_f's motion to the next frame: dx, dz in C_f, dyaw
+  uint8_t contacts[2] = {0, 0};     // left, right foot planted
+  void resize(int num_joints) {
+    rotations.assign(num_joints, Quat::Identity());
+    translations.assign(num_joints, Vec3::Zero());
+  }
+};
+
+// Database frame f as a FramePose (sized to the database's joints).
+void database_frame_pose(const Database& db, int64_t frame, FramePose& out);
+// A compressed controller's pose row (compressed.hpp: 9 J + 5 floats) as a FramePose.
+void compressed_frame_pose(const float* row, FramePose& out);
+
 // Global positions (J x 3, meters) of database frame f in the database's world.
 // rotations_scratch: J x 4 floats of caller-owned scratch (the global rotations on return).
 void database_pose_global(const Database& db, int64_t frame, float* positions, float* rotations_scratch);
@@ -61,6 +83,8 @@ class Character {
   Character(const Database& db, const Matcher& matcher, const CharacterOptions& options);
 
   const CharacterOptions& options() const { return options_; }
+  // The pose rows of a compressed controller this character plays (9 J + 5 floats each).
+  int pose_row_dim() const { return 9 * J_ + 5; }
   // Changes the transition cost of the next matches (finite, >= 0; else std::invalid_argument):
   // a task may vary it per decision (the obstacles task's bias_yields).
   void set_transition_cost(float cost);
@@ -75,6 +99,15 @@ class Character {
   // The decision alone (decision.hpp's decision_for_action with this character's options):
   // the frame to play from, and its cost. Changes nothing.
   int64_t decide(const float* trajectory, float* cost = nullptr) const;
+  // A compressed controller's start: shows the pose row `row` at the world root (frame() is -1
+  // from now on: no database frame is shown); clears offsets and locks.
+  void reset_row(const float* row, const RootState& root);
+  // Plays a compressed controller's decision (the env's, compressed.hpp): rows are
+  // (frames_per_step + 1) pose rows, row 0 the chosen state's pose and rows 1.. the frames shown;
+  // the root advances by rows 0 .. F-1's root deltas. transition: the projection replaced the
+  // state played so far (inertialized from the pose shown now, with its velocity from the two
+  // frames shown last, to row 0 with its velocity from rows 0 and 1). played_frames() are -1.
+  void play_rows(const float* rows, bool transition, float cost);
   // Plays a decision made elsewhere (the batched env's, so the full path never decides again):
   // frames j+1 .. j+F with the transition, root motion and poses of step. j must be a valid
   // match frame (std::invalid_argument otherwise); cost is what last_cost reports.
@@ -110,11 +143,16 @@ class Character {
   const float* current_lock_weights() const { return cur_lock_w_; }      // 2, see lock_weights
 
  private:
-  void blend_pose_of(int64_t frame, BlendPose& pose) const;
+  void blend_pose_of(const FramePose& frame, BlendPose& pose) const;
+  // Velocities from frame a to the next frame b (1/fps apart).
+  void blend_velocity(const FramePose& a, const FramePose& b, BlendVelocity& vel);
   void blend_velocity_of(int64_t frame, BlendVelocity& vel);
-  // Shows database frame f (root_ already advanced to it): fills the current pose.
-  void show_frame(int64_t f, bool decay);
-  void lock_feet(int64_t f, bool decay);
+  // Shows a frame (root_ already advanced to it): fills the current pose.
+  void show_frame(const FramePose& frame, bool decay);
+  void show_database_frame(int64_t f, bool decay);
+  void lock_feet(const FramePose& frame, bool decay);
+  // The step outputs of the k-th frame shown.
+  void record_step_frame(int k, int64_t frame, const uint8_t* contacts);
   void forward_kinematics_joint(int j);
   void forward_kinematics();
   void solve_leg(int side, const Vec3& target);
@@ -136,6 +174,8 @@ class Character {
 
   Inertializer inertializer_;
   BlendPose src_, dst_, anim_, shown_, scratch_;
+  FramePose fp_a_, fp_b_;                // scratch frames
+  FramePose fp_shown_, fp_shown_prev_;   // compressed play: the last two frames shown
   BlendVelocity src_vel_, dst_vel_;
 
   // Foot locks.

@@ -34,6 +34,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "mmrl/compressed.hpp"
 #include "mmrl/decision.hpp"
 #include "mmrl/rng.hpp"
 #include "mmrl/tags.hpp"
@@ -89,6 +90,11 @@ struct TargetEnvState {
   RequestSelection pinned_request;
   std::vector<float> pinned_code;
   RequestFilter request_filter;  // set for each decision (TargetVecEnv::request_filter)
+  // A compressed controller's playback (TargetVecEnv::set_compressed): the state shown now
+  // [X, Zn], the state the last decision chose, the state after its playback, and that
+  // playback's pose rows ((frames_per_step + 1) x pose_dim; compressed.hpp).
+  std::vector<float> cstate, cchosen, cnext, crows;
+  CompressedScratch cscratch;
 };
 
 // One task step's outcome (before truncation, which the template decides).
@@ -151,6 +157,7 @@ class TargetVecEnv {
  public:
   int num_envs() const { return static_cast<int>(envs_.size()); }
   const Config& config() const { return config_; }
+  const Database& database() const { return db_; }
   const float* action_low() const { return low_; }
   const float* action_high() const { return high_; }
   State& state(int i) { return envs_[i]; }
@@ -181,6 +188,7 @@ class TargetVecEnv {
     if (!s.request_pinned && !request_mix_.empty())  // the episode's request, before its start is drawn
       s.request_index = static_cast<int>(request_mix_.pick(s.rng.uniform()));
     task().begin_episode(i);
+    start_compressed(s);
     s.autoreset_pending = false;
     s.episode_frames = 0;
     s.steps = 0;
@@ -240,6 +248,47 @@ class TargetVecEnv {
   }
   bool request_pinned(int i) const { return envs_[i].request_pinned; }
 
+  // Compressed controllers (compressed.hpp). With a model, every env plays it instead of the
+  // database: the observation's pose features are those of the env's state, a decision
+  // projects the query (compressed_decision: the continuation rule with the task's transition
+  // cost) and playback steps and decodes the networks (compressed_playback). Episode starts
+  // still draw a database frame and start from its state: frame_states holds one row of
+  // state_dim floats per database frame (both borrowed, alive while set). Requests and the
+  // task's candidate filters do not apply to a projection. nullptr: back to the database.
+  // Throws std::invalid_argument for a model of another skeleton, or a task that cannot play
+  // one (Task::kPlaysCompressed).
+  void set_compressed(const CompressedModel* model, const float* frame_states) {
+    if (model == nullptr) {
+      compressed_ = nullptr;
+      compressed_states_ = nullptr;
+      return;
+    }
+    if (!Task::kPlaysCompressed)
+      throw std::invalid_argument("this task does not play compressed controllers yet (the plane task does)");
+    model->check();
+    if (model->num_joints != db_.num_joints)
+      throw std::invalid_argument("the compressed model has " + std::to_string(model->num_joints) +
+                                  " joints, the database " + std::to_string(db_.num_joints));
+    if (frame_states == nullptr) throw std::invalid_argument("set_compressed: frame_states is null");
+    const size_t S = static_cast<size_t>(model->state_dim());
+    for (State& s : envs_) {
+      s.cstate.assign(S, 0.0f);
+      s.cchosen.assign(S, 0.0f);
+      s.cnext.assign(S, 0.0f);
+      s.crows.assign(static_cast<size_t>(config_.frames_per_step + 1) * model->pose_dim(), 0.0f);
+      s.cscratch = model->make_scratch();
+    }
+    compressed_ = model;
+    compressed_states_ = frame_states;
+    for (int i = 0; i < num_envs(); ++i) start_compressed(envs_[i]);
+  }
+  const CompressedModel* compressed() const { return compressed_; }
+  // Env i's compressed playback: the last decision's pose rows and the state shown now.
+  const float* compressed_rows(int i) const { return envs_[i].crows.data(); }
+  const float* compressed_state(int i) const { return envs_[i].cstate.data(); }
+  // The state env i's last decision chose (the projection, or the continuation).
+  const float* compressed_chosen(int i) const { return envs_[i].cchosen.data(); }
+
   // Moves env i's target (world meters; finite, else std::invalid_argument).
   void set_target(int i, float x, float z) {
     if (!std::isfinite(x) || !std::isfinite(z)) throw std::invalid_argument("target must be finite");
@@ -251,12 +300,18 @@ class TargetVecEnv {
   // keeping its target, step count, return and RNG: e.g. to go on from where a full-path
   // character stands. The task refreshes what depends on the root (on_state_set). Throws
   // std::invalid_argument for a frame outside the database or a non-finite root.
+  // With a compressed controller, frame -1 keeps env i's compressed state (a database frame
+  // starts from that frame's state).
   void set_state(int i, int64_t frame, float x, float z, float yaw) {
-    if (frame < 0 || frame >= db_.num_frames) throw std::invalid_argument("frame is outside the database");
+    const bool keep = compressed_ != nullptr && frame == -1;
+    if (!keep && (frame < 0 || frame >= db_.num_frames)) throw std::invalid_argument("frame is outside the database");
     if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw))
       throw std::invalid_argument("root must be finite");
     State& s = envs_[i];
-    s.frame = frame;
+    if (!keep) {
+      s.frame = frame;
+      start_compressed(s);
+    }
     s.root.x = x;
     s.root.z = z;
     s.root.yaw = wrap_angle(yaw);
@@ -271,6 +326,7 @@ class TargetVecEnv {
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
     s.last_transition_cost = task().decision_transition_cost(i);
+    if (compressed_ != nullptr) return decide_compressed(s, action);
     const CandidateFilter* filter = task().candidate_filter(i);
     const int64_t j = decision_for_action(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost,
                                         filter, task().candidate_shortlist());
@@ -283,6 +339,25 @@ class TargetVecEnv {
       for (int k = 0; k < kPoseDim; ++k) s.last_pose_jump += (a[k] - b[k]) * (a[k] - b[k]);
     }
     return j;
+  }
+
+  // The compressed decision of decide(): the query of the state shown now, its projection or
+  // the continuation, and the chosen state's playback (s.crows, s.cnext; end_playback moves
+  // on). Returns -1: no database frame.
+  int64_t decide_compressed(State& s, const float* action) {
+    float query[kFeatureDim];
+    for (int k = 0; k < kPoseDim; ++k) query[k] = s.cstate[k];
+    for (int k = 0; k < kTrajectoryDim; ++k) query[kPoseDim + k] = std::min(high_[k], std::max(low_[k], action[k]));
+    s.last_transition = compressed_decision(*compressed_, s.cstate.data(), query, s.last_transition_cost,
+                                            s.cchosen.data(), &s.last_cost, s.cscratch);
+    if (!s.last_transition) std::copy(s.cstate.begin(), s.cstate.end(), s.cchosen.begin());
+    s.last_pose_jump = 0;
+    if (s.last_transition)
+      for (int k = 0; k < kPoseDim; ++k) s.last_pose_jump += (s.cstate[k] - s.cchosen[k]) * (s.cstate[k] - s.cchosen[k]);
+    compressed_playback(*compressed_, s.cchosen.data(), config_.frames_per_step, s.crows.data(), s.cnext.data(),
+                        s.cscratch);
+    s.last_match = -1;
+    return -1;
   }
 
   // Every env's MatchStats since the last call, summed; zeroes them.
@@ -456,11 +531,29 @@ class TargetVecEnv {
     out[1] = g.y();
   }
 
-  // c_t: the normalized pose features of env i's current frame (kPoseDim floats).
+  // c_t: the normalized pose features of env i's current frame (kPoseDim floats), or of its
+  // compressed state.
   void observe_pose(const State& s, float* out) const {
-    const float* pose = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
+    const float* pose = compressed_ ? s.cstate.data() : &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
     for (int k = 0; k < kPoseDim; ++k) out[k] = pose[k];
   }
+
+  // Playback of decision j (decide's frame): the root delta of its k-th frame, and the end of
+  // the step's playback (the current frame becomes j + frames_per_step, or the compressed
+  // state moves to the played one).
+  const float* played_delta(const State& s, int64_t j, int k) const {
+    if (compressed_) return &s.crows[static_cast<size_t>(k) * compressed_->pose_dim() + 9 * compressed_->num_joints];
+    return &db_.root_deltas[static_cast<size_t>(j + k) * 3];
+  }
+  void end_playback(State& s, int64_t j) {
+    if (compressed_) {
+      s.cstate.swap(s.cnext);
+      return;
+    }
+    s.frame = j + config_.frames_per_step;
+  }
+  // A task that plays compressed controllers says so (and reads played_delta, end_playback).
+  static constexpr bool kPlaysCompressed = false;
 
   const Database& db_;
   const Matcher& matcher_;
@@ -471,10 +564,19 @@ class TargetVecEnv {
   RequestCode request_code_;
   RequestMix request_mix_;
   RequestSelection every_clip_;  // the request of an env without one: every clip
+  const CompressedModel* compressed_ = nullptr;
+  const float* compressed_states_ = nullptr;  // N x state_dim, per database frame
   bool next_step_autoreset_ = false;
   ThreadPool pool_;
 
  private:
+  // Starts env s's compressed state from its database frame (nothing without a model).
+  void start_compressed(State& s) {
+    if (compressed_ == nullptr) return;
+    const size_t S = static_cast<size_t>(compressed_->state_dim());
+    const float* row = compressed_states_ + static_cast<size_t>(s.frame) * S;
+    std::copy(row, row + S, s.cstate.begin());
+  }
   Task& task() { return static_cast<Task&>(*this); }
   const Task& task() const { return static_cast<const Task&>(*this); }
 };

@@ -232,12 +232,12 @@ TaskStep ObstacleVecEnv::advance(int i, const float* action) {
   int k = 0;
   for (; k < config_.frames_per_step && !success && !collision; ++k) {
     if (moving) field_.move(i, frame_dt_);
-    root_advance(s.root, &db_.root_deltas[static_cast<size_t>(j + k) * 3]);
+    root_advance(s.root, played_delta(s, j, k));
     collision = field_.disc_overlaps_any(i, s.root.x, s.root.z, config_.body_radius);
     const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
     success = !collision && dx * dx + dz * dz <= r2;
   }
-  s.frame = j + config_.frames_per_step;
+  end_playback(s, j);
   s.collided = collision;
   TaskStep out;
   out.frames_played = k;

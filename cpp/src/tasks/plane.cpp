@@ -26,14 +26,14 @@ TaskStep PlaneVecEnv::advance(int i, const float* action) {
   TaskStep out;
   out.frames_played = config_.frames_per_step;
   for (int k = 0; k < config_.frames_per_step; ++k) {
-    root_advance(s.root, &db_.root_deltas[static_cast<size_t>(j + k) * 3]);
+    root_advance(s.root, played_delta(s, j, k));
     const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
     if (dx * dx + dz * dz <= r2 && !out.success) {  // tested on every played frame
       out.success = true;
       out.frames_played = k + 1;
     }
   }
-  s.frame = j + config_.frames_per_step;
+  end_playback(s, j);
   out.reward = std::exp(-target_distance(s)) + (out.success ? config_.success_bonus : 0.0f);
   out.terminated = out.success;
   return out;

@@ -43,6 +43,9 @@ def add_shared_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--request", default="", metavar="TAGS",
                    help="keep the character to the clips carrying these tags, e.g. \"style=elderly\" or "
                         "\"style=elderly & gait=walk\" (docs/styles.md; 'mmrl db info' lists the tags)")
+    p.add_argument("--compressed", default=None, metavar="FILE",
+                   help="play a compressed controller (mmrl compress) instead of the database: the same policy, "
+                        "its projector for the search and its stepper for playback (docs/compressed.md)")
 
 
 def register_cli(sub) -> None:
@@ -99,6 +102,13 @@ class Setup:
         self.options = dict(ik=not args.no_ik, foot_locking=not args.no_ik,
                             inertialization_halflife=0.0 if args.no_inertialization else 0.1)
         self.request = check_request(self.db, getattr(args, "request", "") or "")
+        self.compressed = None
+        if getattr(args, "compressed", None):
+            from ..compress.model import CompressedController
+
+            if self.request:
+                raise InputError("--compressed: a compressed controller keeps to no tags; drop --request")
+            self.compressed = CompressedController(args.compressed, self.db)
 
     def _policy(self, args, run):
         from ..rl.policies import JoystickPolicy
@@ -140,7 +150,7 @@ def _follow(args):
         raise InputError("--seconds must be positive")
     s = Setup(args)
     return s, follow(s.task, s.db, s.policy, seconds=args.seconds, seed=args.seed, config=s.config, stage=s.stage,
-                     request=s.request, **s.options)
+                     request=s.request, compressed=s.compressed, **s.options)
 
 
 # ---------------------------------------------------------------------- commands
@@ -154,7 +164,9 @@ def cmd_eval(args: argparse.Namespace) -> int:
         return _eval_per_request(args, s)
     t0 = time.perf_counter()
     res = evaluate_full_path(s.task, s.db, s.policy, episodes=args.episodes, seed=args.seed, config=s.config,
-                             stage=s.stage, request=s.request, **s.options)
+                             stage=s.stage, request=s.request, compressed=s.compressed, **s.options)
+    if s.compressed is not None:
+        res["compressed"] = str(s.compressed.path)
     line = (5 if s.task.name == "plane" else 0) if args.line is None else args.line
     if line:
         from ..rl.reference import against_line, joystick_line, joystick_speeds
@@ -176,7 +188,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
     fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
     where = f" (stage {res['stage']})" if "stage" in res else ""
     print(f"{s.policy_name} on {s.task.name}{where}: {args.episodes} episodes"
-          + (f", request {s.request!r}" if s.request else ""))
+          + (f", request {s.request!r}" if s.request else "")
+          + (f", compressed controller {s.compressed.path}" if s.compressed is not None else ""))
     rates = [k for k in res if k.endswith("_rate") and k != "success_rate"]
     for k in ["success_rate", *rates, "mean_time_to_target_s", "foot_sliding_cm_per_s", "foot_sliding_ik_off_cm_per_s",
               "transitions_per_s", "pose_jump_p99_cm", "max_pose_jump_cm", "matched_cost_mean", "mean_speed_m_per_s",

@@ -43,6 +43,8 @@ def register_cli(sub) -> None:
     p.add_argument("--stage", type=int, default=None, metavar="K", help="curriculum stage (default: the last)")
     p.add_argument("--request", default="", metavar="TAGS",
                    help="the request to start with, e.g. \"style=elderly\" (switchable in the page; docs/styles.md)")
+    p.add_argument("--compressed", default=None, metavar="FILE",
+                   help="play a compressed controller (mmrl compress) instead of the database (docs/compressed.md)")
     p.set_defaults(func=cmd_play)
 
 
@@ -112,8 +114,16 @@ def cmd_play(args: argparse.Namespace) -> int:
     from .run import check_request
 
     db = run.database()
+    compressed = None
+    if args.compressed:
+        from ..compress.model import CompressedController
+
+        if args.request:
+            raise InputError("--compressed: a compressed controller keeps to no tags; drop --request")
+        compressed = CompressedController(args.compressed, db)
     session = LiveSession(task, db, run.policy(), config=run.task_config(task), stage=args.stage,
-                          seed=args.seed, trace=args.trace, request=check_request(db, args.request))
+                          seed=args.seed, trace=args.trace, request=check_request(db, args.request),
+                          compressed=compressed)
     session.policy_name = args.policy
     scene = _serve(args, f"mmrl play {run.path.name}")
     app = PlayApp(scene, session)

@@ -16,6 +16,8 @@ block                 size        meaning
                                   character frame
 ``root_delta``        3           the character frame's motion to the next frame: (dx, dz) in this
                                   frame's character frame (meters) and dyaw (radians)
+``contacts``          2           the left and right foot contacts (1 planted, 0 not): the foot
+                                  locking of playback reads them
 ====================  ==========  ===============================================================
 
 :func:`pose_targets` builds them from a database (one row per frame), :func:`rotation_6d_to_matrix`
@@ -28,7 +30,7 @@ from typing import Dict
 
 import numpy as np
 
-__all__ = ["pose_targets", "pose_layout", "rotation_6d_to_matrix", "forward_kinematics", "quat_to_matrix"]
+__all__ = ["pose_targets", "pose_layout", "pose_dim", "rotation_6d_to_matrix", "forward_kinematics", "quat_to_matrix"]
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
@@ -52,11 +54,17 @@ def _yaw_matrix(yaw: np.ndarray) -> np.ndarray:
 def pose_layout(num_joints: int) -> Dict[str, slice]:
     """Where each block sits in a pose row."""
     j = int(num_joints)
-    return {"rotations": slice(0, 6 * j), "translations": slice(6 * j, 9 * j), "root_delta": slice(9 * j, 9 * j + 3)}
+    return {"rotations": slice(0, 6 * j), "translations": slice(6 * j, 9 * j), "root_delta": slice(9 * j, 9 * j + 3),
+            "contacts": slice(9 * j + 3, 9 * j + 5)}
+
+
+def pose_dim(num_joints: int) -> int:
+    """Floats in a pose row of a skeleton with ``num_joints`` joints."""
+    return 9 * int(num_joints) + 5
 
 
 def pose_targets(db) -> np.ndarray:
-    """(N, 9 J + 3) float32: every frame's pose in its character frame (module docstring)."""
+    """(N, 9 J + 5) float32: every frame's pose in its character frame (module docstring)."""
     rot = quat_to_matrix(np.asarray(db.bone_rotations))                # (N, J, 3, 3) local
     tr = np.asarray(db.bone_translations, np.float64).copy()            # (N, J, 3)
     yaw = np.asarray(db.root_yaws, np.float64)
@@ -66,7 +74,8 @@ def pose_targets(db) -> np.ndarray:
         rot[:, r] = inv @ rot[:, r]
         tr[:, r] = np.einsum("nij,nj->ni", inv, tr[:, r] - np.asarray(db.root_positions, np.float64))
     six = rot[..., :, :2].reshape(rot.shape[0], -1)  # the first two columns, row-major per joint
-    out = np.concatenate([six, tr.reshape(tr.shape[0], -1), np.asarray(db.root_deltas, np.float64)], 1)
+    out = np.concatenate([six, tr.reshape(tr.shape[0], -1), np.asarray(db.root_deltas, np.float64),
+                          np.asarray(db.contacts, np.float64)], 1)
     return out.astype(np.float32)
 
 

@@ -26,11 +26,16 @@ import numpy as np
 from .pose import forward_kinematics, pose_layout, pose_targets, rotation_6d_to_matrix
 
 FORMAT = "mmrl-compressed"
-VERSION = 1
+VERSION = 2
 
 
 class CompressedFileError(ValueError):
     """A compressed-controller file is corrupt, of another version or for another database."""
+
+
+STAGES = ("decompressor", "stepper", "projector")
+"""The networks in the order they train: the stepper learns the latents the compressor found, the
+projector the features and latents of the search's answers."""
 
 
 @dataclass
@@ -41,20 +46,34 @@ class CompressConfig:
     """Size of the latent Z."""
     hidden: Tuple[int, ...] = (512, 512)
     """Hidden layer sizes of the compressor and the decompressor (ELU)."""
+    stepper_hidden: Tuple[int, ...] = (256, 256)
+    """Hidden layer sizes of the stepper (ELU)."""
+    projector_hidden: Tuple[int, ...] = (512, 512)
+    """Hidden layer sizes of the projector (ELU)."""
     batch: int = 256
-    """Pairs of consecutive frames per iteration."""
+    """Pairs of consecutive frames (decompressor), windows (stepper) or queries (projector) per iteration."""
     learning_rate: float = 1e-3
-    """Adam's, decayed by ``lr_decay`` every 1,000 iterations."""
+    """Adam's, decayed by ``lr_decay`` every 1,000 iterations (each network from the start)."""
     lr_decay: float = 0.97
     iterations: int = 50_000
-    """Iterations at most (``--seconds`` may stop sooner)."""
+    """Decompressor iterations at most (``--seconds`` may stop sooner)."""
+    stepper_iterations: int = 20_000
+    projector_iterations: int = 20_000
+    stage_time: Tuple[float, ...] = (0.5, 0.25, 0.25)
+    """With ``--seconds``: the shares of the budget of the decompressor, the stepper and the
+    projector (time a stage leaves unused passes to the next)."""
+    stepper_window: int = 16
+    """Frames the stepper is rolled out over in training (from a true start)."""
+    projector_noise: float = 1.0
+    """Largest standard deviation (normalized feature units) of the noise added to the
+    projector's training queries."""
     w_pose: float = 1.0
     w_positions: float = 1.0
     w_velocity: float = 1.0
     w_latent: float = 0.1
     w_latent_velocity: float = 0.01
     holdout_every: int = 10
-    """Every k-th clip is held back from training and measured (0: none)."""
+    """Every k-th clip is held back from training the decompressor and measured (0: none)."""
     checkpoint_every: int = 2_000
     seed: int = 0
     device: str = "auto"
@@ -65,9 +84,12 @@ def _logger():
     from ..rl.logger import MetricsLogger
 
     class CompressLogger(MetricsLogger):
-        BASE_COLUMNS = ("step", "wall_s", "iteration", "learning_rate", "loss", "pose", "positions_m", "velocity",
-                        "latent", "latent_velocity", "joint_error_cm", "holdout_joint_error_cm")
-        LOSS_KEYS = ("loss", "pose", "positions_m", "velocity", "latent", "latent_velocity")
+        BASE_COLUMNS = ("step", "wall_s", "stage", "iteration", "learning_rate", "loss", "pose", "positions_m",
+                        "velocity", "latent", "latent_velocity", "joint_error_cm", "holdout_joint_error_cm",
+                        "features", "latent_error", "stepper_joint_error_cm", "projector_joint_error_cm",
+                        "projector_match_rate")
+        LOSS_KEYS = ("loss", "pose", "positions_m", "velocity", "latent", "latent_velocity", "features",
+                     "latent_error")
 
     return CompressLogger
 
@@ -83,9 +105,15 @@ def _mlp(sizes: Sequence[int]):
     return nn.Sequential(*layers)
 
 
-def build_networks(pose_dim: int, feature_dim: int, cfg: CompressConfig):
-    """(compressor: pose -> Z, decompressor: [X, Z] -> pose), both on normalized rows."""
-    return (_mlp([pose_dim, *cfg.hidden, cfg.latent]), _mlp([feature_dim + cfg.latent, *cfg.hidden, pose_dim]))
+def build_networks(pose_dim: int, feature_dim: int, cfg: CompressConfig) -> Dict[str, Any]:
+    """The four networks, on normalized rows: compressor (pose -> Z), decompressor ([X, Z] -> pose),
+    stepper ([X, Zn] -> its change over one frame) and projector (query -> [X, Zn]); Zn is the
+    latent normalized by its mean and deviation over the database."""
+    state = feature_dim + cfg.latent
+    return {"compressor": _mlp([pose_dim, *cfg.hidden, cfg.latent]),
+            "decompressor": _mlp([state, *cfg.hidden, pose_dim]),
+            "stepper": _mlp([state, *cfg.stepper_hidden, state]),
+            "projector": _mlp([feature_dim, *cfg.projector_hidden, state])}
 
 
 @dataclass
@@ -101,6 +129,8 @@ class CompressData:
     train_pairs: np.ndarray
     holdout_pairs: np.ndarray
     holdout_frames: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    clip_ranges: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    valid: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
 
     @classmethod
     def from_database(cls, db, holdout_every: int = 10) -> "CompressData":
@@ -121,11 +151,18 @@ class CompressData:
         std = np.maximum(y[np.concatenate([train, train + 1])].std(0) if train.size else y.std(0), 1e-3)
         return cls(x, y, mean.astype(np.float32), std.astype(np.float32), list(db.parents), train,
                    np.concatenate(pairs_held) if pairs_held else np.zeros(0, np.int64),
-                   np.concatenate(frames_held) if frames_held else np.zeros(0, np.int64))
+                   np.concatenate(frames_held) if frames_held else np.zeros(0, np.int64),
+                   ranges.astype(np.int64), np.asarray(db._db.valid_mask, bool))
+
+    def windows(self, length: int) -> np.ndarray:
+        """The first frames t of every window t .. t + length - 1 inside a clip (every clip: the
+        stepper plays the whole database)."""
+        starts = [np.arange(a, b - length + 1, dtype=np.int64) for a, b in self.clip_ranges if b - a >= length]
+        return np.concatenate(starts) if starts else np.zeros(0, np.int64)
 
 
 def _positions(y_raw, parents, J):
-    """torch: raw pose rows (B, 9J + 3) -> joint positions (B, J, 3) in the character frame."""
+    """torch: raw pose rows (B, 9J + 5) -> joint positions (B, J, 3) in the character frame."""
     lay = pose_layout(J)
     rot = rotation_6d_to_matrix(y_raw[:, lay["rotations"]].reshape(-1, J, 6))
     tr = y_raw[:, lay["translations"]].reshape(-1, J, 3)
@@ -133,7 +170,7 @@ def _positions(y_raw, parents, J):
 
 
 def losses(comp, decomp, data_t, idx, cfg: CompressConfig) -> Dict[str, Any]:
-    """The losses of one batch of (t, t + 1) pairs (``idx``: the t's)."""
+    """The decompressor's losses of one batch of (t, t + 1) pairs (``idx``: the t's)."""
     import torch
 
     x, y, mean, std, parents, J = data_t
@@ -157,6 +194,48 @@ def losses(comp, decomp, data_t, idx, cfg: CompressConfig) -> Dict[str, Any]:
             "latent_velocity": l_zv, "joint_error_cm": 100.0 * (pos - true_pos).norm(dim=-1).mean()}
 
 
+def stepper_losses(stepper, s_all, idx, cfg: CompressConfig) -> Dict[str, Any]:
+    """The stepper's losses over windows starting at ``idx``: rolled out from the true state
+    [X, Zn] of the first frame, L1 on the states and on their changes per frame."""
+    import torch
+
+    W = cfg.stepper_window
+    steps = torch.arange(W, device=idx.device)
+    true = s_all[idx[:, None] + steps[None]]  # (B, W, D)
+    cur, pred = true[:, 0], [true[:, 0]]
+    for _ in range(W - 1):
+        cur = cur + stepper(cur)
+        pred.append(cur)
+    pred = torch.stack(pred, 1)
+    l_state = (pred - true).abs().mean()
+    l_vel = ((pred[:, 1:] - pred[:, :-1]) - (true[:, 1:] - true[:, :-1])).abs().mean()
+    nx = s_all.shape[1] - cfg.latent
+    return {"loss": l_state + l_vel, "features": (pred[..., :nx] - true[..., :nx]).abs().mean(),
+            "latent_error": (pred[..., nx:] - true[..., nx:]).abs().mean(), "velocity": l_vel}
+
+
+def projector_queries(data: CompressData, rng: np.random.Generator, n: int, noise: float) -> np.ndarray:
+    """Training queries of the projector (normalized): database features with noise of a random
+    size, half of them with the trajectory of another frame (as a policy's queries pair the
+    character's pose with a trajectory of its choosing)."""
+    valid = np.flatnonzero(data.valid)
+    f = rng.choice(valid, n)
+    q = data.x[f].copy()
+    mixed = rng.random(n) < 0.5
+    g = rng.choice(valid, int(mixed.sum()))
+    q[mixed, 15:] = data.x[g, 15:]
+    q += rng.standard_normal(q.shape).astype(np.float32) * (noise * rng.random((n, 1))).astype(np.float32)
+    return q
+
+
+def projector_losses(projector, s_all, q, nearest, nx: int) -> Dict[str, Any]:
+    """The projector's losses: L1 to the state [X, Zn] of each query's nearest valid frame."""
+    pred, true = projector(q), s_all[nearest]
+    l_x = (pred[:, :nx] - true[:, :nx]).abs().mean()
+    l_z = (pred[:, nx:] - true[:, nx:]).abs().mean()
+    return {"loss": l_x + l_z, "features": l_x, "latent_error": l_z}
+
+
 def _device(name: str):
     import torch
 
@@ -178,16 +257,30 @@ def database_signature(db) -> Dict[str, Any]:
     return {"num_frames": int(db.num_frames), "joint_names": list(db.joint_names), "parents": list(db.parents)}
 
 
-def save_compressed(path, comp, decomp, data: CompressData, cfg: CompressConfig, db, state: Dict[str, Any]) -> None:
+def _plain_config(cfg: CompressConfig) -> Dict[str, Any]:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}
+
+
+def config_from(saved: Dict[str, Any]) -> CompressConfig:
+    """A file's CompressConfig (fields it lacks keep their defaults)."""
+    cfg = CompressConfig()
+    for k, v in saved.items():
+        if hasattr(cfg, k):
+            setattr(cfg, k, tuple(v) if isinstance(getattr(cfg, k), tuple) else v)
+    return cfg
+
+
+def save_compressed(path, nets: Dict[str, Any], data: CompressData, cfg: CompressConfig, db,
+                    state: Dict[str, Any]) -> None:
+    """Writes the file atomically: the networks trained so far, the normalizations, the
+    database's signature and ``state`` (stage, iteration, optimizer, RNG)."""
     import torch
 
     from ..io import atomic_open
 
-    payload = {"format": FORMAT, "version": VERSION, "config": {k: (list(v) if isinstance(v, tuple) else v)
-                                                                for k, v in asdict(cfg).items()},
-               "compressor": comp.state_dict(), "decompressor": decomp.state_dict(),
+    payload = {"format": FORMAT, "version": VERSION, "config": _plain_config(cfg),
                "y_mean": torch.as_tensor(data.y_mean), "y_std": torch.as_tensor(data.y_std),
-               "database": database_signature(db), **state}
+               "database": database_signature(db), **{k: v.state_dict() for k, v in nets.items()}, **state}
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     with atomic_open(Path(path), "wb") as f:
         torch.save(payload, f)
@@ -217,53 +310,171 @@ def load_compressed(path, db=None) -> Dict[str, Any]:
 
 
 def networks_from(state: Dict[str, Any], pose_dim: int, feature_dim: int = 27):
-    cfg = CompressConfig(**{k: (tuple(v) if k == "hidden" else v) for k, v in state["config"].items()})
-    comp, decomp = build_networks(pose_dim, feature_dim, cfg)
-    comp.load_state_dict(state["compressor"])
-    decomp.load_state_dict(state["decompressor"])
-    return comp.eval(), decomp.eval(), cfg
+    """(compressor, decompressor, config) of a file, in eval mode."""
+    nets, cfg = all_networks_from(state, pose_dim, feature_dim)
+    return nets["compressor"], nets["decompressor"], cfg
+
+
+def all_networks_from(state: Dict[str, Any], pose_dim: int, feature_dim: int = 27):
+    """({name: network} of every network the file holds, config), in eval mode."""
+    cfg = config_from(state["config"])
+    nets = build_networks(pose_dim, feature_dim, cfg)
+    out = {}
+    for name, net in nets.items():
+        if name in state:
+            try:
+                net.load_state_dict(state[name])
+            except (RuntimeError, KeyError) as e:
+                raise CompressedFileError(f"the file's {name} does not fit its config: {str(e)[:120]}") from None
+            out[name] = net.eval()
+    return out, cfg
+
+
+def stage_of(state: Dict[str, Any]) -> str:
+    """The stage a file is in: the network training now, or "done"."""
+    return str(state.get("stage", "decompressor" if "stepper" not in state else "done"))
+
+
+def latent_states(nets: Dict[str, Any], data: CompressData, device, chunk: int = 8192):
+    """(every frame's state [X, Zn] (N, 27 + L) as a torch tensor on device, z_mean, z_std):
+    the compressor's latents of the database, normalized."""
+    import torch
+
+    comp = nets["compressor"]
+    mean, std = torch.as_tensor(data.y_mean, device=device), torch.as_tensor(data.y_std, device=device)
+    was = comp.training
+    comp.eval()
+    zs = []
+    with torch.no_grad():
+        for a in range(0, data.y.shape[0], chunk):
+            zs.append(comp((torch.as_tensor(data.y[a:a + chunk], device=device) - mean) / std))
+    comp.train(was)
+    z = torch.cat(zs)
+    z_mean, z_std = z.mean(0), z.std(0).clamp_min(1e-3)
+    return torch.cat([torch.as_tensor(data.x, device=device), (z - z_mean) / z_std], 1), z_mean, z_std
 
 
 def train_compressed(db, out, cfg: Optional[CompressConfig] = None, *, seconds: Optional[float] = None,
                      resume: bool = False, progress: bool = True, log_dir=None) -> Dict[str, Any]:
-    """Train (or resume) the compressor and decompressor of ``db`` into ``out``; returns the last
-    metrics (the held-back clips' joint error included)."""
+    """Train (or resume) the networks of ``db``'s compressed controller into ``out``, stage by
+    stage (:data:`STAGES`); returns the last metrics (the held-back clips' joint error included)."""
     import torch
 
     cfg = cfg or CompressConfig()
     out = Path(out)
     device = _device(cfg.device)
     torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
     data = CompressData.from_database(db, cfg.holdout_every)
     if data.train_pairs.size == 0:
         raise ValueError("the database has no pair of consecutive frames to train on")
-    comp, decomp = build_networks(data.y.shape[1], data.x.shape[1], cfg)
-    comp.to(device), decomp.to(device)
-    opt = torch.optim.Adam(list(comp.parameters()) + list(decomp.parameters()), lr=cfg.learning_rate)
-    start = 0
+    if len(cfg.stage_time) != len(STAGES) or not all(t >= 0 for t in cfg.stage_time) or sum(cfg.stage_time) <= 0:
+        raise ValueError(f"stage_time: expected {len(STAGES)} shares >= 0, got {cfg.stage_time}")
+    nets = build_networks(data.y.shape[1], data.x.shape[1], cfg)
+    for net in nets.values():
+        net.to(device)
+    stage, start, saved = STAGES[0], 0, None
     if resume and out.exists():
-        state = load_compressed(out, db)
-        comp.load_state_dict(state["compressor"])
-        decomp.load_state_dict(state["decompressor"])
-        opt.load_state_dict(state["optimizer"])
-        start = int(state["iteration"])
-        rng.bit_generator.state = state["rng"]  # the batches a run without the stop would have drawn
-    sched = torch.optim.lr_scheduler.StepLR(opt, 1000, gamma=cfg.lr_decay, last_epoch=start - 1 if start else -1)
-    data_t = _tensors(data, device)
+        saved = load_compressed(out, db)
+        for name in nets:
+            if name in saved:
+                nets[name].load_state_dict(saved[name])
+        stage, start = stage_of(saved), int(saved.get("iteration", 0))
     log_path = Path(log_dir or out.parent) / f"{out.stem}-metrics"
     log_path.mkdir(parents=True, exist_ok=True)
-    logger = _logger()(log_path, start if resume else None, tensorboard=True)
+    offset = {name: sum(_stage_iterations(cfg, s) for s in STAGES[:k]) for k, name in enumerate(STAGES)}
+    step0 = (offset[stage] + start) if stage in offset else sum(_stage_iterations(cfg, s) for s in STAGES)
+    logger = _logger()(log_path, step0 if resume else None, tensorboard=True)
+    t0, last = time.perf_counter(), {}
+    # What earlier stages measured and how long they trained, carried into every later save.
+    extra: Dict[str, Any] = {k: v for k, v in (saved or {}).items()
+                             if isinstance(v, (int, float)) and k.endswith(("_iterations", "_cm", "_rate"))}
+    try:
+        for k, name in enumerate(STAGES):
+            if stage == "done" or STAGES.index(name) < STAGES.index(stage):
+                continue
+            budget = None
+            if seconds is not None:
+                left = seconds - (time.perf_counter() - t0)
+                shares = cfg.stage_time[k:]
+                budget = max(0.0, left * shares[0] / max(sum(shares), 1e-9))
+            last = _train_stage(name, nets, data, cfg, db, out, device, logger, offset[name],
+                                start if name == stage else 0, saved if name == stage else None, budget, progress,
+                                extra)
+            saved = None
+    finally:
+        logger.close()
+    if stage == "done" and saved is not None:
+        last = {"iteration": int(saved.get("iteration", 0))}
+    held = holdout_error(nets["compressor"], nets["decompressor"], data, device)
+    if held is not None:
+        last["holdout_joint_error_cm"] = held
+    last["stage"] = "done"
+    return last
+
+
+def _stage_iterations(cfg: CompressConfig, stage: str) -> int:
+    return {"decompressor": cfg.iterations, "stepper": cfg.stepper_iterations,
+            "projector": cfg.projector_iterations}[stage]
+
+
+def _train_stage(stage, nets, data, cfg, db, out, device, logger, step_offset, start, saved, budget, progress,
+                 extra) -> Dict[str, Any]:
+    """One stage's loop (resumable at any checkpoint: networks, Adam and the sampler's RNG)."""
+    import torch
+
+    iterations = _stage_iterations(cfg, stage)
+    trained = {"decompressor": ("compressor", "decompressor"), "stepper": ("stepper",),
+               "projector": ("projector",)}[stage]
+    params = [p for n in trained for p in nets[n].parameters()]
+    opt = torch.optim.Adam(params, lr=cfg.learning_rate)
+    rng = np.random.default_rng([cfg.seed, STAGES.index(stage)])
+    if saved is not None and start > 0:
+        opt.load_state_dict(saved["optimizer"])
+        rng.bit_generator.state = saved["rng"]  # the batches a run without the stop would have drawn
+    sched = torch.optim.lr_scheduler.StepLR(opt, 1000, gamma=cfg.lr_decay, last_epoch=start - 1 if start else -1)
+    data_t = _tensors(data, device)
+    s_all, norms, znorm = None, {}, None
+    if stage != "decompressor":
+        s_all, z_mean, z_std = latent_states(nets, data, device)
+        norms, znorm = {"z_mean": z_mean.cpu(), "z_std": z_std.cpu()}, (z_mean, z_std)
+    windows = data.windows(cfg.stepper_window) if stage == "stepper" else None
+    if stage == "stepper" and windows.size == 0:
+        raise ValueError(f"no clip has stepper_window={cfg.stepper_window} frames")
+    matcher = db.matcher if stage == "projector" else None
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=cfg.iterations, initial=start, unit="it", desc="compress")
+        bar = tqdm(total=iterations, initial=start, unit="it", desc=stage)
     t0, it, last = time.perf_counter(), start, {}
+
+    def save(done: bool):
+        k = STAGES.index(stage)
+        if done:  # the next stage starts from scratch: no optimizer or sampler state to keep
+            state = {"stage": STAGES[k + 1] if k + 1 < len(STAGES) else "done", "iteration": 0}
+        else:
+            state = {"stage": stage, "iteration": it, "optimizer": opt.state_dict(), "rng": rng.bit_generator.state}
+        state = {**extra, **metrics, **state, f"{stage}_iterations": it}
+        keep = {n: v for n, v in nets.items() if _first_stage(n) <= k}
+        save_compressed(out, keep, data, cfg, db, {**state, **norms})
+
+    metrics: Dict[str, Any] = {}
+
     try:
-        while it < cfg.iterations and (seconds is None or time.perf_counter() - t0 < seconds):
-            idx = torch.as_tensor(rng.choice(data.train_pairs, cfg.batch), device=device)
-            res = losses(comp, decomp, data_t, idx, cfg)
+        for n in trained:
+            nets[n].train()
+        while it < iterations and (budget is None or time.perf_counter() - t0 < budget):
+            if stage == "decompressor":
+                idx = torch.as_tensor(rng.choice(data.train_pairs, cfg.batch), device=device)
+                res = losses(nets["compressor"], nets["decompressor"], data_t, idx, cfg)
+            elif stage == "stepper":
+                idx = torch.as_tensor(rng.choice(windows, cfg.batch), device=device)
+                res = stepper_losses(nets["stepper"], s_all, idx, cfg)
+            else:
+                q = projector_queries(data, rng, cfg.batch, cfg.projector_noise)
+                nearest, _ = matcher.match(q, None, None)
+                res = projector_losses(nets["projector"], s_all, torch.as_tensor(q, device=device),
+                                       torch.as_tensor(nearest, device=device), data.x.shape[1])
             opt.zero_grad()
             res["loss"].backward()
             opt.step()
@@ -271,32 +482,85 @@ def train_compressed(db, out, cfg: Optional[CompressConfig] = None, *, seconds: 
             it += 1
             if bar is not None:
                 bar.update(1)
-            if it % 200 == 0 or it == cfg.iterations:
+            checkpoint = it % cfg.checkpoint_every == 0
+            if checkpoint or it % 200 == 0 or it == iterations:
                 last = {k: float(v.detach()) for k, v in res.items()}
-                last.update(step=it, wall_s=time.perf_counter() - t0, iteration=it,
-                            learning_rate=opt.param_groups[0]["lr"])
-                if it % cfg.checkpoint_every == 0:
-                    held = holdout_error(comp, decomp, data, device)
-                    if held is not None:
-                        last["holdout_joint_error_cm"] = held
-                    save_compressed(out, comp, decomp, data, cfg, db, {"iteration": it, "optimizer": opt.state_dict(),
-                                                                       "rng": rng.bit_generator.state})
+                last.update(step=step_offset + it, wall_s=time.perf_counter() - t0, stage=STAGES.index(stage),
+                            iteration=it, learning_rate=opt.param_groups[0]["lr"])
+                if checkpoint:
+                    last.update(stage_metrics(stage, nets, data, s_all, znorm, matcher, device))
+                    save(False)
                 logger.write(last)
     finally:
         if bar is not None:
             bar.close()
-    held = holdout_error(comp, decomp, data, device)
-    if held is not None:
-        last["holdout_joint_error_cm"] = held
+        for n in trained:
+            nets[n].eval()
+    last.update(stage_metrics(stage, nets, data, s_all, znorm, matcher, device))
+    metrics.update({k: v for k, v in last.items() if k.endswith(("_cm", "_match_rate"))})
+    save(it >= iterations or budget is not None)
+    extra.update(metrics)
+    extra[f"{stage}_iterations"] = it
     last["iteration"] = it
-    save_compressed(out, comp, decomp, data, cfg, db, {"iteration": it, "optimizer": opt.state_dict(),
-                                                       "rng": rng.bit_generator.state})
-    logger.close()
     return last
 
 
+def stage_metrics(stage, nets, data: CompressData, s_all, norms, matcher, device, n: int = 256,
+                  seconds: float = 2.0) -> Dict[str, float]:
+    """A stage's measure on the database (fixed draws, so the numbers compare across checkpoints):
+    the decompressor's held-back joint error; the stepper's joint error after rolling out
+    ``seconds`` from a true state; the projector's: how often its answer decodes to the pose of
+    the search's own answer within 5 cm (mean joint error), and that mean error."""
+    import torch
+
+    if stage == "decompressor":
+        held = holdout_error(nets["compressor"], nets["decompressor"], data, device)
+        return {} if held is None else {"holdout_joint_error_cm": held}
+    rng = np.random.default_rng(12345)
+    was = {k: v.training for k, v in nets.items()}
+    for v in nets.values():
+        v.eval()
+    try:
+        with torch.no_grad():
+            if stage == "stepper":
+                W = int(round(seconds * 30))
+                starts = data.windows(W + 1)
+                if starts.size == 0:
+                    return {}
+                t = rng.choice(starts, n)
+                cur = s_all[torch.as_tensor(t, device=device)]
+                for _ in range(W):
+                    cur = cur + nets["stepper"](cur)
+                poses = decode_states(nets, data, cur, *norms, device)
+                return {"stepper_joint_error_cm": float(joint_errors_cm(data, t + W, poses).mean())}
+            q = projector_queries(data, rng, n, 0.5)
+            nearest, _ = matcher.match(q, None, None)
+            pred = nets["projector"](torch.as_tensor(q, device=device))
+            err = joint_errors_cm(data, nearest, decode_states(nets, data, pred, *norms, device))
+            return {"projector_joint_error_cm": float(err.mean()), "projector_match_rate": float((err < 5.0).mean())}
+    finally:
+        for k, v in nets.items():
+            v.train(was[k])
+
+
+def decode_states(nets, data: CompressData, states, z_mean, z_std, device) -> np.ndarray:
+    """Raw poses of torch states [X, Zn] through the decompressor (Zn de-normalized by the
+    database's latent statistics z_mean, z_std)."""
+    import torch
+
+    nx = data.x.shape[1]
+    z = states[:, nx:] * z_std + z_mean
+    mean, std = torch.as_tensor(data.y_mean, device=device), torch.as_tensor(data.y_std, device=device)
+    return (nets["decompressor"](torch.cat([states[:, :nx], z], 1)) * std + mean).cpu().numpy()
+
+
+def _first_stage(name: str) -> int:
+    """The index of the stage that trains network ``name``."""
+    return {"compressor": 0, "decompressor": 0, "stepper": 1, "projector": 2}[name]
+
+
 def reconstruct(comp, decomp, data: CompressData, frames: np.ndarray, device=None) -> np.ndarray:
-    """Raw poses (len(frames), 9J + 3) of ``frames`` through the compressor and decompressor."""
+    """Raw poses (len(frames), 9J + 5) of ``frames`` through the compressor and decompressor."""
     import torch
 
     device = device or next(decomp.parameters()).device
@@ -325,8 +589,8 @@ def holdout_error(comp, decomp, data: CompressData, device) -> Optional[float]:
     if frames.size == 0:
         return None
     frames = frames[:: max(1, frames.size // 4096)]
+    was = comp.training, decomp.training
     comp.eval(), decomp.eval()
     err = float(joint_errors_cm(data, frames, reconstruct(comp, decomp, data, frames, device)).mean())
-    comp.train(), decomp.train()
+    comp.train(was[0]), decomp.train(was[1])
     return err
-

@@ -40,10 +40,10 @@ class LiveSession:
     """One character, its task's env and the policies it can switch between."""
 
     def __init__(self, task, db, policy, *, config=None, stage: Optional[int] = None, seed: int = 0,
-                 trace: Optional[str] = None, window_steps: int = 50, request: str = ""):
+                 trace: Optional[str] = None, window_steps: int = 50, request: str = "", compressed=None):
         self.task, self.db = task, db
         self.run = FullPath(task, db, config=config, stage=stage, seed=seed, record=False, continuous=True,
-                            request=request)
+                            request=request, compressed=compressed)
         self.config = self.run.config
         self.policies = {"trained": policy, "joystick": JoystickPolicy.preset(db, "joystick")}
         self.policy_name = "trained"
@@ -183,8 +183,10 @@ class LiveSession:
         self.last, self.k = res, 0
         self.decisions += 1
         self.window.append(res)
+        chosen = (run.env._core.compressed_chosen(0) if run.compressed is not None else  # the projection
+                  self.db.normalized_features[res.match])
         match_points, match_directions = _world_query(
-            self.db, np.asarray(self.db.normalized_features[res.match, POSE_DIM:], np.float32), root_before)
+            self.db, np.asarray(chosen[POSE_DIM:POSE_DIM + 12], np.float32), root_before)
         self.shown.update(query_points=points, query_directions=directions, match_points=match_points,
                           match_directions=match_directions, sensors=self._sensors(),
                           continuation_path=continuation)
@@ -197,8 +199,11 @@ class LiveSession:
         self.run.ctrl = Character(self.db, frames_per_step=self.F,
                                    inertialization_halflife=0.1 if self.inertialization else 0.0, ik=self.ik,
                                    foot_locking=self.ik, action_limit_std=self.config.action_limit_std,
-                                   transition_cost=self.config.transition_cost, start_frame=frame,
-                                   position=(x, z), yaw=yaw)
+                                   transition_cost=self.config.transition_cost,
+                                   start_frame=None if frame < 0 else frame, position=(x, z), yaw=yaw)
+        if self.run.compressed is not None:  # start the new character on the pose shown now
+            row = self.run.compressed.decode(self.run.env._core.compressed_state(0)[None])[0]
+            self.run.ctrl.reset_row(row, (x, z), yaw)
         self._wrap_controller_timing()
 
     def _wrap_controller_timing(self) -> None:

@@ -1,0 +1,131 @@
+// mmrl._core.CompressedModel: a compressed controller's networks (compressed.hpp), built from
+// the arrays of a compressed file (python/mmrl/compress/model.py) and the database frames'
+// states. Convert, check, forward.
+#include "bind_compressed.hpp"
+
+#include <string>
+
+namespace mmrl {
+
+namespace {
+
+Mlp mlp_arg(const py::handle& layers, const char* name) {
+  Mlp m;
+  for (const py::handle& item : layers) {
+    auto pair = py::reinterpret_borrow<py::tuple>(item);
+    if (pair.size() != 2) throw py::value_error(std::string(name) + ": expected (weight, bias) pairs");
+    auto w = check_array<float>(pair[0], name, {-1, -1});
+    auto b = check_array<float>(pair[1], name, {w.shape(0)});
+    Mlp::Layer l;
+    l.out = static_cast<int>(w.shape(0));
+    l.in = static_cast<int>(w.shape(1));
+    l.weight.assign(w.data(), w.data() + w.size());
+    l.bias.assign(b.data(), b.data() + b.size());
+    m.layers.push_back(std::move(l));
+  }
+  return m;
+}
+
+std::vector<float> vector_arg(const py::handle& obj, const char* name) {
+  auto a = check_array<float>(obj, name, {-1});
+  return std::vector<float>(a.data(), a.data() + a.size());
+}
+
+// Rows of a batch (N x dim, float32), checked finite.
+carray<float> rows_arg(const py::handle& obj, const char* name, int dim) {
+  auto a = check_array<float>(obj, name, {-1, dim});
+  check_finite(a.data(), a.size(), name);
+  return a;
+}
+
+}  // namespace
+
+// long: a binding table, one .def per method; each lambda only converts, checks and forwards.
+void bind_compressed(py::module_& m) {
+  py::class_<PyCompressed>(m, "CompressedModel", "A compressed controller's networks (compressed.hpp).")
+      .def(py::init([](int num_joints, int latent, const py::list& decompressor, const py::list& stepper,
+                       const py::list& projector, const py::handle& y_mean, const py::handle& y_std,
+                       const py::handle& z_mean, const py::handle& z_std, const py::handle& frame_states) {
+             auto* p = new PyCompressed();
+             CompressedModel& c = p->model;
+             c.num_joints = num_joints;
+             c.latent = latent;
+             c.decompressor = mlp_arg(decompressor, "decompressor");
+             c.stepper = mlp_arg(stepper, "stepper");
+             c.projector = mlp_arg(projector, "projector");
+             c.y_mean = vector_arg(y_mean, "y_mean");
+             c.y_std = vector_arg(y_std, "y_std");
+             c.z_mean = vector_arg(z_mean, "z_mean");
+             c.z_std = vector_arg(z_std, "z_std");
+             try {
+               c.check();
+             } catch (...) {
+               delete p;
+               throw;
+             }
+             if (!frame_states.is_none()) {
+               auto s = rows_arg(frame_states, "frame_states", c.state_dim());
+               p->frame_states.assign(s.data(), s.data() + s.size());
+               p->num_frame_states = s.shape(0);
+             }
+             return p;
+           }),
+           py::arg("num_joints"), py::arg("latent"), py::arg("decompressor"), py::arg("stepper"), py::arg("projector"),
+           py::arg("y_mean"), py::arg("y_std"), py::arg("z_mean"), py::arg("z_std"), py::arg("frame_states") = py::none())
+      .def_property_readonly("num_joints", [](const PyCompressed& p) { return p.model.num_joints; })
+      .def_property_readonly("latent", [](const PyCompressed& p) { return p.model.latent; })
+      .def_property_readonly("pose_dim", [](const PyCompressed& p) { return p.model.pose_dim(); })
+      .def_property_readonly("state_dim", [](const PyCompressed& p) { return p.model.state_dim(); })
+      .def_property_readonly("num_frame_states", [](const PyCompressed& p) { return p.num_frame_states; })
+      .def_property_readonly("num_parameters", [](const PyCompressed& p) { return p.model.num_parameters(); })
+      .def_property_readonly("memory_bytes", [](const PyCompressed& p) { return p.model.memory_bytes(); },
+                             "Bytes of the networks and normalizations (not the frame states).")
+      .def(
+          "decode",
+          [](const PyCompressed& p, const py::handle& states) {
+            auto s = rows_arg(states, "states", p.model.state_dim());
+            const py::ssize_t n = s.shape(0), P = p.model.pose_dim(), S = p.model.state_dim();
+            py::array_t<float> out({n, P});
+            float* o = out.mutable_data();
+            {
+              py::gil_scoped_release release;
+              CompressedScratch scratch = p.model.make_scratch();
+              for (py::ssize_t i = 0; i < n; ++i) p.model.decode(s.data() + i * S, o + i * P, scratch);
+            }
+            return out;
+          },
+          py::arg("states"), "The pose rows (N, pose_dim) of states (N, state_dim).")
+      .def(
+          "step",
+          [](const PyCompressed& p, const py::handle& states) {
+            auto s = rows_arg(states, "states", p.model.state_dim());
+            const py::ssize_t n = s.shape(0), S = p.model.state_dim();
+            py::array_t<float> out({n, S});
+            float* o = out.mutable_data();
+            {
+              py::gil_scoped_release release;
+              std::copy(s.data(), s.data() + n * S, o);
+              CompressedScratch scratch = p.model.make_scratch();
+              for (py::ssize_t i = 0; i < n; ++i) p.model.step(o + i * S, scratch);
+            }
+            return out;
+          },
+          py::arg("states"), "Each state (N, state_dim) one frame later.")
+      .def(
+          "project",
+          [](const PyCompressed& p, const py::handle& queries) {
+            auto q = rows_arg(queries, "queries", kFeatureDim);
+            const py::ssize_t n = q.shape(0), S = p.model.state_dim();
+            py::array_t<float> out({n, S});
+            float* o = out.mutable_data();
+            {
+              py::gil_scoped_release release;
+              CompressedScratch scratch = p.model.make_scratch();
+              for (py::ssize_t i = 0; i < n; ++i) p.model.project(q.data() + i * kFeatureDim, o + i * S, scratch);
+            }
+            return out;
+          },
+          py::arg("queries"), "The projected states (N, state_dim) of normalized queries (N, 27).");
+}
+
+}  // namespace mmrl

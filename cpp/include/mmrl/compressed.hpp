@@ -1,0 +1,96 @@
+// A compressed controller: learned motion matching (Holden, Kanoun, Perepichka, Popa 2020;
+// docs/compressed.md). Three small networks stand in for the database:
+//   - the decompressor, from a state [X, Zn] (X: a frame's 27 normalized matching features,
+//     Zn: its latent, normalized) to that frame's pose row (python/mmrl/compress/pose.py);
+//   - the stepper, which advances a state by one frame (playback): s' = s + stepper(s);
+//   - the projector, from a query (27, normalized) to the state of its best match (the search).
+//
+// The decision (compressed_decision) keeps the database's continuation rule: the state played
+// now is the starting best, and the projection replaces it only when it is closer to the query
+// by more than the transition cost (squared normalized distance between the query and a
+// state's X; the same cost a database match reports). A transition is an accepted projection.
+//
+// Pose rows (9 J + 5 floats): J x 6 rotations (the first two columns of each joint's local
+// rotation matrix, row-major; a root joint's relative to the character frame's yaw), J x 3
+// translations (a root joint's in the character frame), the root delta to the next frame
+// (dx, dz, dyaw in this frame's character frame) and the two foot contacts (> 0.5: planted).
+//
+// Evaluation allocates nothing: every intermediate lives in a CompressedScratch the caller owns.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "mmrl/features.hpp"
+#include "mmrl/math.hpp"
+
+namespace mmrl {
+
+// A dense network: layers out x in (row-major) with biases, ELU between layers, none after the last.
+struct Mlp {
+  struct Layer {
+    int in = 0, out = 0;
+    std::vector<float> weight, bias;
+  };
+  std::vector<Layer> layers;
+
+  int input_dim() const { return layers.empty() ? 0 : layers.front().in; }
+  int output_dim() const { return layers.empty() ? 0 : layers.back().out; }
+  int max_width() const;
+  size_t num_parameters() const;
+  // Throws std::invalid_argument (naming `what`) unless the layers chain and every array has its size.
+  void check(const std::string& what) const;
+  // out = net(in); scratch: 2 * max_width() floats. in and out may not alias scratch.
+  void forward(const float* in, float* out, float* scratch) const;
+};
+
+struct CompressedScratch {
+  std::vector<float> a, b, state, pose_input;
+};
+
+class CompressedModel {
+ public:
+  int num_joints = 0;
+  int latent = 0;
+  Mlp decompressor, stepper, projector;
+  std::vector<float> y_mean, y_std;  // pose_dim: decompressor output * y_std + y_mean = pose row
+  std::vector<float> z_mean, z_std;  // latent: Z = Zn * z_std + z_mean
+
+  int pose_dim() const { return 9 * num_joints + 5; }
+  int state_dim() const { return kFeatureDim + latent; }
+  // Throws std::invalid_argument naming what does not fit (sizes of the networks and arrays).
+  void check() const;
+  CompressedScratch make_scratch() const;
+  size_t num_parameters() const;
+  size_t memory_bytes() const;
+
+  // The pose row (pose_dim) of a state.
+  void decode(const float* state, float* pose, CompressedScratch& scratch) const;
+  // Advances a state by one frame, in place.
+  void step(float* state, CompressedScratch& scratch) const;
+  // The state (state_dim) of a query's best match.
+  void project(const float* query, float* state, CompressedScratch& scratch) const;
+};
+
+// Squared distance between a query and a state's features (27 normalized floats each).
+inline float feature_distance(const float* query, const float* state) {
+  float d = 0;
+  for (int k = 0; k < kFeatureDim; ++k) d += (query[k] - state[k]) * (query[k] - state[k]);
+  return d;
+}
+
+// The compressed decision (see the header comment): projects the query into `projected`
+// (state_dim floats) and returns true when it replaces `current`; cost: the chosen state's.
+bool compressed_decision(const CompressedModel& model, const float* current, const float* query,
+                         float transition_cost, float* projected, float* cost, CompressedScratch& scratch);
+
+// Playback of a chosen state: rows (frames + 1) x pose_dim, row k the pose of the k-th frame
+// from `start` (row 0: start itself); `end` (may alias start) gets the state after `frames` steps.
+void compressed_playback(const CompressedModel& model, const float* start, int frames, float* rows, float* end,
+                         CompressedScratch& scratch);
+
+// A pose row's rotation block (6 floats) as a unit quaternion (Gram-Schmidt, as in training).
+Quat rotation_from_6d(const float* six);
+
+}  // namespace mmrl

@@ -1,0 +1,170 @@
+#include "mmrl/compressed.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include <Eigen/Dense>
+
+namespace mmrl {
+
+namespace {
+
+using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+
+inline float elu(float x) { return x > 0.0f ? x : std::expm1(x); }
+
+void check_size(const std::vector<float>& v, size_t n, const std::string& what) {
+  if (v.size() != n)
+    throw std::invalid_argument(what + ": expected " + std::to_string(n) + " floats, got " + std::to_string(v.size()));
+}
+
+}  // namespace
+
+int Mlp::max_width() const {
+  int w = 0;
+  for (const Layer& l : layers) w = std::max({w, l.in, l.out});
+  return w;
+}
+
+size_t Mlp::num_parameters() const {
+  size_t n = 0;
+  for (const Layer& l : layers) n += l.weight.size() + l.bias.size();
+  return n;
+}
+
+void Mlp::check(const std::string& what) const {
+  if (layers.empty()) throw std::invalid_argument(what + ": no layers");
+  for (size_t k = 0; k < layers.size(); ++k) {
+    const Layer& l = layers[k];
+    const std::string name = what + " layer " + std::to_string(k);
+    if (l.in < 1 || l.out < 1) throw std::invalid_argument(name + ": sizes must be >= 1");
+    if (k > 0 && l.in != layers[k - 1].out)
+      throw std::invalid_argument(name + ": takes " + std::to_string(l.in) + " inputs, the layer before gives " +
+                                  std::to_string(layers[k - 1].out));
+    check_size(l.weight, static_cast<size_t>(l.in) * l.out, name + " weight");
+    check_size(l.bias, static_cast<size_t>(l.out), name + " bias");
+    for (float v : l.weight)
+      if (!std::isfinite(v)) throw std::invalid_argument(name + ": weight is not finite");
+    for (float v : l.bias)
+      if (!std::isfinite(v)) throw std::invalid_argument(name + ": bias is not finite");
+  }
+}
+
+void Mlp::forward(const float* in, float* out, float* scratch) const {
+  const int w = max_width();
+  float* buf[2] = {scratch, scratch + w};
+  const float* x = in;
+  for (size_t k = 0; k < layers.size(); ++k) {
+    const Layer& l = layers[k];
+    const bool last = k + 1 == layers.size();
+    float* y = last ? out : buf[k % 2];
+    Eigen::Map<const RowMatrix> W(l.weight.data(), l.out, l.in);
+    Eigen::Map<const Eigen::VectorXf> xv(x, l.in), b(l.bias.data(), l.out);
+    Eigen::Map<Eigen::VectorXf> yv(y, l.out);
+    yv.noalias() = W * xv;
+    yv += b;
+    if (!last)
+      for (int i = 0; i < l.out; ++i) y[i] = elu(y[i]);
+    x = y;
+  }
+}
+
+void CompressedModel::check() const {
+  if (num_joints < 1 || latent < 1) throw std::invalid_argument("compressed model: joints and latent must be >= 1");
+  decompressor.check("decompressor");
+  stepper.check("stepper");
+  projector.check("projector");
+  const int S = state_dim(), P = pose_dim();
+  auto dims = [](const Mlp& m, int in, int out, const char* name) {
+    if (m.input_dim() != in || m.output_dim() != out)
+      throw std::invalid_argument(std::string(name) + ": maps " + std::to_string(m.input_dim()) + " -> " +
+                                  std::to_string(m.output_dim()) + ", the model needs " + std::to_string(in) + " -> " +
+                                  std::to_string(out));
+  };
+  dims(decompressor, S, P, "decompressor");
+  dims(stepper, S, S, "stepper");
+  dims(projector, kFeatureDim, S, "projector");
+  check_size(y_mean, P, "pose mean");
+  check_size(y_std, P, "pose scale");
+  check_size(z_mean, latent, "latent mean");
+  check_size(z_std, latent, "latent scale");
+}
+
+CompressedScratch CompressedModel::make_scratch() const {
+  const int w = std::max({decompressor.max_width(), stepper.max_width(), projector.max_width()});
+  CompressedScratch s;
+  s.a.assign(static_cast<size_t>(2 * w), 0.0f);
+  s.b.assign(static_cast<size_t>(std::max(state_dim(), pose_dim())), 0.0f);
+  s.state.assign(static_cast<size_t>(state_dim()), 0.0f);
+  s.pose_input.assign(static_cast<size_t>(state_dim()), 0.0f);
+  return s;
+}
+
+size_t CompressedModel::num_parameters() const {
+  return decompressor.num_parameters() + stepper.num_parameters() + projector.num_parameters();
+}
+
+size_t CompressedModel::memory_bytes() const {
+  return sizeof(float) * (num_parameters() + y_mean.size() + y_std.size() + z_mean.size() + z_std.size());
+}
+
+void CompressedModel::decode(const float* state, float* pose, CompressedScratch& scratch) const {
+  float* in = scratch.pose_input.data();
+  for (int k = 0; k < kFeatureDim; ++k) in[k] = state[k];
+  for (int k = 0; k < latent; ++k) in[kFeatureDim + k] = state[kFeatureDim + k] * z_std[k] + z_mean[k];
+  decompressor.forward(in, pose, scratch.a.data());
+  const int P = pose_dim();
+  for (int k = 0; k < P; ++k) pose[k] = pose[k] * y_std[k] + y_mean[k];
+}
+
+void CompressedModel::step(float* state, CompressedScratch& scratch) const {
+  float* delta = scratch.b.data();
+  stepper.forward(state, delta, scratch.a.data());
+  const int S = state_dim();
+  for (int k = 0; k < S; ++k) state[k] += delta[k];
+}
+
+void CompressedModel::project(const float* query, float* state, CompressedScratch& scratch) const {
+  projector.forward(query, state, scratch.a.data());
+}
+
+bool compressed_decision(const CompressedModel& model, const float* current, const float* query,
+                         float transition_cost, float* projected, float* cost, CompressedScratch& scratch) {
+  const float stay = feature_distance(query, current);
+  model.project(query, projected, scratch);
+  const float jump = feature_distance(query, projected);
+  const bool transition = jump + transition_cost < stay;
+  if (cost) *cost = transition ? jump : stay;
+  return transition;
+}
+
+void compressed_playback(const CompressedModel& model, const float* start, int frames, float* rows, float* end,
+                         CompressedScratch& scratch) {
+  float* s = scratch.state.data();
+  const int S = model.state_dim(), P = model.pose_dim();
+  std::copy(start, start + S, s);
+  model.decode(s, rows, scratch);
+  for (int k = 1; k <= frames; ++k) {
+    model.step(s, scratch);
+    model.decode(s, rows + static_cast<size_t>(k) * P, scratch);
+  }
+  std::copy(s, s + S, end);
+}
+
+Quat rotation_from_6d(const float* six) {
+  // Row-major first two columns: six = [m00, m01, m10, m11, m20, m21].
+  Vec3 c1(six[0], six[2], six[4]), c2(six[1], six[3], six[5]);
+  const float n1 = c1.norm();
+  c1 = n1 > 1e-12f ? Vec3(c1 / n1) : Vec3::UnitX();
+  c2 = c2 - c1.dot(c2) * c1;
+  const float n2 = c2.norm();
+  c2 = n2 > 1e-12f ? Vec3(c2 / n2) : Vec3(c1.unitOrthogonal());
+  Mat3 m;
+  m.col(0) = c1;
+  m.col(1) = c2;
+  m.col(2) = c1.cross(c2);
+  return Quat(m).normalized();
+}
+
+}  // namespace mmrl
