@@ -13,16 +13,21 @@ def scripted_targets(n: int, seed: int, half: float = 6.0) -> np.ndarray:
 
 
 def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0, success_radius: float = 0.5,
-               request: str = ""):
+               request: str = "", compressed=None, start=None):
     """``decisions`` decisions of the runtime and of the Python full path from the same start,
     through the same scripted targets (the next one once the root is within success_radius at
-    a decision). ``python_act(obs) -> action`` is the Python side's policy.
+    a decision). ``python_act(obs) -> action`` is the Python side's policy. ``compressed``: the
+    Python side's CompressedController; ``start``: (the Python side's start frame, the runtime's)
+    when they differ (a compressed file keeps only its start windows).
 
     Returns per decision the matches of both, and the largest root and pose differences per frame."""
-    fp = FullPath(task, db, config=config, seed=seed, record=False, continuous=True)
+    fp = FullPath(task, db, config=config, seed=seed, record=False, continuous=True, compressed=compressed)
+    if start is not None:
+        fp.env.set_state(0, int(start[0]), 0.0, 0.0, 0.0)
+        fp._start_episode()
     x, z, yaw = fp.ctrl.root
     controller = _core.RuntimeController.load(str(path))
-    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.ctrl.frame)
+    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.ctrl.frame if start is None else int(start[1]))
     if request:  # the same request on both sides (tags.hpp)
         fp.env.set_request(0, request)
         fp.obs = fp.env.observe(0)

@@ -51,6 +51,8 @@ void bind_runtime(py::module_& m) {
       .def_property_readonly("task_name", [](const RuntimeController& c) { return c.task().name; })
       .def_property_readonly("frames_per_step", [](const RuntimeController& c) { return c.task().frames_per_step; })
       .def_property_readonly("memory_bytes", &RuntimeController::memory_bytes)
+      .def_property_readonly("compressed", [](const RuntimeController& c) { return c.compressed() != nullptr; },
+                             "True for a compressed controller (networks in place of the database).")
       .def(
           "act",
           [](const RuntimeController& c, const py::handle& obs) {

@@ -241,6 +241,25 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
           },
           py::arg("index"), "Env i's compressed state shown now (state_dim).")
       .def(
+          "compressed_played",
+          [](const Wrapper& s, int i) {
+            const int e = checked_env_index(s, i);
+            const CompressedModel* m = s.env.compressed();
+            if (m == nullptr) throw py::value_error("compressed_played: no compressed controller is set");
+            return py::array_t<float>(m->state_dim(), s.env.compressed_played(e));
+          },
+          py::arg("index"), "The state at the end of env i's last playback (kept through the autoreset).")
+      .def(
+          "set_compressed_state",
+          [](Wrapper& s, int i, const py::handle& state) {
+            const int e = checked_env_index(s, i);
+            const CompressedModel* m = s.env.compressed();
+            if (m == nullptr) throw py::value_error("set_compressed_state: no compressed controller is set");
+            auto a = check_array<float>(state, "state", {m->state_dim()});
+            s.env.set_compressed_state(e, a.data());
+          },
+          py::arg("index"), py::arg("state"), "Sets env i's compressed state (state_dim, finite).")
+      .def(
           "compressed_chosen",
           [](const Wrapper& s, int i) {
             const int e = checked_env_index(s, i);

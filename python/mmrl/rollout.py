@@ -221,6 +221,8 @@ class FullPath:
         ``target_half_extent``, not too close) around the character, from the env's own random
         stream (the C++ rule, not a copy of it)."""
         x, z, yaw = self.ctrl.root
+        if self.compressed is not None:  # where the playback ended (the env's autoreset drew a new start)
+            self.env._core.set_compressed_state(0, self.env._core.compressed_played(0))
         self.env.set_state(0, self.ctrl.frame, x, z, yaw)  # frame -1 (compressed): the env keeps its state
         if target is None:
             target = self.env._core.draw_target_around_root(0, float(self.config.target_half_extent))

@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "mmrl/character.hpp"
+#include "mmrl/compressed.hpp"
 #include "mmrl/policy_net.hpp"
 #include "mmrl/runtime_file.hpp"
 #include "mmrl/tasks/obstacles.hpp"
@@ -79,7 +80,14 @@ class RuntimeController {
   int num_joints() const { return db_.num_joints; }
   float fps() const { return db_.fps; }
   const RuntimeLoadTimes& load_times() const { return times_; }
-  // Bytes held: the database's arrays, the search tree and the policy's weights.
+  // A compressed controller (docs/compressed.md; the file's lmm.* sections), or null: its
+  // database then holds only the start frames, with their states (frame_states: num_frames x
+  // state_dim), and the characters decide by the projector and play by the stepper.
+  const CompressedModel* compressed() const { return compressed_.get(); }
+  const float* frame_states() const { return frame_states_.data(); }
+  const float* action_box() const { return action_box_; }  // low (12), high (12); compressed files
+  // Bytes held: the database's arrays, the search tree, the policy's weights and (compressed)
+  // the networks and start states.
   size_t memory_bytes() const;
 
   RuntimeController(const RuntimeController&) = delete;
@@ -87,7 +95,11 @@ class RuntimeController {
 
  private:
   RuntimeController() = default;
+  void read_compressed(const ControllerFile& file);
   Database db_;
+  std::unique_ptr<CompressedModel> compressed_;
+  std::vector<float> frame_states_;
+  float action_box_[2 * kTrajectoryDim] = {};
   std::unique_ptr<Matcher> matcher_;  // borrows db_.normalized
   PolicyNet policy_;
   RuntimeTask task_;
@@ -169,7 +181,8 @@ class RuntimeCharacter {
   std::shared_ptr<const RuntimeController> controller_;
   Character character_;
   PolicyScratch scratch_;
-  std::vector<float> obs_, action_;
+  CompressedScratch cscratch_;  // compressed controllers: the start pose's decoding
+  std::vector<float> obs_, action_, row_;
   float target_x_ = 0, target_z_ = 0;
   float clock_ = 0;
   int k_ = 0;  // frames of the last decision shown

@@ -283,6 +283,29 @@ class TargetVecEnv {
     for (int i = 0; i < num_envs(); ++i) start_compressed(envs_[i]);
   }
   const CompressedModel* compressed() const { return compressed_; }
+  // Moves env i's compressed state to the end of its last decision's playback: what a step does
+  // after deciding, for a caller that only decides (the engine runtime, whose character plays).
+  void end_compressed_playback(int i) {
+    if (compressed_ != nullptr) std::copy(envs_[i].cnext.begin(), envs_[i].cnext.end(), envs_[i].cstate.begin());
+  }
+  // The state at the end of env i's last playback (kept through the autoreset, so a caller
+  // can go on from where the episode ended: set_compressed_state, then set_state with frame -1).
+  const float* compressed_played(int i) const { return envs_[i].cnext.data(); }
+  // Sets env i's compressed state (state_dim floats, finite; std::invalid_argument otherwise).
+  void set_compressed_state(int i, const float* state) {
+    if (compressed_ == nullptr) throw std::invalid_argument("set_compressed_state: no compressed controller is set");
+    for (size_t k = 0; k < envs_[i].cstate.size(); ++k)
+      if (!std::isfinite(state[k])) throw std::invalid_argument("set_compressed_state: the state is not finite");
+    std::copy(state, state + envs_[i].cstate.size(), envs_[i].cstate.begin());
+  }
+  // Replaces the action box (12 + 12 normalized floats, low <= high): a controller file whose
+  // database holds only its start frames carries the training database's box.
+  void set_action_box(const float* low, const float* high) {
+    for (int k = 0; k < kTrajectoryDim; ++k)
+      if (!(low[k] <= high[k])) throw std::invalid_argument("action box: low must be <= high in every dimension");
+    std::copy(low, low + kTrajectoryDim, low_);
+    std::copy(high, high + kTrajectoryDim, high_);
+  }
   // Env i's compressed playback: the last decision's pose rows and the state shown now.
   const float* compressed_rows(int i) const { return envs_[i].crows.data(); }
   const float* compressed_state(int i) const { return envs_[i].cstate.data(); }
@@ -547,7 +570,7 @@ class TargetVecEnv {
   }
   void end_playback(State& s, int64_t j) {
     if (compressed_) {
-      s.cstate.swap(s.cnext);
+      std::copy(s.cnext.begin(), s.cnext.end(), s.cstate.begin());  // end_compressed_playback's rule
       return;
     }
     s.frame = j + config_.frames_per_step;

@@ -23,6 +23,10 @@ def register_cli(sub) -> None:
     x.add_argument("run", metavar="RUN", help="a training run directory")
     x.add_argument("-o", "--output", metavar="FILE", help="write the controller file (.mmrl) for mmrl_runtime")
     x.add_argument("--onnx", metavar="FILE", help="write the policy as ONNX (needs mmrl[onnx])")
+    x.add_argument("--compressed", metavar="FILE", help="with -o: a compressed controller file, the networks of "
+                   "FILE (mmrl compress) in place of the database (docs/compressed.md)")
+    x.add_argument("--starts", type=int, default=8, metavar="K",
+                   help="with --compressed: start frames kept for the characters (default: 8)")
     x.add_argument("--check-observations", type=int, default=512, metavar="N",
                    help="observations the ONNX check compares on (default: 512)")
     x.set_defaults(func=cmd_export)
@@ -49,6 +53,8 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     if args.output is None and args.onnx is None:
         raise InputError("export: nothing to write; pass -o FILE (controller) and/or --onnx FILE")
+    if args.compressed and args.output is None:
+        raise InputError("export: --compressed writes a controller file; pass -o FILE")
     run = RunDir(args.run)
     task = run.task
     if task is None:
@@ -58,9 +64,23 @@ def cmd_export(args: argparse.Namespace) -> int:
         from ..export.runtime_export import write_controller
 
         t0 = time.perf_counter()
-        size = write_controller(args.output, db, policy, task.name, config)
-        print(f"wrote {args.output}: {size / 1e6:.1f} MB, {db.num_frames} frames, {db.num_joints} joints "
-              f"({time.perf_counter() - t0:.1f} s)")
+        if args.compressed:
+            from ..compress.model import CompressedController
+            from ..export.compressed_export import write_compressed_controller
+
+            if args.starts < 1:
+                raise InputError(f"--starts must be >= 1, got {args.starts}")
+            try:
+                size = write_compressed_controller(args.output, db, policy, task, config,
+                                                   CompressedController(args.compressed, db), args.starts)
+            except ValueError as e:
+                raise InputError(f"export --compressed: {e}") from None
+            print(f"wrote {args.output}: {size / 1e6:.2f} MB, the compressed networks of {args.compressed} and "
+                  f"{args.starts} start windows, {db.num_joints} joints ({time.perf_counter() - t0:.1f} s)")
+        else:
+            size = write_controller(args.output, db, policy, task.name, config)
+            print(f"wrote {args.output}: {size / 1e6:.1f} MB, {db.num_frames} frames, {db.num_joints} joints "
+                  f"({time.perf_counter() - t0:.1f} s)")
     if args.onnx is not None:
         from ..export.onnx_export import check_onnx, export_onnx
 

@@ -57,6 +57,7 @@ class CompressedController:
             z = torch.cat([nets["compressor"](y[a:a + 8192]) for a in range(0, y.shape[0], 8192)]).numpy()
         states = np.concatenate([data.x, (z - self.z_mean) / self.z_std], 1).astype(np.float32)
         self.networks = nets
+        self.frame_states = states  # (N, 27 + latent): every database frame's state
         self.core = _core.CompressedModel(J, int(self.config.latent), linear_layers(nets["decompressor"]),
                                           linear_layers(nets["stepper"]), linear_layers(nets["projector"]),
                                           self.y_mean, self.y_std, self.z_mean, self.z_std,

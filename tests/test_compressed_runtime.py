@@ -1,0 +1,69 @@
+"""A compressed controller in the C++ runtime (issue 27): ``mmrl export RUN --compressed FILE``
+writes the networks in place of the database; the runtime then equals Python's compressed full
+path (same file, same targets) over 1,000 decisions, and refuses a broken file with the reason."""
+import numpy as np
+import pytest
+import torch
+
+import mmrl
+from mmrl import _core
+from mmrl.cli import main
+from mmrl.compress import CompressConfig, train_compressed
+from mmrl.compress.model import CompressedController
+from mmrl.export.runtime_export import read_controller
+from mmrl.export.runtime_file import read_sections, write_sections
+from mmrl.runs import RunDir
+from runtime_helpers import drive_both
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    torch.set_num_threads(1)
+    out = tmp_path_factory.mktemp("compressed-runtime")
+    run = out / "plane"
+    assert main(["train", "plane", "--steps", "65536", "--seed", "0", "--out", str(run), "--no-progress"]) == 0
+    db = RunDir(run).database()
+    cfg = CompressConfig(iterations=800, hidden=(64, 64), latent=8, stepper_iterations=400, projector_iterations=600,
+                         stepper_hidden=(64, 64), projector_hidden=(64, 64), stepper_window=8)
+    train_compressed(db, out / "c.pt", cfg, progress=False)
+    assert main(["export", str(run), "--compressed", str(out / "c.pt"), "-o", str(out / "c.mmrl")]) == 0
+    return run, out / "c.pt", out / "c.mmrl"
+
+
+def test_the_runtime_equals_the_python_compressed_path_for_1000_decisions(exported):
+    run, cpt, path = exported
+    r = RunDir(run)
+    db = r.database()
+    controller = _core.RuntimeController.load(str(path))
+    assert controller.compressed and controller.num_frames == 8 * 31  # the start windows only
+    source = read_sections(path)["lmm.start_sources"]
+    out = drive_both(path, r.task, db, r.task_config(), controller.act, 1000,
+                     compressed=CompressedController(cpt, db), start=(int(source[0]), 0))
+    assert out["obs_error"] == 0.0
+    assert out["root_error"] <= 1e-4 and out["pose_error"] <= 1e-4, out
+    assert (out["rt_matches"] == -1).all() and (out["py_matches"] == -1).all()
+    assert out["targets_reached"] >= 10  # not vacuous: the character walked
+
+
+def test_a_broken_compressed_file_is_refused_with_the_reason(exported, tmp_path):
+    run, cpt, path = exported
+    sections = read_sections(path)
+
+    def refused(change, match):
+        s = dict(sections)
+        change(s)
+        bad = tmp_path / "bad.mmrl"
+        write_sections(bad, s)
+        with pytest.raises(ValueError, match=match):
+            _core.RuntimeController.load(str(bad))
+
+    def version(s):
+        s["lmm.header"] = np.array([9, *s["lmm.header"][1:]], np.int32)
+
+    refused(version, "bad.mmrl.*compressed sections of version 9")
+    refused(lambda s: s.update({"lmm.stepper.0.weight": s["lmm.stepper.0.weight"][:, :3].copy()}),
+            "bad.mmrl.*compressed networks do not fit")
+    refused(lambda s: s.pop("lmm.frame_states"), "bad.mmrl.*lmm.frame_states")
+    states = sections["lmm.frame_states"].copy()
+    states[0, 0] = np.nan
+    refused(lambda s: s.update({"lmm.frame_states": states}), "bad.mmrl.*not finite")
