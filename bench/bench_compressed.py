@@ -1,0 +1,129 @@
+"""A compressed controller against the database controller, on the same episodes (issue 27,
+docs/compressed.md): the same policy drives both through the full path.
+
+    python bench/bench_compressed.py --run RUN --compressed FILE [--episodes 100] [--seed 0]
+        [--runtime-bench build/bench_compressed] [--json out.json]
+
+Prints, for the database controller, the compressed one and the joystick on the database:
+success, time to target, foot sliding with IK on and off, transitions/s, pose-jump p99, and
+the raw-mocap floor; then the compressed controller's mean joint-position error against the
+database's poses over the same decisions (each projection's decoded frames against the frames
+the database's best match of the same query plays), and with --runtime-bench the C++ numbers
+(file sizes, memory, load time, us per character per frame with the split).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+KEYS = ("success_rate", "mean_time_to_target_s", "foot_sliding_cm_per_s", "foot_sliding_ik_off_cm_per_s",
+        "transitions_per_s", "pose_jump_p99_cm", "mean_speed_m_per_s")
+
+
+def decision_errors(task, db, policy, config, cc, episodes: int, seed: int) -> dict:
+    """Mean joint-position error (cm, character frame) of each projection's decoded frames
+    (the chosen state and the frames shown) against the frames the database plays from its
+    best match of the same query (nearest valid frame, plain distance)."""
+    import torch
+
+    from mmrl.compress.train import _positions
+    from mmrl.compress.pose import pose_targets
+    from mmrl.rollout import FullPath, policy_actions
+
+    run = FullPath(task, db, config=config, seed=seed, compressed=cc, record=False)
+    low, high = run.env.single_action_space.low, run.env.single_action_space.high
+    y = pose_targets(db)
+    F = run.config.frames_per_step
+    errors, decisions, ended = [], 0, 0
+    while ended < episodes:
+        before = run.env._core.compressed_state(0).copy()
+        action = policy_actions(policy, run.obs[None]).reshape(-1)
+        query = np.concatenate([before[:15], np.clip(action, low, high)]).astype(np.float32)[None]
+        out = run.step(action)
+        decisions += 1
+        ended += int(out["done"])
+        if not bool(run.env._step_transitions[0]):
+            continue
+        j, _ = db.matcher.match(query, None, None)
+        ref = y[int(j[0]) + np.arange(F + 1)]
+        rows = run.env._core.compressed_rows(0)
+        with torch.no_grad():
+            p = _positions(torch.as_tensor(rows, dtype=torch.float64), list(db.parents), db.num_joints)
+            q = _positions(torch.as_tensor(ref, dtype=torch.float64), list(db.parents), db.num_joints)
+        errors.append(float(100.0 * (p - q).norm(dim=-1).mean()))
+    return {"joint_error_cm": float(np.mean(errors)) if errors else float("nan"), "projections": len(errors),
+            "decisions": decisions}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--run", required=True, help="a plane training run")
+    ap.add_argument("--compressed", required=True, help="its database's compressed file (mmrl compress)")
+    ap.add_argument("--episodes", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--runtime-bench", default=None, help="the bench_compressed binary (C++ numbers)")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+
+    import torch
+
+    from mmrl.cli import main as cli
+    from mmrl.compress.model import CompressedController
+    from mmrl.rl.policies import JoystickPolicy
+    from mmrl.rollout import evaluate_full_path
+    from mmrl.runs import RunDir
+
+    torch.set_num_threads(1)
+    r = RunDir(args.run)
+    task, db, policy, config = r.task, r.database(), r.policy(), r.task_config()
+    cc = CompressedController(args.compressed, db)
+    out = {"run": args.run, "compressed": args.compressed, "episodes": args.episodes, "seed": args.seed}
+    for name, pol, comp in (("database", policy, None), ("compressed", policy, cc),
+                            ("joystick_database", JoystickPolicy.preset(db, "joystick"), None)):
+        t0 = time.perf_counter()
+        res = evaluate_full_path(task, db, pol, episodes=args.episodes, seed=args.seed, config=config, compressed=comp)
+        out[name] = {k: res.get(k) for k in KEYS}
+        out[name]["wall_s"] = time.perf_counter() - t0
+        out.setdefault("raw_mocap", res.get("raw_mocap"))
+    out["decisions"] = decision_errors(task, db, policy, config, cc, max(10, args.episodes // 5), args.seed)
+    a, b = out["database"], out["compressed"]
+    out["ratios"] = {
+        "success_points": 100.0 * (b["success_rate"] - a["success_rate"]),
+        "time_to_target": b["mean_time_to_target_s"] / a["mean_time_to_target_s"],
+        "sliding_ik_off": b["foot_sliding_ik_off_cm_per_s"] / a["foot_sliding_ik_off_cm_per_s"],
+        "transitions_per_s": b["transitions_per_s"] / a["transitions_per_s"],
+        "pose_jump_p99": b["pose_jump_p99_cm"] / a["pose_jump_p99_cm"],
+    }
+    fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
+    print(f"{args.episodes} plane episodes, seed {args.seed}, the same policy ({args.run}):")
+    print(f"  {'':<20}" + "".join(f"{k[:22]:>24}" for k in KEYS))
+    for name in ("database", "compressed", "joystick_database"):
+        print(f"  {name:<20}" + "".join(f"{fmt(out[name][k]):>24}" for k in KEYS))
+    print(f"  raw mocap floor: {out['raw_mocap']}")
+    print(f"  compressed vs database: {json.dumps({k: round(v, 3) for k, v in out['ratios'].items()})}")
+    d = out["decisions"]
+    print(f"  joint error against the database's poses over {d['projections']} projections "
+          f"({d['decisions']} decisions): {d['joint_error_cm']:.2f} cm")
+    if args.runtime_bench:
+        with tempfile.TemporaryDirectory() as tmp:
+            a_path, b_path = Path(tmp) / "db.mmrl", Path(tmp) / "c.mmrl"
+            assert cli(["export", args.run, "-o", str(a_path)]) == 0
+            assert cli(["export", args.run, "--compressed", args.compressed, "-o", str(b_path)]) == 0
+            text = subprocess.run([args.runtime_bench, str(a_path), str(b_path)], check=True, capture_output=True,
+                                  text=True).stdout
+        print(text)
+        out["runtime"] = text
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
