@@ -38,6 +38,22 @@ carray<float> rows_arg(const py::handle& obj, const char* name, int dim) {
   return a;
 }
 
+// f over the rows of a batch (N x in_dim, float32, finite) into a new N x out_dim array, GIL released.
+template <class F>
+py::array_t<float> batch(const PyCompressed& p, const py::handle& rows, const char* name, int in_dim, int out_dim,
+                         F&& f) {
+  auto a = rows_arg(rows, name, in_dim);
+  const py::ssize_t n = a.shape(0);
+  py::array_t<float> out({n, static_cast<py::ssize_t>(out_dim)});
+  float* o = out.mutable_data();
+  {
+    py::gil_scoped_release release;
+    CompressedScratch scratch = p.model.make_scratch();
+    for (py::ssize_t i = 0; i < n; ++i) f(a.data() + i * in_dim, o + i * out_dim, scratch);
+  }
+  return out;
+}
+
 }  // namespace
 
 // long: a binding table, one .def per method; each lambda only converts, checks and forwards.
@@ -83,47 +99,25 @@ void bind_compressed(py::module_& m) {
       .def(
           "decode",
           [](const PyCompressed& p, const py::handle& states) {
-            auto s = rows_arg(states, "states", p.model.state_dim());
-            const py::ssize_t n = s.shape(0), P = p.model.pose_dim(), S = p.model.state_dim();
-            py::array_t<float> out({n, P});
-            float* o = out.mutable_data();
-            {
-              py::gil_scoped_release release;
-              CompressedScratch scratch = p.model.make_scratch();
-              for (py::ssize_t i = 0; i < n; ++i) p.model.decode(s.data() + i * S, o + i * P, scratch);
-            }
-            return out;
+            return batch(p, states, "states", p.model.state_dim(), p.model.pose_dim(),
+                         [&](const float* in, float* out, CompressedScratch& s) { p.model.decode(in, out, s); });
           },
           py::arg("states"), "The pose rows (N, pose_dim) of states (N, state_dim).")
       .def(
           "step",
           [](const PyCompressed& p, const py::handle& states) {
-            auto s = rows_arg(states, "states", p.model.state_dim());
-            const py::ssize_t n = s.shape(0), S = p.model.state_dim();
-            py::array_t<float> out({n, S});
-            float* o = out.mutable_data();
-            {
-              py::gil_scoped_release release;
-              std::copy(s.data(), s.data() + n * S, o);
-              CompressedScratch scratch = p.model.make_scratch();
-              for (py::ssize_t i = 0; i < n; ++i) p.model.step(o + i * S, scratch);
-            }
-            return out;
+            const int S = p.model.state_dim();
+            return batch(p, states, "states", S, S, [&](const float* in, float* out, CompressedScratch& s) {
+              std::copy(in, in + S, out);
+              p.model.step(out, s);
+            });
           },
           py::arg("states"), "Each state (N, state_dim) one frame later.")
       .def(
           "project",
           [](const PyCompressed& p, const py::handle& queries) {
-            auto q = rows_arg(queries, "queries", kFeatureDim);
-            const py::ssize_t n = q.shape(0), S = p.model.state_dim();
-            py::array_t<float> out({n, S});
-            float* o = out.mutable_data();
-            {
-              py::gil_scoped_release release;
-              CompressedScratch scratch = p.model.make_scratch();
-              for (py::ssize_t i = 0; i < n; ++i) p.model.project(q.data() + i * kFeatureDim, o + i * S, scratch);
-            }
-            return out;
+            return batch(p, queries, "queries", kFeatureDim, p.model.state_dim(),
+                         [&](const float* in, float* out, CompressedScratch& s) { p.model.project(in, out, s); });
           },
           py::arg("queries"), "The projected states (N, state_dim) of normalized queries (N, 27).");
 }

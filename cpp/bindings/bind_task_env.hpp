@@ -24,6 +24,14 @@ int checked_env_index(const Wrapper& s, int i) {
   return i;
 }
 
+// The compressed controller wrapper s's env plays, or ValueError naming the method.
+template <class Wrapper>
+const CompressedModel& compressed_of(const Wrapper& s, const char* method) {
+  const CompressedModel* m = s.env.compressed();
+  if (m == nullptr) throw py::value_error(std::string(method) + ": no compressed controller is set");
+  return *m;
+}
+
 // The state every target env keeps (world meters, radians), as a dict; tasks add their own keys.
 inline py::dict target_state_dict(const TargetEnvState& st) {
   py::dict d;
@@ -224,50 +232,39 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
       .def(
           "compressed_rows",
           [](const Wrapper& s, int i) {
-            const int e = checked_env_index(s, i);
-            const CompressedModel* m = s.env.compressed();
-            if (m == nullptr) throw py::value_error("compressed_rows: no compressed controller is set");
-            const py::ssize_t F = s.env.config().frames_per_step + 1, P = m->pose_dim();
-            return py::array_t<float>({F, P}, s.env.compressed_rows(e));
+            const CompressedModel& m = compressed_of(s, "compressed_rows");
+            const py::ssize_t F = s.env.config().frames_per_step + 1, P = m.pose_dim();
+            return py::array_t<float>({F, P}, s.env.compressed_rows(checked_env_index(s, i)));
           },
           py::arg("index"), "Env i's last decision's pose rows (frames_per_step + 1, pose_dim): row 0 the chosen state.")
       .def(
           "compressed_state",
           [](const Wrapper& s, int i) {
-            const int e = checked_env_index(s, i);
-            const CompressedModel* m = s.env.compressed();
-            if (m == nullptr) throw py::value_error("compressed_state: no compressed controller is set");
-            return py::array_t<float>(m->state_dim(), s.env.compressed_state(e));
+            return py::array_t<float>(compressed_of(s, "compressed_state").state_dim(),
+                                      s.env.compressed_state(checked_env_index(s, i)));
           },
           py::arg("index"), "Env i's compressed state shown now (state_dim).")
       .def(
           "compressed_played",
           [](const Wrapper& s, int i) {
-            const int e = checked_env_index(s, i);
-            const CompressedModel* m = s.env.compressed();
-            if (m == nullptr) throw py::value_error("compressed_played: no compressed controller is set");
-            return py::array_t<float>(m->state_dim(), s.env.compressed_played(e));
+            return py::array_t<float>(compressed_of(s, "compressed_played").state_dim(),
+                                      s.env.compressed_played(checked_env_index(s, i)));
           },
           py::arg("index"), "The state at the end of env i's last playback (kept through the autoreset).")
       .def(
-          "set_compressed_state",
-          [](Wrapper& s, int i, const py::handle& state) {
-            const int e = checked_env_index(s, i);
-            const CompressedModel* m = s.env.compressed();
-            if (m == nullptr) throw py::value_error("set_compressed_state: no compressed controller is set");
-            auto a = check_array<float>(state, "state", {m->state_dim()});
-            s.env.set_compressed_state(e, a.data());
-          },
-          py::arg("index"), py::arg("state"), "Sets env i's compressed state (state_dim, finite).")
-      .def(
           "compressed_chosen",
           [](const Wrapper& s, int i) {
-            const int e = checked_env_index(s, i);
-            const CompressedModel* m = s.env.compressed();
-            if (m == nullptr) throw py::value_error("compressed_chosen: no compressed controller is set");
-            return py::array_t<float>(m->state_dim(), s.env.compressed_chosen(e));
+            return py::array_t<float>(compressed_of(s, "compressed_chosen").state_dim(),
+                                      s.env.compressed_chosen(checked_env_index(s, i)));
           },
           py::arg("index"), "The state env i's last decision chose (the projection or the continuation; state_dim).")
+      .def(
+          "set_compressed_state",
+          [](Wrapper& s, int i, const py::handle& state) {
+            auto a = check_array<float>(state, "state", {compressed_of(s, "set_compressed_state").state_dim()});
+            s.env.set_compressed_state(checked_env_index(s, i), a.data());
+          },
+          py::arg("index"), py::arg("state"), "Sets env i's compressed state (state_dim, finite).")
       .def(
           "draw_target_around_root",
           [](Wrapper& s, int i, float half_extent) {

@@ -119,8 +119,7 @@ void Character::set_transition_cost(float cost) {
   options_.transition_cost = cost;
 }
 
-void Character::reset(int64_t frame, const RootState& root) {
-  if (frame < 0 || frame >= db_.num_frames) throw std::out_of_range("start frame out of range");
+void Character::clear(int64_t frame, const RootState& root) {
   frame_ = frame;
   root_ = root;
   last_match_ = -1;
@@ -130,19 +129,16 @@ void Character::reset(int64_t frame, const RootState& root) {
     locked_[s] = released_in_contact_[s] = false;
     lock_weight_[s] = 0;
   }
+}
+
+void Character::reset(int64_t frame, const RootState& root) {
+  if (frame < 0 || frame >= db_.num_frames) throw std::out_of_range("start frame out of range");
+  clear(frame, root);
   if (options_.poses) show_database_frame(frame, false);
 }
 
 void Character::reset_row(const float* row, const RootState& root) {
-  frame_ = -1;
-  root_ = root;
-  last_match_ = -1;
-  last_transition_ = false;
-  inertializer_.clear();
-  for (int s = 0; s < 2; ++s) {
-    locked_[s] = released_in_contact_[s] = false;
-    lock_weight_[s] = 0;
-  }
+  clear(-1, root);
   compressed_frame_pose(row, fp_shown_);
   fp_shown_prev_ = fp_shown_;
   if (options_.poses) show_frame(fp_shown_, false);

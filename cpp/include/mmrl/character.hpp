@@ -143,6 +143,8 @@ class Character {
   const float* current_lock_weights() const { return cur_lock_w_; }      // 2, see lock_weights
 
  private:
+  // Puts the character on `frame` (-1: a compressed state) at root, with no offsets or locks.
+  void clear(int64_t frame, const RootState& root);
   void blend_pose_of(const FramePose& frame, BlendPose& pose) const;
   // Velocities from frame a to the next frame b (1/fps apart).
   void blend_velocity(const FramePose& a, const FramePose& b, BlendVelocity& vel);
