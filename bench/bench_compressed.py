@@ -62,6 +62,53 @@ def decision_errors(task, db, policy, config, cc, episodes: int, seed: int) -> d
             "decisions": decisions}
 
 
+def episode_paths(task, db, policy, config, cc, episodes: int, seed: int):
+    """The root paths (x, z) and targets of the first ``episodes`` full-path episodes."""
+    from mmrl.rollout import FullPath, policy_actions
+
+    run = FullPath(task, db, config=config, seed=seed, compressed=cc)
+    paths = []
+    while len(paths) < episodes:
+        target = run.target.copy()
+        out = run.step(policy_actions(policy, run.obs[None]).reshape(-1))
+        if out["done"]:
+            paths.append((np.asarray(run.last_recording["roots"])[:, :2], target, bool(out["success"])))
+    return paths
+
+
+def picture(path, task, db, policy, config, cc, out: dict, seed: int) -> None:
+    """Left: the same episodes' root paths, database and compressed. Right: the quality numbers."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 5.2))
+    for comp, color, name in ((None, "tab:blue", "database"), (cc, "tab:orange", "compressed")):
+        for k, (xz, target, ok) in enumerate(episode_paths(task, db, policy, config, comp, 6, seed)):
+            ax.plot(xz[:, 0], xz[:, 1], color=color, lw=1.6, label=name if k == 0 else None)
+            ax.plot(*xz[0], "o", color=color, ms=4)
+            ax.plot(*target, "x", color="k", ms=7)
+    ax.set_aspect("equal")
+    ax.set_title("the same policy, the same 6 episodes (x: targets)")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.legend(loc="best")
+    names = ("foot_sliding_cm_per_s", "foot_sliding_ik_off_cm_per_s", "transitions_per_s", "pose_jump_p99_cm")
+    labels = ("sliding, IK on\n(cm/s)", "sliding, IK off\n(cm/s)", "transitions/s", "pose jump p99\n(cm)")
+    x = np.arange(len(names))
+    for k, (who, color) in enumerate((("database", "tab:blue"), ("compressed", "tab:orange"),
+                                      ("joystick_database", "tab:gray"))):
+        bx.bar(x + (k - 1) * 0.27, [out[who][n] or 0.0 for n in names], 0.27, color=color,
+               label=who.replace("_", " on the "))
+    bx.set_xticks(x, labels)
+    bx.set_title(f"motion quality over {out['episodes']} episodes")
+    bx.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--run", required=True, help="a plane training run")
@@ -70,6 +117,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--runtime-bench", default=None, help="the bench_compressed binary (C++ numbers)")
     ap.add_argument("--json", default=None)
+    ap.add_argument("--picture", default=None, help="write the comparison's picture (PNG)")
     args = ap.parse_args(argv)
 
     import torch
@@ -120,6 +168,8 @@ def main(argv=None) -> int:
                                   text=True).stdout
         print(text)
         out["runtime"] = text
+    if args.picture:
+        picture(args.picture, task, db, policy, config, cc, out, args.seed)
     if args.json:
         Path(args.json).write_text(json.dumps(out, indent=1))
     return 0
