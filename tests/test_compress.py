@@ -169,12 +169,23 @@ def test_the_core_networks_equal_torch(db, trained):
             torch.as_tensor(cc.y_mean)
         step = torch.as_tensor(s) + nets["stepper"](torch.as_tensor(s))
         proj = nets["projector"](torch.as_tensor(q))
-    np.testing.assert_allclose(cc.decode(s), pose.numpy(), atol=2e-5, rtol=1e-5)
+    free = np.ones(cc.core.pose_dim, bool)
+    J = db.num_joints
+    for j in np.flatnonzero(cc.fixed_joints):
+        free[6 * J + 3 * j:6 * J + 3 * j + 3] = False
+    np.testing.assert_allclose(cc.decode(s)[:, free], pose.numpy()[:, free], atol=2e-5, rtol=1e-5)
     np.testing.assert_allclose(cc.core.step(s), step.numpy(), atol=2e-5, rtol=1e-5)
     np.testing.assert_allclose(cc.core.project(q), proj.numpy(), atol=2e-5, rtol=1e-5)
     assert cc.core.num_frame_states == db.num_frames
+    J = db.num_joints
     assert cc.memory_bytes == 4 * (sum(p.numel() for n in ("decompressor", "stepper", "projector")
-                                       for p in nets[n].parameters()) + 2 * cc.core.pose_dim + 2 * 8)
+                                       for p in nets[n].parameters()) + 2 * cc.core.pose_dim + 2 * 8 + 3 * J) + J
+    # Bones keep their lengths: a joint whose translation never changes in the database decodes to it.
+    tr = np.asarray(db.bone_translations)
+    fixed = np.abs(tr - tr[:1]).max(axis=(0, 2)) <= 1e-6
+    assert fixed.sum() >= J // 2
+    decoded = cc.decode(s)[:, 6 * J:9 * J].reshape(-1, J, 3)
+    np.testing.assert_array_equal(decoded[:, fixed], np.broadcast_to(tr[0, fixed], decoded[:, fixed].shape))
 
 
 def test_the_full_path_plays_the_projector_and_the_stepper(db, trained):

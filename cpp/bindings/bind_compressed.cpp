@@ -61,7 +61,8 @@ void bind_compressed(py::module_& m) {
   py::class_<PyCompressed>(m, "CompressedModel", "A compressed controller's networks (compressed.hpp).")
       .def(py::init([](int num_joints, int latent, const py::list& decompressor, const py::list& stepper,
                        const py::list& projector, const py::handle& y_mean, const py::handle& y_std,
-                       const py::handle& z_mean, const py::handle& z_std, const py::handle& frame_states) {
+                       const py::handle& z_mean, const py::handle& z_std, const py::handle& frame_states,
+                       const py::handle& fixed_joints, const py::handle& fixed_translations) {
              auto* p = new PyCompressed();
              CompressedModel& c = p->model;
              c.num_joints = num_joints;
@@ -73,6 +74,12 @@ void bind_compressed(py::module_& m) {
              c.y_std = vector_arg(y_std, "y_std");
              c.z_mean = vector_arg(z_mean, "z_mean");
              c.z_std = vector_arg(z_std, "z_std");
+             if (!fixed_joints.is_none()) {
+               auto f = check_array<uint8_t>(fixed_joints, "fixed_joints", {num_joints});
+               c.fixed_joints.assign(f.data(), f.data() + f.size());
+               auto t = check_array<float>(fixed_translations, "fixed_translations", {num_joints, 3});
+               c.fixed_translations.assign(t.data(), t.data() + t.size());
+             }
              try {
                c.check();
              } catch (...) {
@@ -87,7 +94,8 @@ void bind_compressed(py::module_& m) {
              return p;
            }),
            py::arg("num_joints"), py::arg("latent"), py::arg("decompressor"), py::arg("stepper"), py::arg("projector"),
-           py::arg("y_mean"), py::arg("y_std"), py::arg("z_mean"), py::arg("z_std"), py::arg("frame_states") = py::none())
+           py::arg("y_mean"), py::arg("y_std"), py::arg("z_mean"), py::arg("z_std"), py::arg("frame_states") = py::none(),
+           py::arg("fixed_joints") = py::none(), py::arg("fixed_translations") = py::none())
       .def_property_readonly("num_joints", [](const PyCompressed& p) { return p.model.num_joints; })
       .def_property_readonly("latent", [](const PyCompressed& p) { return p.model.latent; })
       .def_property_readonly("pose_dim", [](const PyCompressed& p) { return p.model.pose_dim(); })

@@ -265,6 +265,10 @@ void RuntimeController::read_compressed(const ControllerFile& file) {
   model->y_std = file.floats("lmm.y_std", {model->pose_dim()});
   model->z_mean = file.floats("lmm.z_mean", {model->latent});
   model->z_std = file.floats("lmm.z_std", {model->latent});
+  if (file.has("lmm.fixed_joints")) {
+    model->fixed_joints = file.bytes("lmm.fixed_joints", {model->num_joints});
+    model->fixed_translations = file.floats("lmm.fixed_translations", {model->num_joints, 3});
+  }
   try {
     model->check();
   } catch (const std::invalid_argument& e) {

@@ -89,6 +89,13 @@ void CompressedModel::check() const {
   check_size(y_std, P, "pose scale");
   check_size(z_mean, latent, "latent mean");
   check_size(z_std, latent, "latent scale");
+  if (!fixed_joints.empty() || !fixed_translations.empty()) {
+    if (fixed_joints.size() != static_cast<size_t>(num_joints))
+      throw std::invalid_argument("fixed joints: expected " + std::to_string(num_joints) + " flags");
+    check_size(fixed_translations, static_cast<size_t>(num_joints) * 3, "fixed translations");
+    for (float v : fixed_translations)
+      if (!std::isfinite(v)) throw std::invalid_argument("fixed translations: not finite");
+  }
 }
 
 CompressedScratch CompressedModel::make_scratch() const {
@@ -106,7 +113,8 @@ size_t CompressedModel::num_parameters() const {
 }
 
 size_t CompressedModel::memory_bytes() const {
-  return sizeof(float) * (num_parameters() + y_mean.size() + y_std.size() + z_mean.size() + z_std.size());
+  return sizeof(float) * (num_parameters() + y_mean.size() + y_std.size() + z_mean.size() + z_std.size() +
+                          fixed_translations.size()) + fixed_joints.size();
 }
 
 void CompressedModel::decode(const float* state, float* pose, CompressedScratch& scratch) const {
@@ -116,6 +124,9 @@ void CompressedModel::decode(const float* state, float* pose, CompressedScratch&
   decompressor.forward(in, pose, scratch.a.data());
   const int P = pose_dim();
   for (int k = 0; k < P; ++k) pose[k] = pose[k] * y_std[k] + y_mean[k];
+  for (size_t j = 0; j < fixed_joints.size(); ++j)
+    if (fixed_joints[j])
+      for (int c = 0; c < 3; ++c) pose[6 * num_joints + 3 * j + c] = fixed_translations[3 * j + c];
 }
 
 void CompressedModel::step(float* state, CompressedScratch& scratch) const {

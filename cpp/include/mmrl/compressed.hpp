@@ -56,6 +56,11 @@ class CompressedModel {
   Mlp decompressor, stepper, projector;
   std::vector<float> y_mean, y_std;  // pose_dim: decompressor output * y_std + y_mean = pose row
   std::vector<float> z_mean, z_std;  // latent: Z = Zn * z_std + z_mean
+  // Joints whose local translation never changes in the database (a bone's length): decode
+  // writes fixed_translations (J x 3) for them instead of the network's estimate, so bones keep
+  // their lengths. Empty: every translation is decoded.
+  std::vector<uint8_t> fixed_joints;
+  std::vector<float> fixed_translations;
 
   int pose_dim() const { return 9 * num_joints + 5; }
   int state_dim() const { return kFeatureDim + latent; }

@@ -14,7 +14,7 @@ from typing import Any, Dict, Union
 import numpy as np
 
 from .. import _core
-from .pose import pose_dim
+from .pose import pose_dim, pose_layout
 from .train import CompressedFileError, CompressData, all_networks_from, load_compressed, stage_of
 
 __all__ = ["CompressedController", "linear_layers"]
@@ -52,6 +52,11 @@ class CompressedController:
         self.z_std = np.asarray(state["z_std"], np.float32)
         self.info: Dict[str, Any] = {k: v for k, v in state.items() if isinstance(v, (int, float, str))}
         data = CompressData.from_database(db, 0)
+        # Bones keep their lengths: joints whose translation never changes get it exactly.
+        lay = pose_layout(J)
+        tr = data.y[:, lay["translations"]].reshape(-1, J, 3)
+        self.fixed_joints = (np.abs(tr - tr[:1]).max(axis=(0, 2)) <= 1e-6).astype(np.uint8)
+        self.fixed_translations = np.ascontiguousarray(tr[0], np.float32)
         with torch.no_grad():
             y = torch.as_tensor((data.y - self.y_mean) / self.y_std)
             z = torch.cat([nets["compressor"](y[a:a + 8192]) for a in range(0, y.shape[0], 8192)]).numpy()
@@ -61,7 +66,7 @@ class CompressedController:
         self.core = _core.CompressedModel(J, int(self.config.latent), linear_layers(nets["decompressor"]),
                                           linear_layers(nets["stepper"]), linear_layers(nets["projector"]),
                                           self.y_mean, self.y_std, self.z_mean, self.z_std,
-                                          np.ascontiguousarray(states))
+                                          np.ascontiguousarray(states), self.fixed_joints, self.fixed_translations)
         self.num_joints = J
 
     @property

@@ -70,6 +70,8 @@ def compressed_sections(db: Database, policy, task, task_config, compressed, sta
             out[f"lmm.{name}.{k}.bias"] = b
     for key in ("y_mean", "y_std", "z_mean", "z_std"):
         out[f"lmm.{key}"] = np.ascontiguousarray(getattr(compressed, key), np.float32)
+    out["lmm.fixed_joints"] = np.ascontiguousarray(compressed.fixed_joints, np.uint8)
+    out["lmm.fixed_translations"] = np.ascontiguousarray(compressed.fixed_translations, np.float32)
     out["lmm.frame_states"] = np.ascontiguousarray(compressed.frame_states[source], np.float32)
     out["lmm.start_sources"] = source.astype(np.int32)
     env = task.make_vector_env(1, db=db, config=task_config, num_threads=1)
