@@ -1,0 +1,198 @@
+// Compressed controllers (compressed.hpp): the network against a plain loop, the decision rule,
+// playback against stepping and decoding by hand, and no allocation while a plane env and a
+// character play one (counted by a replaced global operator new).
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <cstdlib>
+#include <new>
+#include <random>
+#include <vector>
+
+#include "env_test_database.hpp"
+#include "mmrl/character.hpp"
+#include "mmrl/compressed.hpp"
+#include "mmrl/tasks/plane.hpp"
+
+namespace {
+std::atomic<long> g_allocations{0};
+std::atomic<bool> g_counting{false};
+}  // namespace
+
+void* operator new(std::size_t n) {
+  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+namespace mmrl {
+namespace {
+
+using testing_db::database;
+using testing_db::matcher;
+
+Mlp random_mlp(std::mt19937& rng, const std::vector<int>& sizes, float scale) {
+  std::normal_distribution<float> n(0.0f, 1.0f);
+  Mlp m;
+  for (size_t k = 0; k + 1 < sizes.size(); ++k) {
+    Mlp::Layer l;
+    l.in = sizes[k];
+    l.out = sizes[k + 1];
+    for (int i = 0; i < l.in * l.out; ++i) l.weight.push_back(scale * n(rng) / std::sqrt(float(l.in)));
+    for (int i = 0; i < l.out; ++i) l.bias.push_back(0.1f * n(rng));
+    m.layers.push_back(std::move(l));
+  }
+  return m;
+}
+
+// A model of the test database's skeleton with random weights (a small stepper, so states stay bounded).
+CompressedModel random_model(uint32_t seed) {
+  std::mt19937 rng(seed);
+  CompressedModel m;
+  m.num_joints = database().num_joints;
+  m.latent = 4;
+  const int S = m.state_dim(), P = m.pose_dim();
+  m.decompressor = random_mlp(rng, {S, 16, P}, 1.0f);
+  m.stepper = random_mlp(rng, {S, 16, S}, 0.02f);
+  m.projector = random_mlp(rng, {kFeatureDim, 16, S}, 1.0f);
+  m.y_mean.assign(P, 0.0f);
+  m.y_std.assign(P, 0.1f);
+  // Rotations near the identity (6D: columns (1,0,0), (0,1,0) row-major), contacts near 0.5.
+  for (int j = 0; j < m.num_joints; ++j) {
+    m.y_mean[6 * j + 0] = 1.0f;
+    m.y_mean[6 * j + 3] = 1.0f;
+  }
+  m.y_mean[9 * m.num_joints + 3] = m.y_mean[9 * m.num_joints + 4] = 0.5f;
+  m.y_mean[9 * m.num_joints] = 0.0f;
+  m.y_mean[9 * m.num_joints + 1] = 0.03f;  // walking forward
+  m.z_mean.assign(m.latent, 0.0f);
+  m.z_std.assign(m.latent, 1.0f);
+  m.check();
+  return m;
+}
+
+TEST(Compressed, MlpEqualsAPlainLoop) {
+  std::mt19937 rng(1);
+  const Mlp m = random_mlp(rng, {7, 11, 5, 3}, 1.0f);
+  std::vector<float> in{0.3f, -1.2f, 0.5f, 2.0f, -0.1f, 0.0f, 1.1f}, out(3), scratch(2 * m.max_width());
+  m.forward(in.data(), out.data(), scratch.data());
+  std::vector<double> x(in.begin(), in.end());
+  for (size_t k = 0; k < m.layers.size(); ++k) {
+    const auto& l = m.layers[k];
+    std::vector<double> y(l.out);
+    for (int o = 0; o < l.out; ++o) {
+      double s = l.bias[o];
+      for (int i = 0; i < l.in; ++i) s += double(l.weight[o * l.in + i]) * x[i];
+      y[o] = k + 1 < m.layers.size() ? (s > 0 ? s : std::expm1(s)) : s;
+    }
+    x = y;
+  }
+  for (int o = 0; o < 3; ++o) EXPECT_NEAR(out[o], x[o], 1e-5);
+  Mlp bad = m;
+  bad.layers[1].in = 10;
+  EXPECT_THROW(bad.check("net"), std::invalid_argument);
+}
+
+TEST(Compressed, DecisionKeepsTheContinuationUnlessTheProjectionIsCloserByTheCost) {
+  const CompressedModel m = random_model(2);
+  CompressedScratch s = m.make_scratch();
+  std::mt19937 rng(3);
+  std::normal_distribution<float> n(0.0f, 1.0f);
+  int transitions = 0, stays = 0;
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<float> current(m.state_dim()), query(kFeatureDim), projected(m.state_dim()), reference(m.state_dim());
+    for (float& v : current) v = n(rng);
+    for (float& v : query) v = n(rng);
+    const float cost_m = trial % 2 ? 0.0f : 2.0f;
+    float cost = -1;
+    const bool t = compressed_decision(m, current.data(), query.data(), cost_m, projected.data(), &cost, s);
+    m.project(query.data(), reference.data(), s);
+    for (int k = 0; k < m.state_dim(); ++k) ASSERT_EQ(projected[k], reference[k]);
+    double stay = 0, jump = 0;
+    for (int k = 0; k < kFeatureDim; ++k) {
+      stay += (query[k] - current[k]) * (query[k] - current[k]);
+      jump += (query[k] - projected[k]) * (query[k] - projected[k]);
+    }
+    if (std::abs(stay - jump - cost_m) > 1e-3) EXPECT_EQ(t, jump + cost_m < stay);
+    EXPECT_NEAR(cost, t ? jump : stay, 1e-3);
+    (t ? transitions : stays) += 1;
+  }
+  EXPECT_GT(transitions, 10);
+  EXPECT_GT(stays, 10);
+}
+
+TEST(Compressed, PlaybackStepsAndDecodesTheChosenState) {
+  const CompressedModel m = random_model(4);
+  CompressedScratch s = m.make_scratch();
+  std::vector<float> start(m.state_dim(), 0.2f), end(m.state_dim()), rows(7 * m.pose_dim());
+  compressed_playback(m, start.data(), 6, rows.data(), end.data(), s);
+  std::vector<float> state = start, pose(m.pose_dim());
+  CompressedScratch s2 = m.make_scratch();
+  for (int k = 0; k <= 6; ++k) {
+    m.decode(state.data(), pose.data(), s2);
+    for (int c = 0; c < m.pose_dim(); ++c) ASSERT_EQ(rows[k * m.pose_dim() + c], pose[c]) << k << " " << c;
+    if (k < 6) m.step(state.data(), s2);
+  }
+  for (int c = 0; c < m.state_dim(); ++c) EXPECT_EQ(end[c], state[c]);
+}
+
+TEST(Compressed, RotationFrom6dIsTheMatrixsQuaternion) {
+  const Quat q = Quat(Eigen::AngleAxisf(0.7f, Vec3(0.3f, -0.5f, 0.8f).normalized()));
+  const Mat3 r = q.toRotationMatrix();
+  const float six[6] = {r(0, 0), r(0, 1), r(1, 0), r(1, 1), r(2, 0), r(2, 1)};
+  EXPECT_NEAR(std::abs(rotation_from_6d(six).dot(q)), 1.0f, 1e-6f);
+}
+
+TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
+  const Database& db = database();
+  const CompressedModel m = random_model(5);
+  std::vector<float> states(static_cast<size_t>(db.num_frames) * m.state_dim());
+  for (int64_t f = 0; f < db.num_frames; ++f)
+    for (int k = 0; k < m.state_dim(); ++k)
+      states[f * m.state_dim() + k] = k < kFeatureDim ? db.normalized[f * kFeatureDim + k] : 0.0f;
+  PlaneTaskConfig config;
+  PlaneVecEnv env(db, matcher(), 1, config, 1);
+  env.set_compressed(&m, states.data());
+  std::vector<float> obs(env.obs_dim());
+  env.reset(7, obs.data());
+  CharacterOptions o;
+  Character ch(db, matcher(), o);
+  std::vector<float> row(m.pose_dim());
+  CompressedScratch s = m.make_scratch();
+  m.decode(env.compressed_state(0), row.data(), s);
+  ch.reset_row(row.data(), RootState{});
+  float action[kTrajectoryDim];
+  std::mt19937 rng(9);
+  std::normal_distribution<float> n(0.0f, 1.0f);
+  int transitions = 0;
+  g_allocations = 0;
+  g_counting = true;
+  {
+    std::vector<int> probe(3);  // the counter counts
+    EXPECT_EQ(g_allocations.load(), 1);
+  }
+  g_allocations = 0;
+  for (int d = 0; d < 300; ++d) {
+    for (float& a : action) a = n(rng);
+    env.set_state(0, -1, ch.root().x, ch.root().z, ch.root().yaw);
+    env.decide(0, action);
+    ch.play_rows(env.compressed_rows(0), env.state(0).last_transition, env.state(0).last_cost);
+    env.end_compressed_playback(0);
+    transitions += env.state(0).last_transition;
+  }
+  g_counting = false;
+  EXPECT_EQ(g_allocations.load(), 0);
+  EXPECT_GT(transitions, 0);
+  EXPECT_EQ(ch.frame(), -1);
+  for (int k = 0; k < 3 * ch.num_joints(); ++k) ASSERT_TRUE(std::isfinite(ch.current_global_positions()[k]));
+  // A model of another skeleton is refused.
+  CompressedModel other = m;
+  other.num_joints += 1;
+  EXPECT_THROW(env.set_compressed(&other, states.data()), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace mmrl
