@@ -269,3 +269,30 @@ def test_a_compressed_controller_is_refused_with_the_reason(db, trained, tmp_pat
     torch.save(broken, bad)
     with pytest.raises(CompressedFileError, match="stepper does not fit"):
         CompressedController(bad, db)
+
+
+def test_mmrl_play_steers_a_compressed_character(db, trained):
+    """The live session (mmrl play --compressed): a click acts at the next decision, the IK and
+    inertialization switches keep the character where it stands, a request is refused."""
+    from mmrl.compress.model import CompressedController
+    from mmrl.rl.policies import JoystickPolicy
+    from mmrl.tasks import get_task
+    from mmrl.viewer.live import LiveSession
+
+    t = get_task("plane")
+    s = LiveSession(t, db, JoystickPolicy.preset(db, "joystick"), config=t.default_config(),
+                    compressed=CompressedController(trained, db))
+    try:
+        x, z, _ = s.root
+        s.set_target(x + 3.0, z)
+        for _ in range(7):  # one decision and its frames, then the next decision reads the target
+            s.step()
+        np.testing.assert_allclose(s.run.target, (x + 3.0, z))
+        s.set_options(ik=False)
+        before = s.root
+        s.step()
+        assert np.hypot(s.root[0] - before[0], s.root[1] - before[1]) < 0.2  # no jump to a new start
+        with pytest.raises(ValueError, match="keeps to no tags"):
+            s.set_request("gait=walk")
+    finally:
+        s.close()

@@ -203,7 +203,10 @@ class FullPath:
 
     def set_request(self, request: str) -> None:
         """Pin a request (``""`` for every clip) from the next decision on (ValueError listing the
-        tags available when it names an unknown one or selects nothing)."""
+        tags available when it names an unknown one or selects nothing; a compressed controller
+        takes none)."""
+        if request.strip() and getattr(self, "compressed", None) is not None:
+            raise ValueError("request: a compressed controller keeps to no tags (docs/compressed.md)")
         self.obs = self.env.set_request(0, request)
         self.request = self.env.request(0)
         self.request_clips = (None if not self.request else

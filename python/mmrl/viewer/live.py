@@ -96,6 +96,8 @@ class LiveSession:
         the tags available), applied at the next decision, like a new target."""
         from .. import _core
 
+        if request.strip() and self.run.compressed is not None:
+            raise ValueError("a compressed controller keeps to no tags (docs/compressed.md)")
         canon = _core.select_request(self.db._db, request)[0] if request.strip() else ""
         with self._lock:
             self._pending["request"] = canon
