@@ -67,3 +67,26 @@ def test_a_broken_compressed_file_is_refused_with_the_reason(exported, tmp_path)
     states = sections["lmm.frame_states"].copy()
     states[0, 0] = np.nan
     refused(lambda s: s.update({"lmm.frame_states": states}), "bad.mmrl.*not finite")
+
+
+def test_the_commands_take_a_compressed_controller(exported, tmp_path, capsys):
+    import json
+
+    run, cpt, path = exported
+    assert main(["eval", str(run), "--compressed", str(cpt), "--episodes", "3", "--line", "0", "--json"]) == 0
+    res = json.loads(capsys.readouterr().out)
+    assert res["compressed"] == str(cpt) and res["episodes"] == 3 and 0.0 <= res["success_rate"] <= 1.0
+    assert res["transitions_per_s"] >= 0 and res["pose_jump_p99_cm"] >= 0
+    out = tmp_path / "c.bvh"
+    assert main(["export-bvh", str(run), "--compressed", str(cpt), "--seconds", "2", "-o", str(out)]) == 0
+    assert out.is_file() and "Frames: 6" in out.read_text()[:20000]
+    capsys.readouterr()
+    # Refused with the reason, naming the file: a request, a missing file, a corrupt one.
+    assert main(["eval", str(run), "--compressed", str(cpt), "--request", "gait=walk"]) == 2
+    assert "keeps to no tags" in capsys.readouterr().err
+    assert main(["eval", str(run), "--compressed", str(tmp_path / "none.pt")]) == 2
+    assert "none.pt" in capsys.readouterr().err
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(cpt.read_bytes()[:200])
+    assert main(["eval", str(run), "--compressed", str(bad)]) == 2
+    assert "bad.pt: corrupt" in capsys.readouterr().err
