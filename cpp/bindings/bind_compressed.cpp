@@ -81,7 +81,7 @@ void bind_compressed(py::module_& m) {
                c.fixed_translations.assign(t.data(), t.data() + t.size());
              }
              try {
-               c.check();
+               c.prepare();
              } catch (...) {
                delete p;
                throw;

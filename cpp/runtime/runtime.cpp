@@ -270,7 +270,7 @@ void RuntimeController::read_compressed(const ControllerFile& file) {
     model->fixed_translations = file.floats("lmm.fixed_translations", {model->num_joints, 3});
   }
   try {
-    model->check();
+    model->prepare();
   } catch (const std::invalid_argument& e) {
     file.fail(std::string("the compressed networks do not fit: ") + e.what());
   }

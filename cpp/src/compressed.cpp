@@ -2,15 +2,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
-#include <Eigen/Dense>
+#include "mmrl/kdtree.hpp"
+#include "mmrl/search.hpp"
 
 namespace mmrl {
 
 namespace {
-
-using RowMatrix = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 
 inline float elu(float x) { return x > 0.0f ? x : std::expm1(x); }
 
@@ -51,6 +51,57 @@ void Mlp::check(const std::string& what) const {
   }
 }
 
+void Mlp::pack() {
+  for (Layer& l : layers) {
+    const int blocks = (l.out + kLanes - 1) / kLanes;
+    l.packed.assign(static_cast<size_t>(blocks) * l.in * kLanes, 0.0f);
+    for (int o = 0; o < l.out; ++o)
+      for (int i = 0; i < l.in; ++i)
+        l.packed[(static_cast<size_t>(o / kLanes) * l.in + i) * kLanes + o % kLanes] =
+            l.weight[static_cast<size_t>(o) * l.in + i];
+  }
+}
+
+namespace {
+
+// y = W x + b over packed weights: four blocks of 8 outputs at a time (four independent sums,
+// so the adds pipeline), each output's inputs summed in order.
+MMRL_MULTIVERSION void dense_forward(const float* packed, const float* bias, const float* x, float* y, int in,
+                                     int out) {
+  const int blocks = (out + kLanes - 1) / kLanes;
+  const size_t stride = static_cast<size_t>(in) * kLanes;
+  auto store = [&](int b, const Lanes& acc) {
+    float tmp[kLanes];
+    std::memcpy(tmp, &acc, sizeof(tmp));
+    for (int l = 0; l < kLanes && b * kLanes + l < out; ++l) y[b * kLanes + l] = tmp[l] + bias[b * kLanes + l];
+  };
+  int b = 0;
+  for (; b + 4 <= blocks; b += 4) {
+    const float* w = packed + b * stride;
+    Lanes a0 = {}, a1 = {}, a2 = {}, a3 = {};
+    for (int i = 0; i < in; ++i) {
+      const float xi = x[i];
+      const float* wi = w + i * kLanes;
+      a0 += xi * load_lanes(wi);
+      a1 += xi * load_lanes(wi + stride);
+      a2 += xi * load_lanes(wi + 2 * stride);
+      a3 += xi * load_lanes(wi + 3 * stride);
+    }
+    store(b, a0);
+    store(b + 1, a1);
+    store(b + 2, a2);
+    store(b + 3, a3);
+  }
+  for (; b < blocks; ++b) {
+    const float* w = packed + b * stride;
+    Lanes a = {};
+    for (int i = 0; i < in; ++i) a += x[i] * load_lanes(w + i * kLanes);
+    store(b, a);
+  }
+}
+
+}  // namespace
+
 void Mlp::forward(const float* in, float* out, float* scratch) const {
   const int w = max_width();
   float* buf[2] = {scratch, scratch + w};
@@ -59,11 +110,7 @@ void Mlp::forward(const float* in, float* out, float* scratch) const {
     const Layer& l = layers[k];
     const bool last = k + 1 == layers.size();
     float* y = last ? out : buf[k % 2];
-    Eigen::Map<const RowMatrix> W(l.weight.data(), l.out, l.in);
-    Eigen::Map<const Eigen::VectorXf> xv(x, l.in), b(l.bias.data(), l.out);
-    Eigen::Map<Eigen::VectorXf> yv(y, l.out);
-    yv.noalias() = W * xv;
-    yv += b;
+    dense_forward(l.packed.data(), l.bias.data(), x, y, l.in, l.out);
     if (!last)
       for (int i = 0; i < l.out; ++i) y[i] = elu(y[i]);
     x = y;
@@ -96,6 +143,20 @@ void CompressedModel::check() const {
     for (float v : fixed_translations)
       if (!std::isfinite(v)) throw std::invalid_argument("fixed translations: not finite");
   }
+}
+
+void CompressedModel::prepare() {
+  check();
+  decompressor.pack();
+  stepper.pack();
+  projector.pack();
+}
+
+bool CompressedModel::prepared() const {
+  for (const Mlp* m : {&decompressor, &stepper, &projector})
+    for (const Mlp::Layer& l : m->layers)
+      if (l.packed.size() != static_cast<size_t>((l.out + kLanes - 1) / kLanes) * l.in * kLanes) return false;
+  return true;
 }
 
 CompressedScratch CompressedModel::make_scratch() const {

@@ -70,13 +70,14 @@ CompressedModel random_model(uint32_t seed) {
   m.y_mean[9 * m.num_joints + 1] = 0.03f;  // walking forward
   m.z_mean.assign(m.latent, 0.0f);
   m.z_std.assign(m.latent, 1.0f);
-  m.check();
+  m.prepare();
   return m;
 }
 
 TEST(Compressed, MlpEqualsAPlainLoop) {
   std::mt19937 rng(1);
-  const Mlp m = random_mlp(rng, {7, 11, 5, 3}, 1.0f);
+  Mlp m = random_mlp(rng, {7, 45, 5, 3}, 1.0f);  // 45: blocks of four and a remainder
+  m.pack();
   std::vector<float> in{0.3f, -1.2f, 0.5f, 2.0f, -0.1f, 0.0f, 1.1f}, out(3), scratch(2 * m.max_width());
   m.forward(in.data(), out.data(), scratch.data());
   std::vector<double> x(in.begin(), in.end());
@@ -191,6 +192,9 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
   // A model of another skeleton is refused.
   CompressedModel other = m;
   other.num_joints += 1;
+  CompressedModel unpacked = m;
+  unpacked.stepper.layers[0].packed.clear();
+  EXPECT_THROW(env.set_compressed(&unpacked, states.data()), std::invalid_argument);
   EXPECT_THROW(env.set_compressed(&other, states.data()), std::invalid_argument);
 }
 

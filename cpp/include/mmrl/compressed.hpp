@@ -28,20 +28,27 @@
 namespace mmrl {
 
 // A dense network: layers out x in (row-major) with biases, ELU between layers, none after the last.
+// forward runs the weights as packed by pack() (blocks of 8 outputs, input-major: one load
+// per input feeds 8 outputs), in the library's 8-lane vectors, compiled for AVX2 and the
+// baseline like the search (search.hpp); every output sums its inputs in order, so the clones
+// agree bit for bit.
 struct Mlp {
   struct Layer {
     int in = 0, out = 0;
     std::vector<float> weight, bias;
+    std::vector<float> packed;  // pack(): ceil(out / 8) blocks of in x 8 weights, zero-padded
   };
   std::vector<Layer> layers;
 
+  // Packs every layer's weights for forward (after the layers are set and checked).
+  void pack();
   int input_dim() const { return layers.empty() ? 0 : layers.front().in; }
   int output_dim() const { return layers.empty() ? 0 : layers.back().out; }
   int max_width() const;
   size_t num_parameters() const;
   // Throws std::invalid_argument (naming `what`) unless the layers chain and every array has its size.
   void check(const std::string& what) const;
-  // out = net(in); scratch: 2 * max_width() floats. in and out may not alias scratch.
+  // out = net(in) (pack() first); scratch: 2 * max_width() floats. in and out may not alias scratch.
   void forward(const float* in, float* out, float* scratch) const;
 };
 
@@ -66,6 +73,10 @@ class CompressedModel {
   int state_dim() const { return kFeatureDim + latent; }
   // Throws std::invalid_argument naming what does not fit (sizes of the networks and arrays).
   void check() const;
+  // check(), then packs the three networks: what a model needs before it runs.
+  void prepare();
+  // True once prepare() has packed the networks as they are now.
+  bool prepared() const;
   CompressedScratch make_scratch() const;
   size_t num_parameters() const;
   size_t memory_bytes() const;

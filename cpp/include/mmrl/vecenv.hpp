@@ -266,6 +266,7 @@ class TargetVecEnv {
     if (!Task::kPlaysCompressed)
       throw std::invalid_argument("this task does not play compressed controllers yet (the plane task does)");
     model->check();
+    if (!model->prepared()) throw std::invalid_argument("set_compressed: the model is not prepared (prepare())");
     if (model->num_joints != db_.num_joints)
       throw std::invalid_argument("the compressed model has " + std::to_string(model->num_joints) +
                                   " joints, the database " + std::to_string(db_.num_joints));
