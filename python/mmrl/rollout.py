@@ -26,7 +26,7 @@ import numpy as np
 
 from . import _core, metrics
 from .character import Character
-from .motion.database import POSE_DIM, Database
+from .motion.database import POSE_DIM, TRAJECTORY_DIM, Database
 from .rl.policies import goal_offset
 from .tasks import Task
 
@@ -471,6 +471,9 @@ class _FollowLog:
         self.per_step["query_frames"].append(self.frames_so_far() - 1)
         self.per_step["query_points"].append(points.astype(np.float32))
         self.per_step["query_directions"].append(directions.astype(np.float32))
+        if self.run.compressed is not None:  # what the decision played: the projection or the continuation
+            self.per_step.setdefault("match_features", []).append(
+                self.run.env._core.compressed_chosen(0)[POSE_DIM:POSE_DIM + TRAJECTORY_DIM].astype(np.float32))
         for key, value in out.get("scene_step", {}).items():
             self.per_step.setdefault(key, []).append(value)
         # A continuous run shows the whole step; a cut one only up to the ending frame.

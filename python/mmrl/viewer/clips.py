@@ -166,12 +166,14 @@ def add_matched_queries(db, rec: Dict[str, Any]) -> None:
 
     qf = np.asarray(rec["query_frames"], np.int64)
     frames, roots = np.asarray(rec["frames"]), np.asarray(rec["roots"], np.float64)
-    nxt = np.minimum(qf + 1, len(frames) - 1)
-    matches = np.maximum(frames[nxt] - 1, 0)
-    feats = np.asarray(db.normalized_features, np.float32)
+    if "match_features" in rec:  # a compressed controller's: the chosen states' trajectories (follow)
+        chosen = np.asarray(rec["match_features"], np.float32)
+    else:
+        nxt = np.minimum(qf + 1, len(frames) - 1)
+        chosen = np.asarray(db.normalized_features, np.float32)[np.maximum(frames[nxt] - 1, 0), POSE_DIM:]
     pts, dirs = [], []
-    for q, m in enumerate(matches):
-        p, d = _world_query(db, feats[m, POSE_DIM:], roots[qf[q]])
+    for q, m in enumerate(chosen):
+        p, d = _world_query(db, m, roots[qf[q]])
         pts.append(p)
         dirs.append(d)
     rec["match_points"] = np.array(pts, np.float32).reshape(-1, 3, 2)
