@@ -175,6 +175,8 @@ def main() -> None:
                    "clip paths do not resolve from here")
     p.add_argument("--switch-seconds", type=float, default=2.0)
     p.add_argument("--figure", default="docs/styles.png")
+    p.add_argument("--switches-of", default=None, metavar="RUN",
+                   help="only the switch run: RUN's policy and the walking joystick through the same switches")
     args = p.parse_args()
 
     import mmrl
@@ -193,6 +195,16 @@ def main() -> None:
     if not styles:
         raise SystemExit(f"{db_path}: no style tags (build it with 'mmrl db build ../shared/data/bandai-namco-2')")
     task = mmrl.get_task("plane")
+    if args.switches_of:
+        rd = RunDir(args.switches_of)
+        cfg = rd.task_config(task)
+        res = {"policy": switch_run(task, db, rd.policy(), cfg, styles, args.switch_seconds, args.eval_seed),
+               "joystick": switch_run(task, db, JoystickPolicy.preset(db, "joystick"), cfg, styles,
+                                      args.switch_seconds, args.eval_seed)}
+        res["ratio_after_switches"] = (res["policy"]["pose_jump_p99_after_switches_cm"] /
+                                       res["joystick"]["pose_jump_p99_after_switches_cm"])
+        print(json.dumps(res, indent=1))
+        return
     multi = out / "multi"
     t0 = time.perf_counter()
     train(cli, db_path, multi, ["--tags", args.tags, "--seconds", str(args.seconds)], args.seed)
@@ -238,6 +250,9 @@ def main() -> None:
     joy = evaluate_full_path(task, db, JoystickPolicy.preset(db, "joystick"), episodes=args.episodes,
                              seed=args.eval_seed, config=config.replace(request_groups=""))
     result["switch"]["joystick_pose_jump_p99_cm"] = joy.get("pose_jump_p99_cm")
+    # The peer through the same switches: the walking joystick under the same requests and targets.
+    result["switch"]["joystick_switch"] = switch_run(task, db, JoystickPolicy.preset(db, "joystick"), config, styles,
+                                                     args.switch_seconds, args.eval_seed)
     result["sizes"] = sizes(db, config, multi, out)
     result["figure_times"] = figure(task, db, policy, config, styles, Path(args.figure))
     result["bench_seconds"] = time.perf_counter() - t0
