@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose', 'parse_request', 'select_request', 'tags_available']
+__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'CompressedModel', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose', 'parse_request', 'select_request', 'tags_available']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -228,6 +228,47 @@ class Matcher:
     @property
     def num_valid(self) -> int:
         ...
+class CompressedModel:
+    """
+    A compressed controller's networks (compressed.hpp).
+    """
+    def __init__(self, num_joints: typing.SupportsInt | typing.SupportsIndex, latent: typing.SupportsInt | typing.SupportsIndex, decompressor: list, stepper: list, projector: list, y_mean: typing.Any, y_std: typing.Any, z_mean: typing.Any, z_std: typing.Any, frame_states: typing.Any = None, fixed_joints: typing.Any = None, fixed_translations: typing.Any = None) -> None:
+        ...
+    def decode(self, states: typing.Any) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The pose rows (N, pose_dim) of states (N, state_dim).
+        """
+    def project(self, queries: typing.Any) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The projected states (N, state_dim) of normalized queries (N, 27).
+        """
+    def step(self, states: typing.Any) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        Each state (N, state_dim) one frame later.
+        """
+    @property
+    def latent(self) -> int:
+        ...
+    @property
+    def memory_bytes(self) -> int:
+        """
+        Bytes of the networks and normalizations (not the frame states).
+        """
+    @property
+    def num_frame_states(self) -> int:
+        ...
+    @property
+    def num_joints(self) -> int:
+        ...
+    @property
+    def num_parameters(self) -> int:
+        ...
+    @property
+    def pose_dim(self) -> int:
+        ...
+    @property
+    def state_dim(self) -> int:
+        ...
 class PlaneTaskConfig:
     """
     Numbers of the plane task (see tasks/plane.hpp).
@@ -322,6 +363,22 @@ class PlaneVecEnv:
     core_name: typing.ClassVar[str] = 'plane'
     def __init__(self, db: Database, matcher: Matcher, num_envs: typing.SupportsInt | typing.SupportsIndex, config: PlaneTaskConfig, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
+    def compressed_chosen(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The state env i's last decision chose (the projection or the continuation; state_dim).
+        """
+    def compressed_played(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The state at the end of env i's last playback (kept through the autoreset).
+        """
+    def compressed_rows(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        Env i's last decision's pose rows (frames_per_step + 1, pose_dim): row 0 the chosen state.
+        """
+    def compressed_state(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        Env i's compressed state shown now (state_dim).
+        """
     def current_frames(self, out: typing.Any) -> None:
         """
         Writes each environment's current database frame into out (int64, N).
@@ -366,6 +423,14 @@ class PlaneVecEnv:
         ...
     def reset_env(self, index: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
         ...
+    def set_compressed(self, model: CompressedModel) -> None:
+        """
+        Plays a compressed controller (CompressedModel with the database's frame states) instead of the database, from the next episode start (every env restarts its state from its frame now); None: the database again.
+        """
+    def set_compressed_state(self, index: typing.SupportsInt | typing.SupportsIndex, state: typing.Any) -> None:
+        """
+        Sets env i's compressed state (state_dim, finite).
+        """
     def set_request(self, index: typing.SupportsInt | typing.SupportsIndex, request: str) -> None:
         """
         Pins env i's request ('style=elderly & gait=walk'; '' unpins): its matches and episode starts keep to the clips carrying it from the next decision on. ValueError naming an unknown tag, or when it selects no valid frame (listing the tags available).
@@ -497,12 +562,20 @@ class Character:
         """
         Plays a decision made elsewhere (the env's last_step_match): frames match+1 .. match+F, as step does.
         """
+    def play_rows(self, rows: typing.Any, transition: bool, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        Plays a compressed controller's decision (the env's compressed_rows): rows 1.. are shown.
+        """
     def poses(self) -> tuple[numpy.ndarray, numpy.ndarray, numpy.ndarray, numpy.ndarray]:
         """
         Views (overwritten by the next step): global positions, global rotations, local translations, local rotations of the frames played by the last step.
         """
     def reset(self, frame: typing.SupportsInt | typing.SupportsIndex, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
+    def reset_row(self, row: typing.Any, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        A compressed controller's start: shows a pose row (9 J + 5) at the world root.
+        """
     def step(self, trajectory_query: typing.Any) -> None:
         ...
     @property
@@ -788,6 +861,22 @@ class ObstacleVecEnv:
         """
         Whether the body disc at world (x, z) overlaps an obstacle.
         """
+    def compressed_chosen(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The state env i's last decision chose (the projection or the continuation; state_dim).
+        """
+    def compressed_played(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The state at the end of env i's last playback (kept through the autoreset).
+        """
+    def compressed_rows(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        Env i's last decision's pose rows (frames_per_step + 1, pose_dim): row 0 the chosen state.
+        """
+    def compressed_state(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        Env i's compressed state shown now (state_dim).
+        """
     def current_frames(self, out: typing.Any) -> None:
         """
         Writes each environment's current database frame into out (int64, N).
@@ -855,6 +944,14 @@ class ObstacleVecEnv:
     def sensor_positions(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
         """
         World (x, z) of env i's sensors, (16, 16, 2) [row][col].
+        """
+    def set_compressed(self, model: CompressedModel) -> None:
+        """
+        Plays a compressed controller (CompressedModel with the database's frame states) instead of the database, from the next episode start (every env restarts its state from its frame now); None: the database again.
+        """
+    def set_compressed_state(self, index: typing.SupportsInt | typing.SupportsIndex, state: typing.Any) -> None:
+        """
+        Sets env i's compressed state (state_dim, finite).
         """
     def set_obstacles(self, index: typing.SupportsInt | typing.SupportsIndex, centres: typing.Any, half_sizes: typing.Any, angles: typing.Any, velocities: typing.Any) -> None:
         """
@@ -934,6 +1031,11 @@ class RuntimeController:
     def act(self, obs: typing.Any) -> numpy.typing.NDArray[numpy.float32]:
         """
         The policy's deterministic action for one raw observation (policy_net.hpp).
+        """
+    @property
+    def compressed(self) -> bool:
+        """
+        True for a compressed controller (networks in place of the database).
         """
     @property
     def fps(self) -> float:
