@@ -25,7 +25,7 @@
 //   void begin_episode(int i);                         // draws env i's episode (its RNG only)
 //   TaskStep advance(int i, const float* action);     // one RL step of env i, no autoreset
 // and nothing else of the loop. Config derives from TaskConfig (tasks/task_config.hpp);
-// State derives from TargetEnvState.
+// State derives from TargetEnvState (target_env.hpp, with the step records and start rules).
 #pragma once
 
 #include <algorithm>
@@ -34,123 +34,11 @@
 #include <stdexcept>
 #include <vector>
 
-#include "mmrl/compressed.hpp"
-#include "mmrl/decision.hpp"
-#include "mmrl/rng.hpp"
-#include "mmrl/tags.hpp"
-#include "mmrl/tasks/task_config.hpp"
+#include "mmrl/target_env.hpp"
 #include "mmrl/threadpool.hpp"
 
 namespace mmrl {
 
-// The decisions of one env since they were last popped (training's cheap quality log):
-// decisions (steps that matched), transitions among them, their matched costs summed, frames
-// played.
-struct MatchStats {
-  int64_t decisions = 0, transitions = 0, frames = 0;
-  double cost_sum = 0;
-};
-
-// Per-environment state every target task keeps (world meters, radians).
-struct TargetEnvState {
-  RootState root;
-  int64_t frame = 0;  // current database frame
-  float target_x = 0, target_z = 0;
-  int steps = 0;
-  double episode_return = 0;
-  int64_t last_match = -1;  // frame chosen by the last match
-  bool last_transition = false;
-  float last_cost = 0;  // squared distance of the last match (normalized, weighted feature space)
-  float last_transition_cost = 0;  // the transition cost the last match used
-  // Squared normalized, weighted distance between the pose features (kPoseDim) of the
-  // continuation and of the last match's frame; 0 without a transition.
-  float last_pose_jump = 0;
-  // Frames the last step played before its episode ended: the index of the frame of the
-  // ending event + 1, or frames_per_step when the step did not end the episode (truncation
-  // included). Kept through the autoreset, so it describes the step just returned; 0 after
-  // reset(seed).
-  int last_step_frames = 0;
-  // The last step's decision (a transition; the matched cost), kept through the autoreset
-  // like last_step_frames (last_transition and last_cost are cleared by it); 0 after reset(seed).
-  bool last_step_transition = false;
-  float last_step_cost = 0;
-  int64_t last_step_match = -1;  // the frame the last step's match chose, kept like last_step_frames
-  // The transition cost the last step's match used (the config's transition_cost, or what
-  // the task's decision_transition_cost made of it); kept like last_step_frames.
-  float last_step_transition_cost = 0;
-  // NEXT_STEP autoreset: the episode ended on the last step and the next step resets it.
-  bool autoreset_pending = false;
-  int64_t episode_frames = 0;  // frames played in this episode (the last step up to its ending frame)
-  MatchStats stats;            // since the last pop_match_stats
-  Rng rng;
-  // The request (tags.hpp) env i's matches and episode starts keep to: pinned by set_request,
-  // else drawn per episode from the env's RequestMix (request_index; -1: every clip).
-  bool request_pinned = false;
-  int request_index = -1;
-  RequestSelection pinned_request;
-  std::vector<float> pinned_code;
-  RequestFilter request_filter;  // set for each decision (TargetVecEnv::request_filter)
-  // A compressed controller's playback (TargetVecEnv::set_compressed): the state shown now
-  // [X, Zn], the state the last decision chose, the state after its playback, and that
-  // playback's pose rows ((frames_per_step + 1) x pose_dim; compressed.hpp).
-  std::vector<float> cstate, cchosen, cnext, crows;
-  CompressedScratch cscratch;
-};
-
-// One task step's outcome (before truncation, which the template decides).
-struct TaskStep {
-  float reward = 0;
-  bool terminated = false;
-  bool success = false;
-  int frames_played = 0;  // see TargetEnvState::last_step_frames
-};
-
-// The step outputs every task writes, N rows each (obs and final_obs: N x obs_dim()).
-// final_obs, episode_return and episode_length rows are written only where an episode ended.
-// The last three are optional (null: not written): each env's last_step_frames and its
-// decision (a transition, the matched cost), every row on every step, so one call returns
-// everything a step produced.
-struct TargetStepBuffers {
-  float* obs;
-  float* rewards;
-  uint8_t* terminated;
-  uint8_t* truncated;
-  uint8_t* success;
-  float* final_obs;
-  float* episode_return;
-  int32_t* episode_length;
-  int32_t* step_frames = nullptr;
-  uint8_t* transitions = nullptr;
-  float* costs = nullptr;
-  int64_t* episode_frames = nullptr;  // optional, written only where an episode ended
-};
-
-// Draws an episode start shared by the target tasks: a uniformly random valid frame, the
-// root at the origin with a random (or zero) heading, and a target uniform in the square
-// [-half_extent, half_extent]^2, redrawn while closer than min_target_distance.
-// A target offset (meters) uniform in [-half_extent, half_extent]^2, redrawn while closer than
-// min_target_distance: the episode start's rule, also for a new target where a character stands.
-inline void draw_target_offset(Rng& rng, float half_extent, float min_target_distance, float* dx, float* dz) {
-  do {
-    *dx = rng.uniform(-half_extent, half_extent);
-    *dz = rng.uniform(-half_extent, half_extent);
-  } while (std::hypot(*dx, *dz) < min_target_distance);
-}
-
-// starts: the frames to start from (tags.hpp: the valid frames of a request's clips, or of all).
-inline void draw_episode_start(Rng& rng, const RequestSelection& starts, bool random_heading,
-                               float half_extent, float min_target_distance, int64_t* frame, RootState* root,
-                               float* target_x, float* target_z) {
-  *frame = starts.start_frame(static_cast<int64_t>(rng.below(static_cast<uint64_t>(starts.num_start_frames()))));
-  *root = RootState{};
-  root->yaw = random_heading ? rng.uniform(-kPi, kPi) : 0.0f;
-  draw_target_offset(rng, half_extent, min_target_distance, target_x, target_z);
-}
-
-// The checks every target task makes (std::invalid_argument): num_envs >= 1, the config's
-// base numbers (check_task_config), the matcher built over db, and at least one valid frame
-// (the episode starts: db.valid_frames).
-void target_env_check(const Database& db, const Matcher& matcher, int num_envs, const TaskConfig& config);
 
 template <class Task, class Config, class State>
 class TargetVecEnv {

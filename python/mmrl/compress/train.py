@@ -17,21 +17,16 @@ reproducible with a seed. It uses CUDA when present.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
+from .files import (FORMAT, VERSION, CompressedFileError, all_networks_from, config_from, database_signature,  # noqa: F401
+                    load_compressed, networks_from, save_compressed, stage_of)
+from .measure import decode_states, holdout_error, joint_errors_cm, reconstruct, stage_metrics  # noqa: F401
 from .pose import forward_kinematics, pose_layout, pose_targets, rotation_6d_to_matrix
-
-FORMAT = "mmrl-compressed"
-VERSION = 2
-
-
-class CompressedFileError(ValueError):
-    """A compressed-controller file is corrupt, of another version or for another database."""
-
 
 STAGES = ("decompressor", "stepper", "projector")
 """The networks in the order they train: the stepper learns the latents the compressor found, the
@@ -252,89 +247,6 @@ def _tensors(data: CompressData, device):
             list(data.parents), len(data.parents))
 
 
-def database_signature(db) -> Dict[str, Any]:
-    """What a compressed file must match in a database: frames, joints and their names."""
-    return {"num_frames": int(db.num_frames), "joint_names": list(db.joint_names), "parents": list(db.parents)}
-
-
-def _plain_config(cfg: CompressConfig) -> Dict[str, Any]:
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}
-
-
-def config_from(saved: Dict[str, Any]) -> CompressConfig:
-    """A file's CompressConfig (fields it lacks keep their defaults)."""
-    cfg = CompressConfig()
-    for k, v in saved.items():
-        if hasattr(cfg, k):
-            setattr(cfg, k, tuple(v) if isinstance(getattr(cfg, k), tuple) else v)
-    return cfg
-
-
-def save_compressed(path, nets: Dict[str, Any], data: CompressData, cfg: CompressConfig, db,
-                    state: Dict[str, Any]) -> None:
-    """Writes the file atomically: the networks trained so far, the normalizations, the
-    database's signature and ``state`` (stage, iteration, optimizer, RNG)."""
-    import torch
-
-    from ..io import atomic_open
-
-    payload = {"format": FORMAT, "version": VERSION, "config": _plain_config(cfg),
-               "y_mean": torch.as_tensor(data.y_mean), "y_std": torch.as_tensor(data.y_std),
-               "database": database_signature(db), **{k: v.state_dict() for k, v in nets.items()}, **state}
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    with atomic_open(Path(path), "wb") as f:
-        torch.save(payload, f)
-
-
-def load_compressed(path, db=None) -> Dict[str, Any]:
-    """A compressed file's contents (tensors and plain values only: never unpickles code).
-    With ``db``, refuses a file made for another database, naming the difference."""
-    from ..rl.checkpoints import load_plain_torch_file
-
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such compressed-controller file")
-    state = load_plain_torch_file(path, CompressedFileError, "{path}: corrupt or unreadable compressed file ({error})")
-    if not isinstance(state, dict) or state.get("format") != FORMAT:
-        raise CompressedFileError(f"{path}: not an mmrl compressed-controller file")
-    if state.get("version") != VERSION:
-        raise CompressedFileError(f"{path}: compressed file version {state.get('version')}, this mmrl reads "
-                                  f"version {VERSION}")
-    if db is not None:
-        sig, want = state.get("database", {}), database_signature(db)
-        for key in ("num_frames", "joint_names", "parents"):
-            if sig.get(key) != want[key]:
-                raise CompressedFileError(f"{path}: made for another database ({key} differ: the file's "
-                                          f"{str(sig.get(key))[:60]}, the database's {str(want[key])[:60]})")
-    return state
-
-
-def networks_from(state: Dict[str, Any], pose_dim: int, feature_dim: int = 27):
-    """(compressor, decompressor, config) of a file, in eval mode."""
-    nets, cfg = all_networks_from(state, pose_dim, feature_dim)
-    return nets["compressor"], nets["decompressor"], cfg
-
-
-def all_networks_from(state: Dict[str, Any], pose_dim: int, feature_dim: int = 27):
-    """({name: network} of every network the file holds, config), in eval mode."""
-    cfg = config_from(state["config"])
-    nets = build_networks(pose_dim, feature_dim, cfg)
-    out = {}
-    for name, net in nets.items():
-        if name in state:
-            try:
-                net.load_state_dict(state[name])
-            except (RuntimeError, KeyError) as e:
-                raise CompressedFileError(f"the file's {name} does not fit its config: {str(e)[:120]}") from None
-            out[name] = net.eval()
-    return out, cfg
-
-
-def stage_of(state: Dict[str, Any]) -> str:
-    """The stage a file is in: the network training now, or "done"."""
-    return str(state.get("stage", "decompressor" if "stepper" not in state else "done"))
-
-
 def latent_states(nets: Dict[str, Any], data: CompressData, device, chunk: int = 8192):
     """(every frame's state [X, Zn] (N, 27 + L) as a torch tensor on device, z_mean, z_std):
     the compressor's latents of the database, normalized."""
@@ -464,17 +376,7 @@ def _train_stage(stage, nets, data, cfg, db, out, device, logger, step_offset, s
         for n in trained:
             nets[n].train()
         while it < iterations and (budget is None or time.perf_counter() - t0 < budget):
-            if stage == "decompressor":
-                idx = torch.as_tensor(rng.choice(data.train_pairs, cfg.batch), device=device)
-                res = losses(nets["compressor"], nets["decompressor"], data_t, idx, cfg)
-            elif stage == "stepper":
-                idx = torch.as_tensor(rng.choice(windows, cfg.batch), device=device)
-                res = stepper_losses(nets["stepper"], s_all, idx, cfg)
-            else:
-                q = projector_queries(data, rng, cfg.batch, cfg.projector_noise)
-                nearest, _ = matcher.match(q, None, None)
-                res = projector_losses(nets["projector"], s_all, torch.as_tensor(q, device=device),
-                                       torch.as_tensor(nearest, device=device), data.x.shape[1])
+            res = _batch_losses(stage, nets, data, data_t, cfg, rng, windows, s_all, matcher, device)
             opt.zero_grad()
             res["loss"].backward()
             opt.step()
@@ -505,92 +407,23 @@ def _train_stage(stage, nets, data, cfg, db, out, device, logger, step_offset, s
     return last
 
 
-def stage_metrics(stage, nets, data: CompressData, s_all, norms, matcher, device, n: int = 256,
-                  seconds: float = 2.0) -> Dict[str, float]:
-    """A stage's measure on the database (fixed draws, so the numbers compare across checkpoints):
-    the decompressor's held-back joint error; the stepper's joint error after rolling out
-    ``seconds`` from a true state; the projector's: how often its answer decodes to the pose of
-    the search's own answer within 5 cm (mean joint error), and that mean error."""
+def _batch_losses(stage, nets, data, data_t, cfg, rng, windows, s_all, matcher, device) -> Dict[str, Any]:
+    """One batch of ``stage``, drawn from ``rng``, and its losses."""
     import torch
 
     if stage == "decompressor":
-        held = holdout_error(nets["compressor"], nets["decompressor"], data, device)
-        return {} if held is None else {"holdout_joint_error_cm": held}
-    rng = np.random.default_rng(12345)
-    was = {k: v.training for k, v in nets.items()}
-    for v in nets.values():
-        v.eval()
-    try:
-        with torch.no_grad():
-            if stage == "stepper":
-                W = int(round(seconds * 30))
-                starts = data.windows(W + 1)
-                if starts.size == 0:
-                    return {}
-                t = rng.choice(starts, n)
-                cur = s_all[torch.as_tensor(t, device=device)]
-                for _ in range(W):
-                    cur = cur + nets["stepper"](cur)
-                poses = decode_states(nets, data, cur, *norms, device)
-                return {"stepper_joint_error_cm": float(joint_errors_cm(data, t + W, poses).mean())}
-            q = projector_queries(data, rng, n, 0.5)
-            nearest, _ = matcher.match(q, None, None)
-            pred = nets["projector"](torch.as_tensor(q, device=device))
-            err = joint_errors_cm(data, nearest, decode_states(nets, data, pred, *norms, device))
-            return {"projector_joint_error_cm": float(err.mean()), "projector_match_rate": float((err < 5.0).mean())}
-    finally:
-        for k, v in nets.items():
-            v.train(was[k])
-
-
-def decode_states(nets, data: CompressData, states, z_mean, z_std, device) -> np.ndarray:
-    """Raw poses of torch states [X, Zn] through the decompressor (Zn de-normalized by the
-    database's latent statistics z_mean, z_std)."""
-    import torch
-
-    nx = data.x.shape[1]
-    z = states[:, nx:] * z_std + z_mean
-    mean, std = torch.as_tensor(data.y_mean, device=device), torch.as_tensor(data.y_std, device=device)
-    return (nets["decompressor"](torch.cat([states[:, :nx], z], 1)) * std + mean).cpu().numpy()
+        idx = torch.as_tensor(rng.choice(data.train_pairs, cfg.batch), device=device)
+        return losses(nets["compressor"], nets["decompressor"], data_t, idx, cfg)
+    if stage == "stepper":
+        idx = torch.as_tensor(rng.choice(windows, cfg.batch), device=device)
+        return stepper_losses(nets["stepper"], s_all, idx, cfg)
+    q = projector_queries(data, rng, cfg.batch, cfg.projector_noise)
+    nearest, _ = matcher.match(q, None, None)
+    return projector_losses(nets["projector"], s_all, torch.as_tensor(q, device=device),
+                            torch.as_tensor(nearest, device=device), data.x.shape[1])
 
 
 def _first_stage(name: str) -> int:
     """The index of the stage that trains network ``name``."""
     return {"compressor": 0, "decompressor": 0, "stepper": 1, "projector": 2}[name]
 
-
-def reconstruct(comp, decomp, data: CompressData, frames: np.ndarray, device=None) -> np.ndarray:
-    """Raw poses (len(frames), 9J + 5) of ``frames`` through the compressor and decompressor."""
-    import torch
-
-    device = device or next(decomp.parameters()).device
-    with torch.no_grad():
-        y = torch.as_tensor(data.y[frames], device=device)
-        mean, std = torch.as_tensor(data.y_mean, device=device), torch.as_tensor(data.y_std, device=device)
-        z = comp((y - mean) / std)
-        out = decomp(torch.cat([torch.as_tensor(data.x[frames], device=device), z], 1)) * std + mean
-    return out.cpu().numpy()
-
-
-def joint_errors_cm(data: CompressData, frames: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Per frame, the mean over joints of |p - p_true| (cm), character frame."""
-    import torch
-
-    J = len(data.parents)
-    with torch.no_grad():
-        p = _positions(torch.as_tensor(poses), data.parents, J)
-        q = _positions(torch.as_tensor(data.y[frames]), data.parents, J)
-    return (100.0 * (p - q).norm(dim=-1).mean(-1)).numpy()
-
-
-def holdout_error(comp, decomp, data: CompressData, device) -> Optional[float]:
-    """Mean joint position error (cm) over the held-back clips' frames (None without them)."""
-    frames = data.holdout_frames
-    if frames.size == 0:
-        return None
-    frames = frames[:: max(1, frames.size // 4096)]
-    was = comp.training, decomp.training
-    comp.eval(), decomp.eval()
-    err = float(joint_errors_cm(data, frames, reconstruct(comp, decomp, data, frames, device)).mean())
-    comp.train(was[0]), decomp.train(was[1])
-    return err
