@@ -64,56 +64,63 @@ void Mlp::pack() {
 
 namespace {
 
-// y = W x + b over packed weights: four blocks of 8 outputs at a time (four independent sums,
-// so the adds pipeline), each output's inputs summed in order.
-MMRL_MULTIVERSION void dense_forward(const float* packed, const float* bias, const float* x, float* y, int in,
-                                     int out) {
+// Y = X W^T + b for R rows of X (R <= kMaxRows) over packed weights: per block of 8 outputs, one
+// load of each input's weights feeds every row (R independent sums, so the adds pipeline and a
+// batch reads the weights once). Each output sums its inputs in order from 0, then adds its bias,
+// whatever R is: a row's result does not depend on the batch it is in.
+template <int R>
+__attribute__((always_inline)) inline void dense_rows(const float* packed, const float* bias, const float* x,
+                                                      int x_stride, float* y, int y_stride, int in, int out) {
   const int blocks = (out + kLanes - 1) / kLanes;
-  const size_t stride = static_cast<size_t>(in) * kLanes;
-  auto store = [&](int b, const Lanes& acc) {
-    float tmp[kLanes];
-    std::memcpy(tmp, &acc, sizeof(tmp));
-    for (int l = 0; l < kLanes && b * kLanes + l < out; ++l) y[b * kLanes + l] = tmp[l] + bias[b * kLanes + l];
-  };
-  int b = 0;
-  for (; b + 4 <= blocks; b += 4) {
-    const float* w = packed + b * stride;
-    Lanes a0 = {}, a1 = {}, a2 = {}, a3 = {};
+  for (int b = 0; b < blocks; ++b) {
+    const float* w = packed + static_cast<size_t>(b) * in * kLanes;
+    Lanes acc[R];
+    for (int r = 0; r < R; ++r) acc[r] = Lanes{};
     for (int i = 0; i < in; ++i) {
-      const float xi = x[i];
-      const float* wi = w + i * kLanes;
-      a0 += xi * load_lanes(wi);
-      a1 += xi * load_lanes(wi + stride);
-      a2 += xi * load_lanes(wi + 2 * stride);
-      a3 += xi * load_lanes(wi + 3 * stride);
+      const Lanes wi = load_lanes(w + i * kLanes);
+      for (int r = 0; r < R; ++r) acc[r] += x[r * x_stride + i] * wi;
     }
-    store(b, a0);
-    store(b + 1, a1);
-    store(b + 2, a2);
-    store(b + 3, a3);
+    const int n = std::min(kLanes, out - b * kLanes);
+    for (int r = 0; r < R; ++r) {
+      float tmp[kLanes];
+      std::memcpy(tmp, &acc[r], sizeof(tmp));
+      for (int l = 0; l < n; ++l) y[r * y_stride + b * kLanes + l] = tmp[l] + bias[b * kLanes + l];
+    }
   }
-  for (; b < blocks; ++b) {
-    const float* w = packed + b * stride;
-    Lanes a = {};
-    for (int i = 0; i < in; ++i) a += x[i] * load_lanes(w + i * kLanes);
-    store(b, a);
+}
+
+MMRL_MULTIVERSION void dense_forward(const float* packed, const float* bias, const float* x, int x_stride, float* y,
+                                     int y_stride, int in, int out, int rows) {
+  switch (rows) {
+    case 1: return dense_rows<1>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 2: return dense_rows<2>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 3: return dense_rows<3>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 4: return dense_rows<4>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 5: return dense_rows<5>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 6: return dense_rows<6>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 7: return dense_rows<7>(packed, bias, x, x_stride, y, y_stride, in, out);
+    default: return dense_rows<8>(packed, bias, x, x_stride, y, y_stride, in, out);
   }
 }
 
 }  // namespace
 
-void Mlp::forward(const float* in, float* out, float* scratch) const {
+void Mlp::forward(const float* in, float* out, float* scratch, int rows) const {
   const int w = max_width();
-  float* buf[2] = {scratch, scratch + w};
+  float* buf[2] = {scratch, scratch + static_cast<size_t>(w) * kMlpMaxRows};
   const float* x = in;
+  int x_stride = input_dim();
   for (size_t k = 0; k < layers.size(); ++k) {
     const Layer& l = layers[k];
     const bool last = k + 1 == layers.size();
     float* y = last ? out : buf[k % 2];
-    dense_forward(l.packed.data(), l.bias.data(), x, y, l.in, l.out);
+    const int y_stride = last ? l.out : w;
+    dense_forward(l.packed.data(), l.bias.data(), x, x_stride, y, y_stride, l.in, l.out, rows);
     if (!last)
-      for (int i = 0; i < l.out; ++i) y[i] = elu(y[i]);
+      for (int r = 0; r < rows; ++r)
+        for (int i = 0; i < l.out; ++i) y[r * y_stride + i] = elu(y[r * y_stride + i]);
     x = y;
+    x_stride = y_stride;
   }
 }
 
@@ -162,10 +169,10 @@ bool CompressedModel::prepared() const {
 CompressedScratch CompressedModel::make_scratch() const {
   const int w = std::max({decompressor.max_width(), stepper.max_width(), projector.max_width()});
   CompressedScratch s;
-  s.a.assign(static_cast<size_t>(2 * w), 0.0f);
+  s.a.assign(static_cast<size_t>(2 * w) * kMlpMaxRows, 0.0f);
   s.b.assign(static_cast<size_t>(std::max(state_dim(), pose_dim())), 0.0f);
-  s.state.assign(static_cast<size_t>(state_dim()), 0.0f);
-  s.pose_input.assign(static_cast<size_t>(state_dim()), 0.0f);
+  s.state.assign(static_cast<size_t>(kCompressedMaxFrames + 1) * state_dim(), 0.0f);
+  s.pose_input.assign(static_cast<size_t>(kMlpMaxRows) * state_dim(), 0.0f);
   return s;
 }
 
@@ -179,15 +186,29 @@ size_t CompressedModel::memory_bytes() const {
 }
 
 void CompressedModel::decode(const float* state, float* pose, CompressedScratch& scratch) const {
-  float* in = scratch.pose_input.data();
-  for (int k = 0; k < kFeatureDim; ++k) in[k] = state[k];
-  for (int k = 0; k < latent; ++k) in[kFeatureDim + k] = state[kFeatureDim + k] * z_std[k] + z_mean[k];
-  decompressor.forward(in, pose, scratch.a.data());
-  const int P = pose_dim();
-  for (int k = 0; k < P; ++k) pose[k] = pose[k] * y_std[k] + y_mean[k];
-  for (size_t j = 0; j < fixed_joints.size(); ++j)
-    if (fixed_joints[j])
-      for (int c = 0; c < 3; ++c) pose[6 * num_joints + 3 * j + c] = fixed_translations[3 * j + c];
+  decode_rows(state, pose, 1, scratch);
+}
+
+void CompressedModel::decode_rows(const float* states, float* poses, int rows, CompressedScratch& scratch) const {
+  const int S = state_dim(), P = pose_dim();
+  for (int r0 = 0; r0 < rows; r0 += kMlpMaxRows) {
+    const int n = std::min(kMlpMaxRows, rows - r0);
+    float* in = scratch.pose_input.data();
+    for (int r = 0; r < n; ++r) {
+      const float* state = states + static_cast<size_t>(r0 + r) * S;
+      for (int k = 0; k < kFeatureDim; ++k) in[r * S + k] = state[k];
+      for (int k = 0; k < latent; ++k) in[r * S + kFeatureDim + k] = state[kFeatureDim + k] * z_std[k] + z_mean[k];
+    }
+    float* out = poses + static_cast<size_t>(r0) * P;
+    decompressor.forward(in, out, scratch.a.data(), n);
+    for (int r = 0; r < n; ++r) {
+      float* pose = out + static_cast<size_t>(r) * P;
+      for (int k = 0; k < P; ++k) pose[k] = pose[k] * y_std[k] + y_mean[k];
+      for (size_t j = 0; j < fixed_joints.size(); ++j)
+        if (fixed_joints[j])
+          for (int c = 0; c < 3; ++c) pose[6 * num_joints + 3 * j + c] = fixed_translations[3 * j + c];
+    }
+  }
 }
 
 void CompressedModel::step(float* state, CompressedScratch& scratch) const {
@@ -213,15 +234,18 @@ bool compressed_decision(const CompressedModel& model, const float* current, con
 
 void compressed_playback(const CompressedModel& model, const float* start, int frames, float* rows, float* end,
                          CompressedScratch& scratch) {
-  float* s = scratch.state.data();
-  const int S = model.state_dim(), P = model.pose_dim();
-  std::copy(start, start + S, s);
-  model.decode(s, rows, scratch);
+  if (frames < 0 || frames > kCompressedMaxFrames)
+    throw std::invalid_argument("compressed_playback: frames must be in 0.." + std::to_string(kCompressedMaxFrames));
+  // Every state first (the stepper's weights stay in cache), then their poses in batches.
+  float* states = scratch.state.data();
+  const int S = model.state_dim();
+  std::copy(start, start + S, states);
   for (int k = 1; k <= frames; ++k) {
-    model.step(s, scratch);
-    model.decode(s, rows + static_cast<size_t>(k) * P, scratch);
+    std::copy(states + (k - 1) * S, states + k * S, states + k * S);
+    model.step(states + static_cast<size_t>(k) * S, scratch);
   }
-  std::copy(s, s + S, end);
+  model.decode_rows(states, rows, frames + 1, scratch);
+  std::copy(states + static_cast<size_t>(frames) * S, states + static_cast<size_t>(frames + 1) * S, end);
 }
 
 Quat rotation_from_6d(const float* six) {

@@ -27,6 +27,9 @@
 
 namespace mmrl {
 
+constexpr int kMlpMaxRows = 8;            // rows a network evaluates together (Mlp::forward)
+constexpr int kCompressedMaxFrames = 30;  // frames one playback may decode (decision.hpp's kMaxFramesPerStep)
+
 // A dense network: layers out x in (row-major) with biases, ELU between layers, none after the last.
 // forward runs the weights as packed by pack() (blocks of 8 outputs, input-major: one load
 // per input feeds 8 outputs), in the library's 8-lane vectors, compiled for AVX2 and the
@@ -48,8 +51,10 @@ struct Mlp {
   size_t num_parameters() const;
   // Throws std::invalid_argument (naming `what`) unless the layers chain and every array has its size.
   void check(const std::string& what) const;
-  // out = net(in) (pack() first); scratch: 2 * max_width() floats. in and out may not alias scratch.
-  void forward(const float* in, float* out, float* scratch) const;
+  // out = net(in) for `rows` rows (1..kMlpMaxRows; in: rows x input_dim, out: rows x
+  // output_dim), pack() first; scratch: 2 * kMlpMaxRows * max_width() floats (not aliasing in or
+  // out). A row's result is the same bit for bit whatever the number of rows.
+  void forward(const float* in, float* out, float* scratch, int rows = 1) const;
 };
 
 struct CompressedScratch {
@@ -81,8 +86,10 @@ class CompressedModel {
   size_t num_parameters() const;
   size_t memory_bytes() const;
 
-  // The pose row (pose_dim) of a state.
+  // The pose row (pose_dim) of a state; decode_rows: of `rows` states (rows x state_dim ->
+  // rows x pose_dim), evaluated kMlpMaxRows at a time, each row equal to its decode().
   void decode(const float* state, float* pose, CompressedScratch& scratch) const;
+  void decode_rows(const float* states, float* poses, int rows, CompressedScratch& scratch) const;
   // Advances a state by one frame, in place.
   void step(float* state, CompressedScratch& scratch) const;
   // The state (state_dim) of a query's best match.
@@ -102,7 +109,8 @@ bool compressed_decision(const CompressedModel& model, const float* current, con
                          float transition_cost, float* projected, float* cost, CompressedScratch& scratch);
 
 // Playback of a chosen state: rows (frames + 1) x pose_dim, row k the pose of the k-th frame
-// from `start` (row 0: start itself); `end` (may alias start) gets the state after `frames` steps.
+// from `start` (row 0: start itself); `end` (may alias start) gets the state after `frames`
+// steps (0 <= frames <= kCompressedMaxFrames). The states are stepped first, then decoded together.
 void compressed_playback(const CompressedModel& model, const float* start, int frames, float* rows, float* end,
                          CompressedScratch& scratch);
 

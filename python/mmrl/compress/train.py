@@ -52,8 +52,8 @@ class CompressConfig:
     lr_decay: float = 0.97
     iterations: int = 50_000
     """Decompressor iterations at most (``--seconds`` may stop sooner)."""
-    stepper_iterations: int = 20_000
-    projector_iterations: int = 20_000
+    stepper_iterations: int = 50_000
+    projector_iterations: int = 50_000
     stage_time: Tuple[float, ...] = (0.5, 0.25, 0.25)
     """With ``--seconds``: the shares of the budget of the decompressor, the stepper and the
     projector (time a stage leaves unused passes to the next)."""
