@@ -296,3 +296,25 @@ def test_mmrl_play_steers_a_compressed_character(db, trained):
             s.set_request("gait=walk")
     finally:
         s.close()
+
+
+def test_a_finished_file_retrains_one_stage(tmp_path):
+    """--stages projector: a fresh projector with the whole budget; the other networks stay."""
+    db = mmrl.default_database()
+    out = tmp_path / "c.pt"
+    cfg = CompressConfig(iterations=100, hidden=(32, 32), latent=8, checkpoint_every=1000, batch=64,
+                         **{**QUICK, "stepper_iterations": 50, "projector_iterations": 50})
+    train_compressed(db, out, cfg, progress=False)
+    before = load_compressed(out)
+    more = CompressConfig(**{**cfg.__dict__, "projector_iterations": 120})
+    train_compressed(db, out, more, progress=False, stages=["projector"])
+    after = load_compressed(out)
+    assert after["stage"] == "done" and after["projector_iterations"] == 120
+    for key in ("compressor", "decompressor", "stepper"):
+        for name, tensor in before[key].items():
+            torch.testing.assert_close(after[key][name], tensor, rtol=0, atol=0)
+    assert any(not torch.equal(after["projector"][n], t) for n, t in before["projector"].items())
+    with pytest.raises(ValueError, match="retrains the stepper and the projector too"):
+        train_compressed(db, out, more, progress=False, stages=["decompressor"])
+    with pytest.raises(ValueError, match="expected some of"):
+        train_compressed(db, out, more, progress=False, stages=["nothing"])

@@ -18,6 +18,10 @@ def register_cli(sub) -> None:
     c.add_argument("--seconds", type=float, default=None, help="wall-clock budget (default: --iterations only)")
     c.add_argument("--iterations", type=int, default=None, help="iterations (default 50,000)")
     c.add_argument("--resume", action="store_true", help="continue the training saved in OUTPUT")
+    c.add_argument("--stages", default=None, metavar="LIST",
+                   help="train these stages of the finished OUTPUT again from fresh networks, with the whole "
+                        "budget (comma-separated: decompressor, stepper, projector), e.g. --stages projector "
+                        "--seconds 900 --set projector_iterations=80000")
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--device", default="auto", help="torch device: auto, cpu, cuda")
     c.add_argument("--no-progress", action="store_true")
@@ -48,9 +52,10 @@ def cmd_compress(args: argparse.Namespace) -> int:
     db = _database(args)
     out = Path(args.output)
     cfg = CompressConfig(seed=args.seed, device=args.device)
-    if args.resume:
+    stages = [x.strip() for x in args.stages.split(",") if x.strip()] if args.stages else None
+    if args.resume or stages:
         if not out.is_file():
-            raise InputError(f"--resume: {out} does not exist")
+            raise InputError(f"--{'resume' if args.resume else 'stages'}: {out} does not exist")
         saved = load_compressed(out, db)["config"]
         apply_values(cfg, {k: v for k, v in saved.items() if hasattr(cfg, k)})
     (over,) = split_overrides(args.set, cfg)
@@ -61,9 +66,15 @@ def cmd_compress(args: argparse.Namespace) -> int:
         cfg.iterations = args.iterations
     if args.seconds is not None and not args.seconds > 0:
         raise InputError("--seconds must be positive")
-    if out.exists() and not args.resume:
+    if out.exists() and not args.resume and not stages:
         raise InputError(f"{out} exists; pass --resume to continue it, or another -o")
-    res = train_compressed(db, out, cfg, seconds=args.seconds, resume=args.resume, progress=not args.no_progress)
+    try:
+        res = train_compressed(db, out, cfg, seconds=args.seconds, resume=args.resume, progress=not args.no_progress,
+                               stages=stages)
+    except ValueError as e:
+        if stages is None:
+            raise
+        raise InputError(f"--stages: {e}") from None
     held = res.get("holdout_joint_error_cm")
     print(f"wrote {out}: {res['iteration']} iterations; joint error {res.get('joint_error_cm', float('nan')):.2f} cm "
           f"on training frames" + ("" if held is None else f", {held:.2f} cm on held-back clips"))

@@ -267,9 +267,14 @@ def latent_states(nets: Dict[str, Any], data: CompressData, device, chunk: int =
 
 
 def train_compressed(db, out, cfg: Optional[CompressConfig] = None, *, seconds: Optional[float] = None,
-                     resume: bool = False, progress: bool = True, log_dir=None) -> Dict[str, Any]:
+                     resume: bool = False, progress: bool = True, log_dir=None,
+                     stages: Optional[Sequence[str]] = None) -> Dict[str, Any]:
     """Train (or resume) the networks of ``db``'s compressed controller into ``out``, stage by
-    stage (:data:`STAGES`); returns the last metrics (the held-back clips' joint error included)."""
+    stage (:data:`STAGES`); returns the last metrics (the held-back clips' joint error included).
+
+    ``stages``: train these stages of the finished file ``out`` again, from fresh networks, with
+    the whole budget (the others are kept); retraining the decompressor retrains every stage,
+    since the later ones learn its latents."""
     import torch
 
     cfg = cfg or CompressConfig()
@@ -285,12 +290,26 @@ def train_compressed(db, out, cfg: Optional[CompressConfig] = None, *, seconds: 
     for net in nets.values():
         net.to(device)
     stage, start, saved = STAGES[0], 0, None
-    if resume and out.exists():
+    plan = list(STAGES)
+    if stages is not None:
+        plan = [s_ for s_ in STAGES if s_ in set(stages)]
+        unknown = sorted(set(stages) - set(STAGES))
+        if unknown or not plan:
+            raise ValueError(f"stages: expected some of {', '.join(STAGES)}, got {', '.join(stages)}")
+        if "decompressor" in plan and plan != list(STAGES):
+            raise ValueError("stages: retraining the decompressor retrains the stepper and the projector too "
+                             "(they learn its latents); list all three")
+        if not out.exists() or stage_of(load_compressed(out, db)) != "done":
+            raise ValueError(f"stages: {out} must be a finished compressed file")
+    if (resume or stages is not None) and out.exists():
         saved = load_compressed(out, db)
         for name in nets:
-            if name in saved:
+            if name in saved and _first_stage(name) < len(STAGES) and STAGES[_first_stage(name)] not in \
+                    (plan if stages is not None else ()):
                 nets[name].load_state_dict(saved[name])
         stage, start = stage_of(saved), int(saved.get("iteration", 0))
+        if stages is not None:
+            stage, start = plan[0], 0
     log_path = Path(log_dir or out.parent) / f"{out.stem}-metrics"
     log_path.mkdir(parents=True, exist_ok=True)
     offset = {name: sum(_stage_iterations(cfg, s) for s in STAGES[:k]) for k, name in enumerate(STAGES)}
@@ -301,17 +320,17 @@ def train_compressed(db, out, cfg: Optional[CompressConfig] = None, *, seconds: 
     extra: Dict[str, Any] = {k: v for k, v in (saved or {}).items()
                              if isinstance(v, (int, float)) and k.endswith(("_iterations", "_cm", "_rate"))}
     try:
-        for k, name in enumerate(STAGES):
-            if stage == "done" or STAGES.index(name) < STAGES.index(stage):
-                continue
+        todo = [n for n in plan if stage != "done" and STAGES.index(n) >= STAGES.index(stage)]
+        for k, name in enumerate(todo):
             budget = None
             if seconds is not None:
                 left = seconds - (time.perf_counter() - t0)
-                shares = cfg.stage_time[k:]
+                shares = [cfg.stage_time[STAGES.index(n)] for n in todo[k:]]
                 budget = max(0.0, left * shares[0] / max(sum(shares), 1e-9))
+            resumed = name == stage and stages is None
             last = _train_stage(name, nets, data, cfg, db, out, device, logger, offset[name],
-                                start if name == stage else 0, saved if name == stage else None, budget, progress,
-                                extra)
+                                start if resumed else 0, saved if resumed else None, budget, progress, extra,
+                                todo[k + 1] if k + 1 < len(todo) else "done")
             saved = None
     finally:
         logger.close()
@@ -330,7 +349,7 @@ def _stage_iterations(cfg: CompressConfig, stage: str) -> int:
 
 
 def _train_stage(stage, nets, data, cfg, db, out, device, logger, step_offset, start, saved, budget, progress,
-                 extra) -> Dict[str, Any]:
+                 extra, next_stage) -> Dict[str, Any]:
     """One stage's loop (resumable at any checkpoint: networks, Adam and the sampler's RNG)."""
     import torch
 
@@ -363,7 +382,7 @@ def _train_stage(stage, nets, data, cfg, db, out, device, logger, step_offset, s
     def save(done: bool):
         k = STAGES.index(stage)
         if done:  # the next stage starts from scratch: no optimizer or sampler state to keep
-            state = {"stage": STAGES[k + 1] if k + 1 < len(STAGES) else "done", "iteration": 0}
+            state = {"stage": next_stage, "iteration": 0}
         else:
             state = {"stage": stage, "iteration": it, "optimizer": opt.state_dict(), "rng": rng.bit_generator.state}
         state = {**extra, **metrics, **state, f"{stage}_iterations": it}
