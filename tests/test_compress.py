@@ -318,3 +318,16 @@ def test_a_finished_file_retrains_one_stage(tmp_path):
         train_compressed(db, out, more, progress=False, stages=["decompressor"])
     with pytest.raises(ValueError, match="expected some of"):
         train_compressed(db, out, more, progress=False, stages=["nothing"])
+
+
+def test_the_start_database_keeps_windows_of_the_database(db):
+    """A compressed controller file keeps start windows: every frame equals its source frame, the
+    normalization is the database's, and a database without tags works too (Mixamo here)."""
+    from mmrl.export.compressed_export import WINDOW, start_database
+
+    small, source = start_database(db, 5)
+    assert small.num_frames == 5 * WINDOW and source.shape == (5 * WINDOW,)
+    np.testing.assert_array_equal(small.normalized_features, np.asarray(db.normalized_features)[source])
+    np.testing.assert_array_equal(np.asarray(small.bone_rotations), np.asarray(db.bone_rotations)[source])
+    assert np.flatnonzero(small.valid_mask).tolist() == [k * WINDOW for k in range(5)]
+    assert all(db.valid_mask[source[k * WINDOW]] for k in range(5))

@@ -44,7 +44,7 @@ def start_database(db: Database, starts: int = 8):
                                     1).astype(np.asarray(state["clip_ranges"]).dtype)
     state["clip_names"] = [f"{db.clip_names[c]}@{f}" for c, f in zip(clips, picks)]
     state["clip_mirrored"] = np.ascontiguousarray(np.asarray(state["clip_mirrored"])[clips])
-    if state.get("tag_names"):
+    if "clip_tags" in state:
         state["clip_tags"] = np.ascontiguousarray(np.asarray(state["clip_tags"])[clips])
     return Database(_core.Database.from_state(state)), source
 
