@@ -7,8 +7,9 @@ docs/compressed.md): the same policy drives both through the full path.
 Prints, for the database controller, the compressed one and the joystick on the database:
 success, time to target, foot sliding with IK on and off, transitions/s, pose-jump p99, and
 the raw-mocap floor; then the compressed controller's mean joint-position error against the
-database's poses over the same decisions (each projection's decoded frames against the frames
-the database's best match of the same query plays), and with --runtime-bench the C++ numbers
+database controller's poses over the same decisions (at each of the database controller's
+decisions the compressed one starts from the same frame's state, decides on the same query and
+plays the same frames), and with --runtime-bench the C++ numbers
 (file sizes, memory, load time, us per character per frame with the split).
 """
 from __future__ import annotations
@@ -28,38 +29,49 @@ KEYS = ("success_rate", "mean_time_to_target_s", "foot_sliding_cm_per_s", "foot_
 
 
 def decision_errors(task, db, policy, config, cc, episodes: int, seed: int) -> dict:
-    """Mean joint-position error (cm, character frame) of each projection's decoded frames
-    (the chosen state and the frames shown) against the frames the database plays from its
-    best match of the same query (nearest valid frame, plain distance)."""
+    """The compressed controller's poses against the database controller's over the same
+    decisions: the database controller plays ``episodes`` episodes; at each of its decisions the
+    compressed controller starts from the state of the database's current frame, decides on the
+    same query (projector, continuation rule, the same transition cost) and plays the same
+    frames; the mean joint-position error (cm, character frame, every joint) of its frames
+    against the database's, overall and where both continued / both jumped."""
     import torch
 
-    from mmrl.compress.train import _positions
     from mmrl.compress.pose import pose_targets
+    from mmrl.compress.train import _positions
     from mmrl.rollout import FullPath, policy_actions
 
-    run = FullPath(task, db, config=config, seed=seed, compressed=cc, record=False)
+    run = FullPath(task, db, config=config, seed=seed, record=False)
     low, high = run.env.single_action_space.low, run.env.single_action_space.high
     y = pose_targets(db)
     F = run.config.frames_per_step
-    errors, decisions, ended = [], 0, 0
+    states = cc.frame_states
+    errors = {"all": [], "both_continue": [], "both_jump": [], "differ": []}
+    ended = 0
     while ended < episodes:
-        before = run.env._core.compressed_state(0).copy()
+        frame = int(run.env.env_state(0)["frame"])
         action = policy_actions(policy, run.obs[None]).reshape(-1)
-        query = np.concatenate([before[:15], np.clip(action, low, high)]).astype(np.float32)[None]
+        state = states[frame]
+        query = np.concatenate([state[:15], np.clip(action, low, high)]).astype(np.float32)
+        proj = cc.core.project(query[None])[0]
+        jump = ((query - state[:27]) ** 2).sum() > ((query - proj[:27]) ** 2).sum() + float(config.transition_cost)
+        cur = (proj if jump else state)[None].astype(np.float32)
+        rows = []
+        for _ in range(F):
+            cur = cc.core.step(cur)
+            rows.append(cc.decode(cur)[0])
         out = run.step(action)
-        decisions += 1
         ended += int(out["done"])
-        if not bool(run.env._step_transitions[0]):
-            continue
-        j, _ = db.matcher.match(query, None, None)
-        ref = y[int(j[0]) + np.arange(F + 1)]
-        rows = run.env._core.compressed_rows(0)
+        played = out["res"].frames[:out["shown"]]
         with torch.no_grad():
-            p = _positions(torch.as_tensor(rows, dtype=torch.float64), list(db.parents), db.num_joints)
-            q = _positions(torch.as_tensor(ref, dtype=torch.float64), list(db.parents), db.num_joints)
-        errors.append(float(100.0 * (p - q).norm(dim=-1).mean()))
-    return {"joint_error_cm": float(np.mean(errors)) if errors else float("nan"), "projections": len(errors),
-            "decisions": decisions}
+            p = _positions(torch.as_tensor(np.array(rows[:len(played)]), dtype=torch.float64), list(db.parents),
+                           db.num_joints)
+            q = _positions(torch.as_tensor(y[played], dtype=torch.float64), list(db.parents), db.num_joints)
+        err = float(100.0 * (p - q).norm(dim=-1).mean())
+        db_jump = bool(out["res"].transition)
+        errors["all"].append(err)
+        errors["both_jump" if (jump and db_jump) else "both_continue" if not (jump or db_jump) else "differ"].append(err)
+    return {k: {"decisions": len(v), "joint_error_cm": float(np.mean(v)) if v else None} for k, v in errors.items()}
 
 
 def episode_paths(task, db, policy, config, cc, episodes: int, seed: int):
@@ -157,8 +169,9 @@ def main(argv=None) -> int:
     print(f"  raw mocap floor: {out['raw_mocap']}")
     print(f"  compressed vs database: {json.dumps({k: round(v, 3) for k, v in out['ratios'].items()})}")
     d = out["decisions"]
-    print(f"  joint error against the database's poses over {d['projections']} projections "
-          f"({d['decisions']} decisions): {d['joint_error_cm']:.2f} cm")
+    print("  joint error against the database controller's poses over the same decisions (cm): " +
+          ", ".join(f"{k} {v['joint_error_cm'] if v['joint_error_cm'] is None else round(v['joint_error_cm'], 2)} "
+                    f"({v['decisions']} decisions)" for k, v in d.items()))
     if args.runtime_bench:
         with tempfile.TemporaryDirectory() as tmp:
             a_path, b_path = Path(tmp) / "db.mmrl", Path(tmp) / "c.mmrl"
