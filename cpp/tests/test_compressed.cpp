@@ -78,7 +78,7 @@ TEST(Compressed, MlpEqualsAPlainLoop) {
   std::mt19937 rng(1);
   Mlp m = random_mlp(rng, {7, 45, 5, 3}, 1.0f);  // 45: blocks of four and a remainder
   m.pack();
-  std::vector<float> in{0.3f, -1.2f, 0.5f, 2.0f, -0.1f, 0.0f, 1.1f}, out(3), scratch(2 * m.max_width());
+  std::vector<float> in{0.3f, -1.2f, 0.5f, 2.0f, -0.1f, 0.0f, 1.1f}, out(3), scratch(2 * kMlpMaxRows * m.max_width());
   m.forward(in.data(), out.data(), scratch.data());
   std::vector<double> x(in.begin(), in.end());
   for (size_t k = 0; k < m.layers.size(); ++k) {
