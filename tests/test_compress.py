@@ -255,8 +255,6 @@ def test_a_compressed_controller_is_refused_with_the_reason(db, trained, tmp_pat
     cc = CompressedController(trained, db)
     with pytest.raises(ValueError, match="keeps to no tags"):
         FullPath(get_task("plane"), db, compressed=cc, request="gait=walk")
-    with pytest.raises(ValueError, match="does not play compressed controllers"):
-        FullPath(get_task("obstacles"), db, compressed=cc)
     state = load_compressed(trained)
     state["stage"], state["iteration"] = "projector", 5
     partial = tmp_path / "partial.pt"
@@ -331,3 +329,31 @@ def test_the_start_database_keeps_windows_of_the_database(db):
     np.testing.assert_array_equal(np.asarray(small.bone_rotations), np.asarray(db.bone_rotations)[source])
     assert np.flatnonzero(small.valid_mask).tolist() == [k * WINDOW for k in range(5)]
     assert all(db.valid_mask[source[k * WINDOW]] for k in range(5))
+
+
+def test_the_obstacles_task_plays_a_compressed_controller(db, trained):
+    """Moving obstacles with a compressed controller: the env's collisions, hit points and
+    sensor maps follow the compressed character (its root is the env's), and the task's tests
+    of the played path read the chosen state's trajectory."""
+    from mmrl.compress.model import CompressedController
+    from mmrl.rl.policies import JoystickPolicy
+    from mmrl.rollout import FullPath, policy_actions
+    from mmrl.tasks import get_task
+
+    task = get_task("obstacles")
+    cc = CompressedController(trained, db)
+    run = FullPath(task, db, compressed=cc, seed=2, stage=10, ik=False, foot_locking=False)
+    pol = JoystickPolicy(db)
+    endings = {"success": 0, "collision": 0, "other": 0}
+    steps = 0
+    while sum(endings.values()) < 4 and steps < 2000:
+        out = run.step(policy_actions(pol, run.obs[None]).reshape(-1))
+        steps += 1
+        if not out["done"]:
+            assert run.root_error()[1] == 0.0
+        else:
+            endings["success" if out["success"] else "collision" if out.get("collision") else "other"] += 1
+    assert sum(endings.values()) == 4, endings
+    rec = run.last_recording
+    assert rec is not None and (rec["frames"] == -1).all()
+

@@ -57,7 +57,7 @@ def user_errors() -> tuple:
     from .motion.database import DatabaseFileError
     from .errors import InputError
     from .rl.ppo import CheckpointError
-    from .compress.train import CompressedFileError
+    from .compress.files import CompressedFileError
 
     return (InputError, CompressedFileError, BVHError, JointRoleError, DatabaseFileError, CheckpointError, ChecksumError, DownloadError,
             FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError, PermissionError)

@@ -144,8 +144,8 @@ void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
     f.prepare(field_, i, st.root, st.max_speed > 0, frame_dt_);
     // A frame too close to its clip's end to be matched has no continuation: the next decision
     // must jump, which the observation tells as a hit right away.
-    st.continuation_hit = 0;
-    if (db_.valid[st.frame]) {
+    st.continuation_hit = compressed_ ? -1 : 0;  // a compressed state has no database path to test
+    if (!compressed_ && db_.valid[st.frame]) {
       const int hit = f.first_hit(st.frame);
       st.continuation_hit = hit < 0 ? -1 : kPathSampleFrames[hit];
     }
@@ -162,7 +162,8 @@ void ObstacleVecEnv::observe(int i, float* obs) const {
   observe_goal(s, obs + kGoalOffset);
   if (config_.observe_continuation) {
     float* c = obs + kContinuationOffset;
-    const float* trajectory = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim + kPoseDim];
+    const float* trajectory = compressed_ ? s.cstate.data() + kPoseDim
+                                          : &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim + kPoseDim];
     std::copy(trajectory, trajectory + kTrajectoryDim, c);
     const bool hits = s.continuation_hit >= 0;
     c[kTrajectoryDim] = hits ? 1.0f : 0.0f;
@@ -188,7 +189,12 @@ void ObstacleVecEnv::begin_episode(int i) {
 
 float ObstacleVecEnv::decision_transition_cost(int i) const {
   if (!config_.bias_yields || config_.transition_cost == 0.0f) return config_.transition_cost;
+  float raw[kTrajectoryDim];
   const float* continuation = &db_.features[static_cast<size_t>(envs_[i].frame) * kFeatureDim + kPoseDim];
+  if (compressed_) {  // the compressed state's own trajectory, in the features' raw units
+    trajectory_denormalize(db_, envs_[i].cstate.data() + kPoseDim, raw);
+    continuation = raw;
+  }
   return trajectory_hits(i, continuation) > 0 ? 0.0f : config_.transition_cost;
 }
 
@@ -222,10 +228,14 @@ TaskStep ObstacleVecEnv::advance(int i, const float* action) {
   ObstacleEnvState& s = envs_[i];
   const int64_t j = decide(i, action);
   // Both tests use the root and the obstacles at the step's start, before anything moves.
-  s.last_hits = config_.hit_played
-                    ? trajectory_hits(i, &db_.features[static_cast<size_t>(j) * kFeatureDim + kPoseDim], s.hit_points,
-                                      s.hit_inside)
-                    : action_hits(i, action, s.hit_points, s.hit_inside);
+  float played[kTrajectoryDim];
+  const float* path = &db_.features[static_cast<size_t>(std::max<int64_t>(j, 0)) * kFeatureDim + kPoseDim];
+  if (compressed_) {  // the chosen state's trajectory
+    trajectory_denormalize(db_, s.cchosen.data() + kPoseDim, played);
+    path = played;
+  }
+  s.last_hits = config_.hit_played ? trajectory_hits(i, path, s.hit_points, s.hit_inside)
+                                   : action_hits(i, action, s.hit_points, s.hit_inside);
   const float r2 = config_.success_radius * config_.success_radius;
   const bool moving = s.max_speed > 0;
   bool success = false, collision = false;

@@ -7,6 +7,8 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Dict
 
+from .networks import CompressConfig, build_networks
+
 FORMAT = "mmrl-compressed"
 VERSION = 2
 
@@ -26,8 +28,6 @@ def _plain_config(cfg) -> Dict[str, Any]:
 
 def config_from(saved: Dict[str, Any]):
     """A file's CompressConfig (fields it lacks keep their defaults)."""
-    from .train import CompressConfig
-
     cfg = CompressConfig()
     for k, v in saved.items():
         if hasattr(cfg, k):
@@ -82,8 +82,6 @@ def networks_from(state: Dict[str, Any], pose_dim: int, feature_dim: int = 27):
 
 def all_networks_from(state: Dict[str, Any], pose_dim: int, feature_dim: int = 27):
     """({name: network} of every network the file holds, config), in eval mode."""
-    from .train import build_networks
-
     cfg = config_from(state["config"])
     nets = build_networks(pose_dim, feature_dim, cfg)
     out = {}

@@ -6,6 +6,8 @@ from typing import Dict, Optional
 
 import numpy as np
 
+from .networks import _positions, projector_queries
+
 
 def stage_metrics(stage, nets, data, s_all, norms, matcher, device, n: int = 256,
                   seconds: float = 2.0) -> Dict[str, float]:
@@ -14,8 +16,6 @@ def stage_metrics(stage, nets, data, s_all, norms, matcher, device, n: int = 256
     ``seconds`` from a true state; the projector's: how often its answer decodes to the pose of
     the search's own answer within 5 cm (mean joint error), and that mean error."""
     import torch
-
-    from .train import projector_queries
 
     if stage == "decompressor":
         held = holdout_error(nets["compressor"], nets["decompressor"], data, device)
@@ -74,8 +74,6 @@ def reconstruct(comp, decomp, data, frames: np.ndarray, device=None) -> np.ndarr
 def joint_errors_cm(data, frames: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """Per frame, the mean over joints of |p - p_true| (cm), character frame."""
     import torch
-
-    from .train import _positions
 
     J = len(data.parents)
     with torch.no_grad():

@@ -15,7 +15,8 @@ import numpy as np
 
 from .. import _core
 from .pose import pose_dim, pose_layout
-from .train import CompressedFileError, CompressData, all_networks_from, load_compressed, stage_of
+from .files import CompressedFileError, all_networks_from, load_compressed, stage_of
+from .networks import CompressData
 
 __all__ = ["CompressedController", "linear_layers"]
 
@@ -86,7 +87,7 @@ def natural_motion(rows: np.ndarray, parents) -> np.ndarray:
     as a database frame's predecessor is on the database path (mmrl.metrics.pose_jumps)."""
     import torch
 
-    from .train import _positions
+    from .networks import _positions
 
     rows = np.asarray(rows, np.float64)
     J = len(parents)

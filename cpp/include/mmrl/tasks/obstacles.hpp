@@ -174,6 +174,10 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   int obs_dim() const { return request_offset() + request_dim(); }
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
+  // Plays compressed controllers (TargetVecEnv::set_compressed) without the collision-aware
+  // search: a projection has no database candidates to test (docs/compressed.md); the
+  // continuation's path test of observe_continuation is then "clear".
+  static constexpr bool kPlaysCompressed = true;
 
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
   // Throws std::invalid_argument on a bad config.
