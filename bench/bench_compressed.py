@@ -53,13 +53,8 @@ def decision_errors(task, db, policy, config, cc, episodes: int, seed: int) -> d
         action = policy_actions(policy, run.obs[None]).reshape(-1)
         state = states[frame]
         query = np.concatenate([state[:15], np.clip(action, low, high)]).astype(np.float32)
-        proj = cc.core.project(query[None])[0]
-        jump = ((query - state[:27]) ** 2).sum() > ((query - proj[:27]) ** 2).sum() + float(config.transition_cost)
-        cur = (proj if jump else state)[None].astype(np.float32)
-        rows = []
-        for _ in range(F):
-            cur = cc.core.step(cur)
-            rows.append(cc.decode(cur)[0])
+        jump, chosen, _ = cc.core.decide(state, query, float(config.transition_cost))  # the env's rule (C++)
+        rows = cc.core.playback(chosen, F)[0][1:]
         out = run.step(action)
         ended += int(out["done"])
         played = out["res"].frames[:out["shown"]]

@@ -127,7 +127,43 @@ void bind_compressed(py::module_& m) {
             return batch(p, queries, "queries", kFeatureDim, p.model.state_dim(),
                          [&](const float* in, float* out, CompressedScratch& s) { p.model.project(in, out, s); });
           },
-          py::arg("queries"), "The projected states (N, state_dim) of normalized queries (N, 27).");
+          py::arg("queries"), "The projected states (N, state_dim) of normalized queries (N, 27).")
+      .def(
+          "decide",
+          [](const PyCompressed& p, const py::handle& state, const py::handle& query, float transition_cost) {
+            const int S = p.model.state_dim();
+            auto s = check_array<float>(state, "state", {S});
+            auto q = check_array<float>(query, "query", {kFeatureDim});
+            check_finite(s.data(), S, "state");
+            check_finite(q.data(), kFeatureDim, "query");
+            if (!(transition_cost >= 0) || !std::isfinite(transition_cost))
+              throw py::value_error("transition_cost must be finite and >= 0");
+            py::array_t<float> chosen(S);
+            CompressedScratch scratch = p.model.make_scratch();
+            float cost = 0;
+            const bool t = compressed_decision(p.model, s.data(), q.data(), transition_cost, chosen.mutable_data(),
+                                               &cost, scratch);
+            if (!t) std::copy(s.data(), s.data() + S, chosen.mutable_data());
+            return py::make_tuple(t, chosen, cost);
+          },
+          py::arg("state"), py::arg("query"), py::arg("transition_cost"),
+          "The compressed decision (compressed_decision): (transition, the chosen state, its cost).")
+      .def(
+          "playback",
+          [](const PyCompressed& p, const py::handle& state, int frames) {
+            const int S = p.model.state_dim();
+            auto s = check_array<float>(state, "state", {S});
+            check_finite(s.data(), S, "state");
+            if (frames < 0 || frames > kCompressedMaxFrames)
+              throw py::value_error("frames must be in 0.." + std::to_string(kCompressedMaxFrames));
+            py::array_t<float> rows({static_cast<py::ssize_t>(frames + 1), static_cast<py::ssize_t>(p.model.pose_dim())});
+            py::array_t<float> end(S);
+            CompressedScratch scratch = p.model.make_scratch();
+            compressed_playback(p.model, s.data(), frames, rows.mutable_data(), end.mutable_data(), scratch);
+            return py::make_tuple(rows, end);
+          },
+          py::arg("state"), py::arg("frames"),
+          "compressed_playback: (the pose rows (frames + 1, pose_dim) from the state, the state after them).");
 }
 
 }  // namespace mmrl

@@ -234,9 +234,17 @@ class CompressedModel:
     """
     def __init__(self, num_joints: typing.SupportsInt | typing.SupportsIndex, latent: typing.SupportsInt | typing.SupportsIndex, decompressor: list, stepper: list, projector: list, y_mean: typing.Any, y_std: typing.Any, z_mean: typing.Any, z_std: typing.Any, frame_states: typing.Any = None, fixed_joints: typing.Any = None, fixed_translations: typing.Any = None) -> None:
         ...
+    def decide(self, state: typing.Any, query: typing.Any, transition_cost: typing.SupportsFloat | typing.SupportsIndex) -> tuple[bool, numpy.typing.NDArray[numpy.float32], float]:
+        """
+        The compressed decision (compressed_decision): (transition, the chosen state, its cost).
+        """
     def decode(self, states: typing.Any) -> numpy.typing.NDArray[numpy.float32]:
         """
         The pose rows (N, pose_dim) of states (N, state_dim).
+        """
+    def playback(self, state: typing.Any, frames: typing.SupportsInt | typing.SupportsIndex) -> tuple[numpy.typing.NDArray[numpy.float32], numpy.typing.NDArray[numpy.float32]]:
+        """
+        compressed_playback: (the pose rows (frames + 1, pose_dim) from the state, the state after them).
         """
     def project(self, queries: typing.Any) -> numpy.typing.NDArray[numpy.float32]:
         """

@@ -9,7 +9,7 @@ shows the decoded poses with the database path's inertialization, foot locking a
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Dict, Union
+from typing import Union
 
 import numpy as np
 
@@ -51,7 +51,6 @@ class CompressedController:
         self.y_std = np.asarray(state["y_std"], np.float32)
         self.z_mean = np.asarray(state["z_mean"], np.float32)
         self.z_std = np.asarray(state["z_std"], np.float32)
-        self.info: Dict[str, Any] = {k: v for k, v in state.items() if isinstance(v, (int, float, str))}
         data = CompressData.from_database(db, 0)
         # Bones keep their lengths: joints whose translation never changes get it exactly.
         lay = pose_layout(J)

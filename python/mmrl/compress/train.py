@@ -167,9 +167,9 @@ def train_compressed(db, out, cfg: Optional[CompressConfig] = None, *, seconds: 
             raise ValueError(f"stages: {out} must be a finished compressed file")
     if (resume or stages is not None) and out.exists():
         saved = load_compressed(out, db)
+        retrained = set(plan) if stages is not None else set()  # these start from fresh networks
         for name in nets:
-            if name in saved and _first_stage(name) < len(STAGES) and STAGES[_first_stage(name)] not in \
-                    (plan if stages is not None else ()):
+            if name in saved and STAGES[_first_stage(name)] not in retrained:
                 nets[name].load_state_dict(saved[name])
         stage, start = stage_of(saved), int(saved.get("iteration", 0))
         if stages is not None:
