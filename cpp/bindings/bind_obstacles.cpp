@@ -202,6 +202,19 @@ void bind_obstacles(py::module_& m) {
           "(tasks/path_filter.hpp, this env's path options): the frames ahead of its path's first hit, "
           "0 when clear.")
       .def(
+          "state_path_hits",
+          [](PyObstacleVecEnv& s, int i, const py::handle& features) {
+            checked_index(s, i);
+            auto f = check_array<float>(features, "features", {-1, kFeatureDim});
+            py::array_t<int32_t> out(f.shape(0));
+            s.env.state_path_hits(i, f.data(), static_cast<int>(f.shape(0)), out.mutable_data());
+            return out;
+          },
+          py::arg("index"), py::arg("features"),
+          "The same test of compressed states known by their normalized features (N, 27): each path is "
+          "the quadratic through the start and the state's three trajectory positions (path_filter.hpp's "
+          "trajectory_path); the frames ahead of its first hit, 0 when clear.")
+      .def(
           "collides",
           [](const PyObstacleVecEnv& s, int i, float x, float z) {
             return s.env.collides(checked_index(s, i), x, z);

@@ -213,75 +213,20 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
                                           c->db_.valid.data());
   c->times_.search_tree = seconds_since(t0);
   try {  // the task env's own checks of its config (and of the clip costs), once, at load
-    if (c->task_.obstacles) {
-      ObstacleVecEnv(c->db_, *c->matcher_, 1, c->task_.obstacle, 1);
-    } else {
-      PlaneVecEnv env(c->db_, *c->matcher_, 1, c->task_.plane, 1);
-      if (c->compressed_) {
-        env.set_compressed(c->compressed_.get(), c->frame_states_.data());
-        env.set_action_box(c->action_box_, c->action_box_ + kTrajectoryDim);
-      }
-    }
+    const auto check = [&](auto&& env) {
+      if (!c->compressed_) return;
+      env.set_compressed(c->compressed_.get(), c->frame_states_.data());
+      env.set_action_box(c->action_box_, c->action_box_ + kTrajectoryDim);
+    };
+    if (c->task_.obstacles)
+      check(ObstacleVecEnv(c->db_, *c->matcher_, 1, c->task_.obstacle, 1));
+    else
+      check(PlaneVecEnv(c->db_, *c->matcher_, 1, c->task_.plane, 1));
     Character(c->db_, *c->matcher_, c->options_);
   } catch (const std::invalid_argument& e) {
     file.fail(std::string("the task's numbers are refused: ") + e.what());
   }
   return c;
-}
-
-// The compressed controller's sections (docs/runtime.md, "Compressed controllers").
-void RuntimeController::read_compressed(const ControllerFile& file) {
-  constexpr int32_t kVersion = 1;
-  const auto header = file.ints("lmm.header", {6});
-  if (header[0] != kVersion)
-    file.fail("compressed sections of version " + std::to_string(header[0]) + "; this runtime reads version " +
-              std::to_string(kVersion));
-  if (task_.obstacles) file.fail("a compressed controller runs the plane task only");
-  if (!task_.plane.request_groups.empty()) file.fail("a compressed controller keeps to no tags (task.request_groups)");
-  auto model = std::make_unique<CompressedModel>();
-  model->num_joints = header[1];
-  model->latent = header[2];
-  if (model->num_joints != db_.num_joints)
-    file.fail("the compressed networks are for " + std::to_string(header[1]) + " joints, the skeleton has " +
-              std::to_string(db_.num_joints));
-  if (model->latent < 1 || model->latent > 4096) file.fail("lmm.header: latent size out of range");
-  Mlp* nets[3] = {&model->decompressor, &model->stepper, &model->projector};
-  const char* names[3] = {"decompressor", "stepper", "projector"};
-  for (int n = 0; n < 3; ++n) {
-    if (header[3 + n] < 1 || header[3 + n] > 64) file.fail(std::string("lmm.header: ") + names[n] + " layers out of range");
-    for (int k = 0; k < header[3 + n]; ++k) {
-      const std::string base = std::string("lmm.") + names[n] + "." + std::to_string(k);
-      const FileSection& w = file.section(base + ".weight");
-      if (w.shape.size() != 2) file.fail("section '" + base + ".weight' must be 2-d (out x in)");
-      Mlp::Layer layer;
-      layer.out = static_cast<int>(w.shape[0]);
-      layer.in = static_cast<int>(w.shape[1]);
-      layer.weight = file.floats(base + ".weight", {w.shape[0], w.shape[1]});
-      layer.bias = file.floats(base + ".bias", {w.shape[0]});
-      nets[n]->layers.push_back(std::move(layer));
-    }
-  }
-  model->y_mean = file.floats("lmm.y_mean", {model->pose_dim()});
-  model->y_std = file.floats("lmm.y_std", {model->pose_dim()});
-  model->z_mean = file.floats("lmm.z_mean", {model->latent});
-  model->z_std = file.floats("lmm.z_std", {model->latent});
-  if (file.has("lmm.fixed_joints")) {
-    model->fixed_joints = file.bytes("lmm.fixed_joints", {model->num_joints});
-    model->fixed_translations = file.floats("lmm.fixed_translations", {model->num_joints, 3});
-  }
-  try {
-    model->prepare();
-  } catch (const std::invalid_argument& e) {
-    file.fail(std::string("the compressed networks do not fit: ") + e.what());
-  }
-  frame_states_ = file.floats("lmm.frame_states", {db_.num_frames, model->state_dim()});
-  for (float v : frame_states_)
-    if (!std::isfinite(v)) file.fail("section 'lmm.frame_states' is not finite");
-  const auto box = file.floats("lmm.action_box", {2, kTrajectoryDim});
-  for (int k = 0; k < kTrajectoryDim; ++k)
-    if (!(box[k] <= box[kTrajectoryDim + k])) file.fail("section 'lmm.action_box': low must be <= high");
-  std::copy(box.begin(), box.end(), action_box_);
-  compressed_ = std::move(model);
 }
 
 size_t RuntimeController::memory_bytes() const {
@@ -328,12 +273,15 @@ RuntimeCharacter::RuntimeCharacter(std::shared_ptr<const RuntimeController> cont
   }
   if (const CompressedModel* m = controller_->compressed()) {
     // The start frame's state, decoded: the env holds the state from now on.
-    plane_->set_compressed(m, controller_->frame_states());
-    plane_->set_action_box(controller_->action_box(), controller_->action_box() + kTrajectoryDim);
-    plane_->set_state(0, start_frame, 0.0f, 0.0f, wrap_angle(yaw));
+    const float* state = with_env([&](auto& env) {
+      env.set_compressed(m, controller_->frame_states());
+      env.set_action_box(controller_->action_box(), controller_->action_box() + kTrajectoryDim);
+      env.set_state(0, start_frame, 0.0f, 0.0f, wrap_angle(yaw));
+      return env.compressed_state(0);
+    });
     cscratch_ = m->make_scratch();
     row_.assign(static_cast<size_t>(m->pose_dim()), 0.0f);
-    m->decode(plane_->compressed_state(0), row_.data(), cscratch_);
+    m->decode(state, row_.data(), cscratch_);
     character_.reset_row(row_.data(), RootState{x, z, wrap_angle(yaw)});
   }
   pose_.num_joints = controller_->num_joints();
@@ -437,8 +385,10 @@ void RuntimeCharacter::decide() {
   const int64_t j = plane_ ? plane_->decide(0, action_.data()) : obstacles_->decide(0, action_.data());
   const float cost = plane_ ? plane_->state(0).last_cost : obstacles_->state(0).last_cost;
   if (controller_->compressed()) {
-    character_.play_rows(plane_->compressed_rows(0), plane_->state(0).last_transition, cost);
-    plane_->end_compressed_playback(0);
+    with_env([&](auto& env) {
+      character_.play_rows(env.compressed_rows(0), env.state(0).last_transition, cost);
+      env.end_compressed_playback(0);
+    });
   } else {
     character_.play(j, cost);
   }

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 #include "mmrl/kdtree.hpp"
@@ -224,12 +225,35 @@ void CompressedModel::project(const float* query, float* state, CompressedScratc
 
 bool compressed_decision(const CompressedModel& model, const float* current, const float* query,
                          float transition_cost, float* projected, float* cost, CompressedScratch& scratch) {
-  const float stay = feature_distance(query, current);
-  model.project(query, projected, scratch);
-  const float jump = feature_distance(query, projected);
-  const bool transition = jump + transition_cost < stay;
-  if (cost) *cost = transition ? jump : stay;
-  return transition;
+  return compressed_decision(model, current, query, 1, transition_cost, nullptr, projected, cost, scratch);
+}
+
+bool compressed_decision(const CompressedModel& model, const float* current, const float* queries, int n,
+                         float transition_cost, const CandidateFilter* filter, float* projected, float* cost,
+                         CompressedScratch& scratch) {
+  if (n < 1 || n > kMlpMaxRows)
+    throw std::invalid_argument("compressed_decision: 1.." + std::to_string(kMlpMaxRows) + " queries, got " +
+                                std::to_string(n));
+  const int S = model.state_dim();
+  float* states = scratch.state.data();  // n x S (playback reuses it afterwards)
+  model.projector.forward(queries, states, scratch.a.data(), n);
+  constexpr float kInf = std::numeric_limits<float>::infinity();
+  for (const CandidateFilter* f = filter;; f = f->fallback()) {
+    const float stay = filtered_state_cost(feature_distance(queries, current), f, current);
+    float best = kInf;
+    int arg = 0;
+    for (int r = 0; r < n; ++r) {
+      const float* p = states + static_cast<size_t>(r) * S;
+      const float c = filtered_state_cost(feature_distance(queries, p), f, p);
+      if (c < best) best = c, arg = r;
+    }
+    if (stay < kInf || best < kInf || f == nullptr) {
+      std::copy(states + static_cast<size_t>(arg) * S, states + static_cast<size_t>(arg + 1) * S, projected);
+      const bool transition = best + transition_cost < stay;
+      if (cost) *cost = transition ? best : stay;
+      return transition;
+    }
+  }
 }
 
 void compressed_playback(const CompressedModel& model, const float* start, int frames, float* rows, float* end,

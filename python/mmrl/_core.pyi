@@ -631,7 +631,7 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'observe_continuation', 'grid_cell_size')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'observe_continuation', 'grid_cell_size')
     bias_yields: bool
     hit_lookahead: bool
     hit_penalty: bool
@@ -659,6 +659,12 @@ class ObstacleTaskConfig:
         ...
     @clip_costs.setter
     def clip_costs(self, arg0: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> None:
+        ...
+    @property
+    def compressed_path_fan(self) -> int:
+        ...
+    @compressed_path_fan.setter
+    def compressed_path_fan(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def frames_per_step(self) -> int:
@@ -986,6 +992,10 @@ class ObstacleVecEnv:
     def state(self, index: typing.SupportsInt | typing.SupportsIndex) -> dict:
         """
         The world-space state of environment i (root, frame, target and the task's own).
+        """
+    def state_path_hits(self, index: typing.SupportsInt | typing.SupportsIndex, features: typing.Any) -> numpy.typing.NDArray[numpy.int32]:
+        """
+        The same test of compressed states known by their normalized features (N, 27): each path is the quadratic through the start and the state's three trajectory positions (path_filter.hpp's trajectory_path); the frames ahead of its first hit, 0 when clear.
         """
     def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, collision: typing.Any, hits: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None, episode_frames: typing.Any = None) -> None:
         """

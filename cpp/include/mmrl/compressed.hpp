@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "mmrl/features.hpp"
+#include "mmrl/kdtree.hpp"
 #include "mmrl/math.hpp"
 
 namespace mmrl {
@@ -107,6 +108,18 @@ inline float feature_distance(const float* query, const float* state) {
 // (state_dim floats) and returns true when it replaces `current`; cost: the chosen state's.
 bool compressed_decision(const CompressedModel& model, const float* current, const float* query,
                          float transition_cost, float* projected, float* cost, CompressedScratch& scratch);
+// The same rule with a candidate filter (kdtree.hpp's CandidateFilter, priced through
+// state_extra_cost: the obstacles task's collision-aware search) over several projections:
+// queries holds n rows (1..kMlpMaxRows, projected together), the first the query itself and
+// the others its turned copies (decision.hpp's shortlist_queries). Every candidate (the
+// continuation and each projection) costs its squared distance to the first query plus the
+// filter's price; the cheapest projection replaces the continuation when it is cheaper by more
+// than the transition cost, as a database match does. When the filter refuses every candidate
+// the decision is made again with its fallback, down to no filter. filter null and n = 1: the
+// rule above, bit for bit.
+bool compressed_decision(const CompressedModel& model, const float* current, const float* queries, int n,
+                         float transition_cost, const CandidateFilter* filter, float* projected, float* cost,
+                         CompressedScratch& scratch);
 
 // Playback of a chosen state: rows (frames + 1) x pose_dim, row k the pose of the k-th frame
 // from `start` (row 0: start itself); `end` (may alias start) gets the state after `frames`

@@ -104,6 +104,10 @@ class CandidateFilter {
   // The filter a decision retries with when this one refuses every candidate (decision.hpp's
   // decision_match): a filter built over another returns it; null falls back to no filter.
   virtual const CandidateFilter* fallback() const { return nullptr; }
+  // Extra cost of a candidate known only by its features (kFeatureDim normalized floats): a
+  // compressed controller's state (compressed.hpp), which has no database row. Same meaning as
+  // extra_cost; 0 (the default): the rule does not apply to such a candidate (a clip's rule).
+  virtual float state_extra_cost(const float* /*features*/) const { return 0.0f; }
 };
 
 // Squared distance d of row i plus the filter's extra cost (+inf when refused). Tree and
@@ -111,6 +115,13 @@ class CandidateFilter {
 inline float filtered_cost(float d, const CandidateFilter* filter, int64_t i) {
   if (filter == nullptr) return d;
   const float extra = filter->extra_cost(i);
+  if (!(extra < std::numeric_limits<float>::infinity())) return std::numeric_limits<float>::infinity();
+  return extra > 0.0f ? d + extra : d;
+}
+// The same for a candidate known by its features (CandidateFilter::state_extra_cost).
+inline float filtered_state_cost(float d, const CandidateFilter* filter, const float* features) {
+  if (filter == nullptr) return d;
+  const float extra = filter->state_extra_cost(features);
   if (!(extra < std::numeric_limits<float>::infinity())) return std::numeric_limits<float>::infinity();
   return extra > 0.0f ? d + extra : d;
 }

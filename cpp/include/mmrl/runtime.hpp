@@ -177,6 +177,11 @@ class RuntimeCharacter {
   // Feeds the task's one-env env the character's frame, root and target (and the obstacles
   // around it) for the next decision.
   void sync_env();
+  // f(env) on the task's one-env env, whichever it is.
+  template <class F>
+  auto with_env(F&& f) {
+    return plane_ ? f(*plane_) : f(*obstacles_);
+  }
 
   std::shared_ptr<const RuntimeController> controller_;
   Character character_;

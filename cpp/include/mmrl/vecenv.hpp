@@ -26,6 +26,10 @@
 //   TaskStep advance(int i, const float* action);     // one RL step of env i, no autoreset
 // and nothing else of the loop. Config derives from TaskConfig (tasks/task_config.hpp);
 // State derives from TargetEnvState (target_env.hpp, with the step records and start rules).
+//
+// size: one class template of two halves, the database decision and the compressed one
+// (set_compressed .. decide_compressed), kept together because each mirrors the other's
+// hooks; what both share outside the class is in target_env.hpp and decision.hpp.
 #pragma once
 
 #include <algorithm>
@@ -149,6 +153,7 @@ class TargetVecEnv {
     if (model == nullptr) {
       compressed_ = nullptr;
       compressed_states_ = nullptr;
+      task().on_compressed_set();
       return;
     }
     if (!Task::kPlaysCompressed)
@@ -170,6 +175,7 @@ class TargetVecEnv {
     compressed_ = model;
     compressed_states_ = frame_states;
     for (int i = 0; i < num_envs(); ++i) start_compressed(envs_[i]);
+    task().on_compressed_set();
   }
   const CompressedModel* compressed() const { return compressed_; }
   // Moves env i's compressed state to the end of its last decision's playback: what a step does
@@ -238,7 +244,7 @@ class TargetVecEnv {
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
     s.last_transition_cost = task().decision_transition_cost(i);
-    if (compressed_ != nullptr) return decide_compressed(s, action);
+    if (compressed_ != nullptr) return decide_compressed(i, action);
     const CandidateFilter* filter = task().candidate_filter(i);
     const int64_t j = decision_for_action(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost,
                                         filter, task().candidate_shortlist());
@@ -256,11 +262,17 @@ class TargetVecEnv {
   // The compressed decision of decide(): the query of the state shown now, its projection or
   // the continuation, and the chosen state's playback (s.crows, s.cnext; end_playback moves
   // on). Returns -1: no database frame.
-  int64_t decide_compressed(State& s, const float* action) {
+  int64_t decide_compressed(int i, const float* action) {
+    State& s = envs_[i];
     float query[kFeatureDim];
     for (int k = 0; k < kPoseDim; ++k) query[k] = s.cstate[k];
     for (int k = 0; k < kTrajectoryDim; ++k) query[kPoseDim + k] = std::min(high_[k], std::max(low_[k], action[k]));
-    s.last_transition = compressed_decision(*compressed_, s.cstate.data(), query, s.last_transition_cost,
+    // The task's filter prices the projections (state_extra_cost: the collision-aware search);
+    // with its compressed_shortlist fan, the query's turned copies are projected too.
+    float queries[kMlpMaxRows * kFeatureDim];
+    const int n = shortlist_queries(db_, query, task().compressed_shortlist(), queries);
+    s.last_transition = compressed_decision(*compressed_, s.cstate.data(), queries, n, s.last_transition_cost,
+                                            task().candidate_filter(i),
                                             s.cchosen.data(), &s.last_cost, s.cscratch);
     if (!s.last_transition) std::copy(s.cstate.begin(), s.cstate.end(), s.cchosen.begin());
     s.last_pose_jump = 0;
@@ -402,6 +414,8 @@ class TargetVecEnv {
 
   // Hook of set_state for tasks whose state depends on the root (a task hides it).
   void on_state_set(int) {}
+  // Hook of set_compressed (a task hides it): after a model is set or cleared.
+  void on_compressed_set() {}
 
   // The transition cost of env i's next match (a task hides it to make the bias depend on
   // its state): the config's transition_cost.
@@ -411,6 +425,9 @@ class TargetVecEnv {
   // config's clip costs (decision.hpp's ClipCostFilter), or none.
   // Env i's request over them (RequestFilter) when it restricts the clips.
   const CandidateFilter* candidate_filter(int i) { return request_filter(i); }
+  // The queries a compressed controller projects (shortlist_queries' fan; k is unused): the
+  // query alone, unless a task's filter prices projections and wants its turned copies too.
+  Shortlist compressed_shortlist() const { return {}; }
   // The base every task's filter builds on: env i's request (if it restricts the clips) over
   // the clip costs (if any).
   const CandidateFilter* request_filter(int i) {
@@ -466,6 +483,13 @@ class TargetVecEnv {
   }
   // A task that plays compressed controllers says so (and reads played_delta, end_playback).
   static constexpr bool kPlaysCompressed = false;
+  // Starts env s's compressed state from its database frame (nothing without a model).
+  void start_compressed(State& s) {
+    if (compressed_ == nullptr) return;
+    const size_t S = static_cast<size_t>(compressed_->state_dim());
+    const float* row = compressed_states_ + static_cast<size_t>(s.frame) * S;
+    std::copy(row, row + S, s.cstate.begin());
+  }
 
   const Database& db_;
   const Matcher& matcher_;
@@ -482,13 +506,6 @@ class TargetVecEnv {
   ThreadPool pool_;
 
  private:
-  // Starts env s's compressed state from its database frame (nothing without a model).
-  void start_compressed(State& s) {
-    if (compressed_ == nullptr) return;
-    const size_t S = static_cast<size_t>(compressed_->state_dim());
-    const float* row = compressed_states_ + static_cast<size_t>(s.frame) * S;
-    std::copy(row, row + S, s.cstate.begin());
-  }
   Task& task() { return static_cast<Task&>(*this); }
   const Task& task() const { return static_cast<const Task&>(*this); }
 };

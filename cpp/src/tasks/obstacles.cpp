@@ -36,6 +36,9 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
   if (c.path_fan_candidates < 1 || c.path_fan_candidates > kMaxShortlist)
     throw std::invalid_argument("path_fan_candidates must be between 1 and " + std::to_string(kMaxShortlist) +
                                 ", got " + std::to_string(c.path_fan_candidates));
+  if (c.compressed_path_fan < 0 || 2 * c.compressed_path_fan + 1 > kMlpMaxRows)
+    throw std::invalid_argument("compressed_path_fan must be between 0 and " + std::to_string((kMlpMaxRows - 1) / 2) +
+                                ", got " + std::to_string(c.compressed_path_fan));
   if (!(c.path_fan_degrees > 0) || !(c.path_fan_degrees <= 90))
     throw std::invalid_argument("path_fan_degrees must be in (0, 90]");
   if (!(c.path_margin >= 0) || !finite(c.path_margin)) throw std::invalid_argument("path_margin must be finite and >= 0");
@@ -103,6 +106,19 @@ void ObstacleVecEnv::path_hits(int i, const int64_t* rows, int n, int32_t* first
   }
 }
 
+void ObstacleVecEnv::state_path_hits(int i, const float* features, int n, int32_t* first_hit_frames) {
+  if (compressed_ == nullptr) throw std::invalid_argument("state_path_hits: no compressed controller is set");
+  for (int64_t k = 0; k < static_cast<int64_t>(n) * kFeatureDim; ++k)
+    if (!std::isfinite(features[k])) throw std::invalid_argument("features must be finite");
+  const ObstacleEnvState& s = envs_[i];
+  ObstaclePathFilter& f = path_filters_[i];
+  f.prepare(field_, i, s.root, s.max_speed > 0, frame_dt_);
+  for (int k = 0; k < n; ++k) {
+    const int hit = f.first_hit_state(features + static_cast<size_t>(k) * kFeatureDim);
+    first_hit_frames[k] = hit < 0 ? 0 : kPathSampleFrames[hit];
+  }
+}
+
 void ObstacleVecEnv::set_stage(float max_speed, float target_half_extent) {
   if (!(max_speed >= 0) || !(max_speed <= config_.speed_cap))
     throw std::invalid_argument("max_speed must be in [0, speed_cap = " + std::to_string(config_.speed_cap) + "]");
@@ -144,9 +160,10 @@ void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
     f.prepare(field_, i, st.root, st.max_speed > 0, frame_dt_);
     // A frame too close to its clip's end to be matched has no continuation: the next decision
     // must jump, which the observation tells as a hit right away.
-    st.continuation_hit = compressed_ ? -1 : 0;  // a compressed state has no database path to test
-    if (!compressed_ && db_.valid[st.frame]) {
-      const int hit = f.first_hit(st.frame);
+    // A compressed state's path is its own trajectory's (path_filter.hpp's trajectory_path).
+    st.continuation_hit = 0;
+    if (compressed_ || db_.valid[st.frame]) {
+      const int hit = compressed_ ? f.first_hit_state(st.cstate.data()) : f.first_hit(st.frame);
       st.continuation_hit = hit < 0 ? -1 : kPathSampleFrames[hit];
     }
   }
@@ -340,12 +357,16 @@ void ObstacleVecEnv::set_obstacles(int i, int n, const float* centres, const flo
 void ObstacleVecEnv::set_scene(int i, int64_t frame, float yaw, float target_x, float target_z, int n,
                                const float* centres, const float* half_sizes, const float* angles,
                                const float* velocities, MapUpdate maps) {
-  if (frame < 0 || frame >= db_.num_frames) throw std::invalid_argument("frame is outside the database");
+  const bool keep = compressed_ != nullptr && frame == -1;  // set_state's rule: the compressed state stays
+  if (!keep && (frame < 0 || frame >= db_.num_frames)) throw std::invalid_argument("frame is outside the database");
   if (!std::isfinite(yaw)) throw std::invalid_argument("yaw must be finite");
   set_target(i, target_x, target_z);
   const float fastest = put_obstacles(i, n, centres, half_sizes, angles, velocities);
   ObstacleEnvState& s = envs_[i];
-  s.frame = frame;
+  if (!keep) {
+    s.frame = frame;
+    start_compressed(s);
+  }
   s.root = RootState{0.0f, 0.0f, wrap_angle(yaw)};
   s.max_speed = fastest;
   refresh(i, maps, true);

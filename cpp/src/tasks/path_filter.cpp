@@ -19,6 +19,7 @@ void ObstaclePathFilter::init(const Database& db, int capacity, const PathFilter
   if (db.path_samples.size() != static_cast<size_t>(db.num_frames) * kPathSamples * 2)
     throw std::invalid_argument("path filter: the database has no path samples (Database::index_clips)");
   if (capacity < 0) throw std::invalid_argument("path filter: capacity must be >= 0");
+  db_ = &db;
   paths_ = db.path_samples.data();
   base_ = base;
   config_ = config;
@@ -63,7 +64,7 @@ void ObstaclePathFilter::prepare(const ObstacleField& field, int env, const Root
     const float extent = std::hypot(h.x(), h.y());
     // An obstacle moves at most speed * t (a mirror bounce only shortens the displacement).
     const float travel = moving ? field.velocity(env, k).norm() * seconds : 0.0f;
-    const float far = reach_ + extent + r + travel;
+    const float far = (states_ ? std::max(reach_, kStateReach) : reach_) + extent + r + travel;
     const float dx = c.x() - root.x, dz = c.y() - root.z;
     if (dx * dx + dz * dz > far * far) continue;
     if (moving) field.path(env, k, frames, frame_dt, scratch_x_.data(), scratch_z_.data());
@@ -82,8 +83,41 @@ void ObstaclePathFilter::prepare(const ObstacleField& field, int env, const Root
   }
 }
 
-int ObstaclePathFilter::first_hit(int64_t row) const {
-  const float* p = paths_ + static_cast<size_t>(row) * kPathSamples * 2;
+void trajectory_path(const float* raw_trajectory, float* path) {
+  const float t[4] = {0.0f, static_cast<float>(kTrajectoryOffsets[0]), static_cast<float>(kTrajectoryOffsets[1]),
+                      static_cast<float>(kTrajectoryOffsets[2])};
+  // Positions at t[0..3]; features.hpp's layout: per horizon, position (x, z), then direction.
+  const float px[4] = {0.0f, raw_trajectory[0], raw_trajectory[4], raw_trajectory[8]};
+  const float pz[4] = {0.0f, raw_trajectory[1], raw_trajectory[5], raw_trajectory[9]};
+  for (int s = 0; s < kPathSamples; ++s) {
+    const float f = static_cast<float>(kPathSampleFrames[s]);
+    const int a = f <= t[1] ? 0 : 1;  // the three nodes a, a+1, a+2
+    float x = 0.0f, z = 0.0f;
+    for (int m = a; m < a + 3; ++m) {
+      float w = 1.0f;  // Lagrange basis of node m
+      for (int o = a; o < a + 3; ++o)
+        if (o != m) w *= (f - t[o]) / (t[m] - t[o]);
+      x += w * px[m];
+      z += w * pz[m];
+    }
+    path[2 * s] = x;
+    path[2 * s + 1] = z;
+  }
+}
+
+int ObstaclePathFilter::first_hit_state(const float* features) const {
+  if (!states_) throw std::invalid_argument("path filter: first_hit_state before set_prices_states(true)");
+  float raw[kTrajectoryDim], path[kPathSamples * 2];
+  trajectory_denormalize(*db_, features + kPoseDim, raw);
+  trajectory_path(raw, path);
+  for (int s = 0; s < kPathSamples; ++s) {
+    const float d = std::hypot(path[2 * s], path[2 * s + 1]);
+    if (d > kStateReach) path[2 * s] *= kStateReach / d, path[2 * s + 1] *= kStateReach / d;
+  }
+  return first_hit_path(path);
+}
+
+int ObstaclePathFilter::first_hit_path(const float* p) const {
   const float r2 = config_.radius * config_.radius;
   for (int s = 0; s < samples_; ++s) {
     // local_to_world_xz (math.hpp) of the path point, through the character's root.

@@ -160,6 +160,11 @@ class ObstaclesConfig(TaskConfig):
     """The turn between the path fan's queries (degrees, (0, 90])."""
     path_fan_candidates: int = 1
     """How many nearest candidates each turned query of the path fan adds (1..256)."""
+    compressed_path_fan: int = 3
+    """A compressed controller (docs/compressed.md) under the path filter: the projections of the
+    query and of the query turned by +-1..n x ``path_fan_degrees`` (0..3 turns each way) are its
+    candidates, each path read from its own trajectory features (quadratic through the start and
+    the 10-, 20- and 30-frame positions)."""
     train_path_filter: bool = True
     """Whether the training envs run the collision-aware search too. False trains the policy
     without it (it learns to dodge on its own) and keeps ``path_filter`` for everything after
@@ -326,6 +331,12 @@ class ObstaclesVectorEnv(TargetVectorEnv):
         """For env i's current state, the collision-aware search's test of each database row
         (valid frames): the frames ahead of its played path's first hit, 0 when clear (int32)."""
         return self._core.path_hits(int(i), np.ascontiguousarray(rows, np.int64).reshape(-1))
+
+    def state_path_hits(self, i: int, features: np.ndarray) -> np.ndarray:
+        """The same test of compressed controller states known by their normalized features
+        (N, 27): each path is the quadratic through the start and the state's 10-, 20- and
+        30-frame trajectory positions (int32 frames to the first hit, 0 when clear)."""
+        return self._core.state_path_hits(int(i), features)
 
     def collides(self, i: int, x: float, z: float) -> bool:
         """Whether the body disc at world (x, z) overlaps one of env i's obstacles."""

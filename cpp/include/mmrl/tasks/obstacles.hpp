@@ -98,6 +98,10 @@ struct ObstacleTaskConfig : TaskConfig {
   int path_fan = 0;
   float path_fan_degrees = 30.0f;
   int path_fan_candidates = 1;  // the nearest candidates taken from each turned query
+  // A compressed controller's candidates under the path filter: the projections of the query
+  // and of the query turned by +-1..compressed_path_fan x path_fan_degrees (0..3 turns each
+  // way), each path read from its own trajectory features (path_filter.hpp's trajectory_path).
+  int compressed_path_fan = 3;
   int num_obstacles = 100;
   float obstacle_square_half = 10.0f;  // obstacle centres in a 20 x 20 m square around the start
   float obstacle_min_side = 0.25f;     // rectangle sides uniform in [min, max] meters
@@ -131,6 +135,7 @@ struct ObstacleTaskConfig : TaskConfig {
     v("path_fan", &ObstacleTaskConfig::path_fan);
     v("path_fan_degrees", &ObstacleTaskConfig::path_fan_degrees);
     v("path_fan_candidates", &ObstacleTaskConfig::path_fan_candidates);
+    v("compressed_path_fan", &ObstacleTaskConfig::compressed_path_fan);
     v("num_obstacles", &ObstacleTaskConfig::num_obstacles);
     v("obstacle_square_half", &ObstacleTaskConfig::obstacle_square_half);
     v("obstacle_min_side", &ObstacleTaskConfig::obstacle_min_side);
@@ -221,6 +226,10 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   // whether or not path_filter is on) of env i's current state: for each of n database rows,
   // the frames ahead of its path's first hit (kPathSampleFrames), or 0 when clear.
   void path_hits(int i, const int64_t* rows, int n, int32_t* first_hit_frames);
+  // The same for n compressed states known by their features (n x kFeatureDim normalized
+  // floats, finite) of env i's compressed controller (set_compressed first): each path is
+  // trajectory_path of the state's trajectory (path_filter.hpp).
+  void state_path_hits(int i, const float* features, int n, int32_t* first_hit_frames);
 
   // Env i's obstacles now (world meters, radians, m/s; see grid.hpp): centres and velocities
   // (n x 2, (x, z)), half sizes (n x 2, along the obstacle's own X / Z), angles (n). n is
@@ -252,7 +261,8 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   // The engine runtime's input to a decision: env i's character on database `frame` facing yaw
   // at the centre of its obstacle square (the origin: obstacles are given relative to the
   // character, as set_obstacles takes them), its target relative to it (meters), and its
-  // obstacles. Then observe(i) and decide(i) are the training env's own. Bad values throw
+  // obstacles. Then observe(i) and decide(i) are the training env's own. With a compressed
+  // controller, frame -1 keeps env i's compressed state (set_state's rule). Bad values throw
   // std::invalid_argument as set_obstacles and set_state do.
   void set_scene(int i, int64_t frame, float yaw, float target_x, float target_z, int n, const float* centres,
                  const float* half_sizes, const float* angles, const float* velocities, MapUpdate maps);
@@ -261,6 +271,12 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   friend class TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState>;
   // After set_state: rebuild the grid and both sensor maps around the new root.
   void on_state_set(int i) { refresh(i, false, true); }
+  // After set_compressed: the path filters price compressed states, and the maps and the
+  // continuation test follow the new state.
+  void on_compressed_set() {
+    for (ObstaclePathFilter& f : path_filters_) f.set_prices_states(compressed_ != nullptr);
+    for (int i = 0; i < num_envs(); ++i) refresh(i, false, true);
+  }
   // transition_cost, or 0 when bias_yields and env i's continuation hits an obstacle.
   float decision_transition_cost(int i) const;
   // The clip costs, or with path_filter env i's collision-aware filter prepared for its
@@ -269,6 +285,10 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   Shortlist candidate_shortlist() const {
     if (!config_.path_filter) return {};
     return {config_.path_candidates, config_.path_fan, deg_to_rad(config_.path_fan_degrees), config_.path_fan_candidates};
+  }
+  Shortlist compressed_shortlist() const {
+    if (!config_.path_filter) return {};
+    return {0, config_.compressed_path_fan, deg_to_rad(config_.path_fan_degrees), 1};
   }
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);

@@ -44,6 +44,14 @@ struct PathFilterConfig {
   int horizon = 30;      // frames; kPathSampleFrames[0] <= horizon <= kPathSampleFrames[last]
 };
 
+// The path a trajectory implies (raw trajectory features, 12 floats: features.hpp's layout):
+// the root's (x, z) kPathSampleFrames[s] frames ahead (kPathSamples x 2, character frame), by
+// quadratic interpolation through the start (0, 0) and the trajectory's three positions
+// (kTrajectoryOffsets: 10, 20, 30 frames), the samples before 10 frames through 0, 10 and 20,
+// the later ones through 10, 20 and 30. For a database frame the 10-, 20- and 30-frame samples
+// equal its path samples (tests/test_compress.py bounds the others).
+void trajectory_path(const float* raw_trajectory, float* path);
+
 class ObstaclePathFilter final : public CandidateFilter {
  public:
   ObstaclePathFilter() = default;
@@ -54,6 +62,15 @@ class ObstaclePathFilter final : public CandidateFilter {
   // Prepares one decision: env's obstacles of `field` seen from a character at `root`, moved by
   // the env's rule when `moving` (frame_dt seconds per frame) and frozen otherwise.
   void prepare(const ObstacleField& field, int env, const RootState& root, bool moving, float frame_dt);
+
+  // How far a compressed state's path may reach (meters, 30 frames: faster than any
+  // locomotion): its points beyond are pulled in to it (first_hit_state), and with
+  // set_prices_states(true) prepare() looks that far too, so a state's test depends on no database.
+  static constexpr float kStateReach = 6.0f;
+  void set_prices_states(bool on) {
+    states_ = on;
+    prepared_ = false;
+  }
 
   // The filter under this one (a request's clips and the clip costs; may be null).
   void set_base(const CandidateFilter* base) { base_ = base; }
@@ -66,8 +83,19 @@ class ObstaclePathFilter final : public CandidateFilter {
     if (s < 0) return base;
     return base + hit_cost_[s];
   }
+  // A compressed controller's candidate (a state's kFeatureDim normalized features): its path
+  // is trajectory_path of its own trajectory features, tested as a row's path is. The base
+  // filter does not price it (a state has no clip).
+  float state_extra_cost(const float* features) const override {
+    const int s = first_hit_state(features);
+    return s < 0 ? 0.0f : hit_cost_[s];
+  }
   // The first sample index s at which row's path hits (kPathSampleFrames[s] frames ahead), or -1.
-  int first_hit(int64_t row) const;
+  int first_hit(int64_t row) const { return first_hit_path(paths_ + static_cast<size_t>(row) * kPathSamples * 2); }
+  // The same for a state's features (trajectory_path; set_prices_states(true) first), and for
+  // a path (kPathSamples x (x, z), meters in the character frame, within prepare()'s reach).
+  int first_hit_state(const float* features) const;
+  int first_hit_path(const float* path) const;
   // Sample count within the horizon, and the cost of a first hit at sample s.
   int samples() const { return samples_; }
   float hit_cost(int s) const { return hit_cost_[s]; }
@@ -75,10 +103,12 @@ class ObstaclePathFilter final : public CandidateFilter {
   int nearby() const { return kept_; }
 
  private:
+  const Database* db_ = nullptr;
   const float* paths_ = nullptr;  // db.path_samples
   const CandidateFilter* base_ = nullptr;
   PathFilterConfig config_;
   float reach_ = 0;  // farthest path point within the horizon (meters)
+  bool states_ = false;  // set_prices_states
   int samples_ = 0, capacity_ = 0, kept_ = 0;
   float hit_cost_[kPathSamples] = {};
   float root_x_ = 0, root_z_ = 0, cos_yaw_ = 1, sin_yaw_ = 0;
