@@ -158,8 +158,16 @@ def trained(db, tmp_path_factory):
 def test_the_core_networks_equal_torch(db, trained):
     from mmrl.compress.model import CompressedController
 
+    import copy
+
     cc = CompressedController(trained, db)
-    nets = cc.networks
+    # The core runs float16 weights (compressed.hpp): the reference is torch over the same
+    # weights rounded to float16 (IEEE, nearest even), computed in float32.
+    nets = {n: copy.deepcopy(cc.networks[n]) for n in ("decompressor", "stepper", "projector")}
+    for net in nets.values():
+        for m in net:
+            if isinstance(m, torch.nn.Linear):
+                m.weight.data = m.weight.data.half().float()
     rng = np.random.default_rng(3)
     s = rng.standard_normal((64, cc.core.state_dim)).astype(np.float32)
     q = rng.standard_normal((64, 27)).astype(np.float32)
@@ -178,14 +186,45 @@ def test_the_core_networks_equal_torch(db, trained):
     np.testing.assert_allclose(cc.core.project(q), proj.numpy(), atol=2e-5, rtol=1e-5)
     assert cc.core.num_frame_states == db.num_frames
     J = db.num_joints
-    assert cc.memory_bytes == 4 * (sum(p.numel() for n in ("decompressor", "stepper", "projector")
-                                       for p in nets[n].parameters()) + 2 * cc.core.pose_dim + 2 * 8 + 3 * J) + J
+    linear = [m for n in ("decompressor", "stepper", "projector") for m in nets[n] if isinstance(m, torch.nn.Linear)]
+    packed = sum(2 * 8 * -(-m.out_features // 8) * m.in_features + 4 * m.out_features for m in linear)
+    assert cc.memory_bytes == packed + 4 * (2 * cc.core.pose_dim + 2 * 8 + 3 * J) + J
     # Bones keep their lengths: a joint whose translation never changes in the database decodes to it.
     tr = np.asarray(db.bone_translations)
     fixed = np.abs(tr - tr[:1]).max(axis=(0, 2)) <= 1e-6
     assert fixed.sum() >= J // 2
     decoded = cc.decode(s)[:, 6 * J:9 * J].reshape(-1, J, 3)
     np.testing.assert_array_equal(decoded[:, fixed], np.broadcast_to(tr[0, fixed], decoded[:, fixed].shape))
+
+
+def test_both_kernels_give_the_same_bits(db, trained, tmp_path):
+    """The F16C kernel and the widening one (MMRL_NO_F16C, what a CPU without F16C runs) decode,
+    step and project to the same bits."""
+    import os
+    import subprocess
+    import sys
+
+    from mmrl.compress.model import CompressedController
+
+    cc = CompressedController(trained, db)
+    s = np.random.default_rng(4).standard_normal((16, cc.core.state_dim)).astype(np.float32)
+    np.save(tmp_path / "s.npy", s)
+    script = (f"import numpy as np, mmrl; from mmrl import _core; from mmrl.compress.model import CompressedController; "
+              f"cc = CompressedController({str(trained)!r}, mmrl.Database.load({str(tmp_path / 'db.npz')!r})); "
+              f"s = np.load({str(tmp_path / 's.npy')!r}); "
+              f"np.savez({str(tmp_path / 'out.npz')!r}, k=_core.mlp_kernel(), d=cc.core.decode(s), t=cc.core.step(s), "
+              f"p=cc.core.project(np.ascontiguousarray(s[:, :27])))")
+    db.save(tmp_path / "db.npz")
+    subprocess.run([sys.executable, "-c", script], check=True, env={**os.environ, "MMRL_NO_F16C": "1"})
+    out = np.load(tmp_path / "out.npz")
+    assert str(out["k"]) == "widening"
+    from mmrl import _core
+
+    if _core.mlp_kernel() != "f16c":
+        print("this CPU has no F16C: both sides ran the widening kernel")
+    np.testing.assert_array_equal(out["d"], cc.core.decode(s))
+    np.testing.assert_array_equal(out["t"], cc.core.step(s))
+    np.testing.assert_array_equal(out["p"], cc.core.project(np.ascontiguousarray(s[:, :27])))
 
 
 def test_the_full_path_plays_the_projector_and_the_stepper(db, trained):

@@ -58,6 +58,9 @@ py::array_t<float> batch(const PyCompressed& p, const py::handle& rows, const ch
 
 // long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 void bind_compressed(py::module_& m) {
+  m.def("mlp_kernel", [] { return std::string(mlp_kernel()); },
+        "The compressed networks' dense kernel in this process: 'f16c' (AVX2 and F16C) or 'widening' "
+        "(any CPU, the same bits; MMRL_NO_F16C forces it).");
   py::class_<PyCompressed>(m, "CompressedModel", "A compressed controller's networks (compressed.hpp).")
       .def(py::init([](int num_joints, int latent, const py::list& decompressor, const py::list& stepper,
                        const py::list& projector, const py::handle& y_mean, const py::handle& y_std,

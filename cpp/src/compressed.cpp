@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <stdexcept>
@@ -9,15 +10,91 @@
 #include "mmrl/kdtree.hpp"
 #include "mmrl/search.hpp"
 
+#if defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 namespace mmrl {
 
 namespace {
 
-inline float elu(float x) { return x > 0.0f ? x : std::expm1(x); }
+// ELU over n floats in place: x for x > 0, expm1(x) otherwise, 8 lanes at a time. expm1(x) =
+// 2^k (expm1(r) + 1) - 1 with x = k ln2 + r, |r| <= ln2 / 2, and expm1(r) by its Taylor series
+// to r^8 / 8! (relative error under 1e-7 on that range; near 0, k = 0 and the series is expm1
+// itself). Only IEEE adds, multiplies and conversions, so both clones give the same bits.
+MMRL_MULTIVERSION void elu_inplace(float* y, int n) {
+  typedef int32_t Ints __attribute__((vector_size(kLanes * sizeof(int32_t))));
+  const int full = n - n % kLanes;
+  auto lanes_elu = [](Lanes x) {
+    const Lanes xc = x < Lanes{} ? x : Lanes{};  // the positive lanes are taken as they are
+    const Lanes lo = xc < -87.0f ? Lanes{} - 87.0f : xc;  // 2^k stays normal; expm1 is -1 there in float
+    const Lanes t = lo * 1.44269504088896341f - 0.5f;  // k = round(lo / ln2), lo <= 0
+    Ints k = __builtin_convertvector(t, Ints);  // truncation toward zero of t
+    k = k - (__builtin_convertvector(k, Lanes) > t ? Ints{} + 1 : Ints{});  // floor(t)
+    k = k + 1;
+    const Lanes kf = __builtin_convertvector(k, Lanes);
+    const Lanes r = (lo - kf * 0.693145751953125f) - kf * 1.428606765330187e-06f;  // Cody-Waite ln2
+    Lanes p = Lanes{} + 2.48015873015873e-05f;                                     // 1/8!
+    p = p * r + 1.98412698412698e-04f;
+    p = p * r + 1.38888888888889e-03f;
+    p = p * r + 8.33333333333333e-03f;
+    p = p * r + 4.16666666666667e-02f;
+    p = p * r + 1.66666666666667e-01f;
+    p = p * r + 0.5f;
+    const Lanes em1 = (p * r) * r + r;  // expm1(r)
+    Lanes two_k;
+    const Ints bits = (k + 127) << 23;
+    std::memcpy(&two_k, &bits, sizeof(two_k));
+    const Lanes e = two_k * em1 + (two_k - 1.0f);
+    return x > Lanes{} ? x : e;
+  };
+  for (int i = 0; i < full; i += kLanes) {
+    Lanes x;
+    std::memcpy(&x, y + i, sizeof(x));
+    x = lanes_elu(x);
+    std::memcpy(y + i, &x, sizeof(x));
+  }
+  if (full < n) {
+    float tmp[kLanes] = {};
+    std::copy(y + full, y + n, tmp);
+    Lanes x;
+    std::memcpy(&x, tmp, sizeof(x));
+    x = lanes_elu(x);
+    std::memcpy(tmp, &x, sizeof(x));
+    std::copy(tmp, tmp + (n - full), y + full);
+  }
+}
 
 void check_size(const std::vector<float>& v, size_t n, const std::string& what) {
   if (v.size() != n)
     throw std::invalid_argument(what + ": expected " + std::to_string(n) + " floats, got " + std::to_string(v.size()));
+}
+
+size_t packed_size(const Mlp::Layer& l) {
+  return static_cast<size_t>((l.out + kLanes - 1) / kLanes) * l.in * kLanes;
+}
+
+constexpr float kHalfMax = 65504.0f;
+
+// IEEE float16 bits of a finite float (|f| <= kHalfMax), rounded to nearest even; widen() of
+// them is exact, so both clones read the same weights.
+uint16_t float_to_half(float f) {
+  uint32_t x;
+  std::memcpy(&x, &f, 4);
+  const uint32_t sign = (x >> 16) & 0x8000u, ax = x & 0x7fffffffu;
+  if (ax < 0x33000001u) return static_cast<uint16_t>(sign);  // below half the smallest subnormal: 0
+  if (ax < 0x38800000u) {                                     // a subnormal half
+    const int shift = 126 - static_cast<int>(ax >> 23);       // 14 .. 24
+    const uint32_t m = (ax & 0x7fffffu) | 0x800000u;
+    uint32_t h = m >> shift;
+    const uint32_t rem = m & ((1u << shift) - 1), half = 1u << (shift - 1);
+    if (rem > half || (rem == half && (h & 1u))) ++h;
+    return static_cast<uint16_t>(sign | h);
+  }
+  uint32_t h = ((ax - 0x38000000u) >> 13);  // rebias the exponent (127 -> 15), keep 10 bits
+  const uint32_t rem = ax & 0x1fffu;
+  if (rem > 0x1000u || (rem == 0x1000u && (h & 1u))) ++h;
+  return static_cast<uint16_t>(sign | h);
 }
 
 }  // namespace
@@ -30,7 +107,14 @@ int Mlp::max_width() const {
 
 size_t Mlp::num_parameters() const {
   size_t n = 0;
-  for (const Layer& l : layers) n += l.weight.size() + l.bias.size();
+  for (const Layer& l : layers) n += static_cast<size_t>(l.in) * l.out + l.bias.size();
+  return n;
+}
+
+size_t Mlp::memory_bytes() const {
+  size_t n = 0;
+  for (const Layer& l : layers)
+    n += sizeof(float) * (l.weight.size() + l.bias.size()) + sizeof(uint16_t) * l.packed.size();
   return n;
 }
 
@@ -43,10 +127,12 @@ void Mlp::check(const std::string& what) const {
     if (k > 0 && l.in != layers[k - 1].out)
       throw std::invalid_argument(name + ": takes " + std::to_string(l.in) + " inputs, the layer before gives " +
                                   std::to_string(layers[k - 1].out));
-    check_size(l.weight, static_cast<size_t>(l.in) * l.out, name + " weight");
+    if (!(l.weight.empty() && l.packed.size() == packed_size(l))) {  // not packed yet
+      check_size(l.weight, static_cast<size_t>(l.in) * l.out, name + " weight");
+      for (float v : l.weight)
+        if (!std::isfinite(v)) throw std::invalid_argument(name + ": weight is not finite");
+    }
     check_size(l.bias, static_cast<size_t>(l.out), name + " bias");
-    for (float v : l.weight)
-      if (!std::isfinite(v)) throw std::invalid_argument(name + ": weight is not finite");
     for (float v : l.bias)
       if (!std::isfinite(v)) throw std::invalid_argument(name + ": bias is not finite");
   }
@@ -54,31 +140,58 @@ void Mlp::check(const std::string& what) const {
 
 void Mlp::pack() {
   for (Layer& l : layers) {
-    const int blocks = (l.out + kLanes - 1) / kLanes;
-    l.packed.assign(static_cast<size_t>(blocks) * l.in * kLanes, 0.0f);
+    if (l.weight.empty() && l.packed.size() == packed_size(l)) continue;  // packed already
+    std::vector<uint16_t> packed(packed_size(l), 0);
     for (int o = 0; o < l.out; ++o)
-      for (int i = 0; i < l.in; ++i)
-        l.packed[(static_cast<size_t>(o / kLanes) * l.in + i) * kLanes + o % kLanes] =
-            l.weight[static_cast<size_t>(o) * l.in + i];
+      for (int i = 0; i < l.in; ++i) {
+        const float w = l.weight[static_cast<size_t>(o) * l.in + i];
+        if (!(std::abs(w) <= kHalfMax))
+          throw std::invalid_argument("a weight (" + std::to_string(w) + ") is beyond float16's range (65504)");
+        packed[(static_cast<size_t>(o / kLanes) * l.in + i) * kLanes + o % kLanes] = float_to_half(w);
+      }
+    l.packed = std::move(packed);
+    l.weight.clear();
+    l.weight.shrink_to_fit();
   }
 }
 
 namespace {
+
+// 8 float16 weights widened to float32, exactly (finite halves; pack refuses the rest): the
+// half's exponent and mantissa bits moved into a float's place, then scaled by 2^112 (which
+// rebiases the exponent, subnormals and zero included), then the sign. Integer and float
+// vector operations only, so the AVX2 clone and the baseline give the same bits.
+__attribute__((always_inline)) inline Lanes widen(const uint16_t* p) {
+  typedef uint16_t Shorts __attribute__((vector_size(kLanes * sizeof(uint16_t))));
+  typedef uint32_t Words __attribute__((vector_size(kLanes * sizeof(uint32_t))));
+  Shorts h;
+  std::memcpy(&h, p, sizeof(h));
+  const Words w = __builtin_convertvector(h, Words);
+  const Words magnitude = (w & 0x7fffu) << 13, sign = (w & 0x8000u) << 16;
+  Lanes f;
+  std::memcpy(&f, &magnitude, sizeof(f));
+  f = f * 5.192296858534828e+33f;  // 2^112
+  Words bits;
+  std::memcpy(&bits, &f, sizeof(bits));
+  bits |= sign;
+  std::memcpy(&f, &bits, sizeof(f));
+  return f;
+}
 
 // Y = X W^T + b for R rows of X (R <= kMaxRows) over packed weights: per block of 8 outputs, one
 // load of each input's weights feeds every row (R independent sums, so the adds pipeline and a
 // batch reads the weights once). Each output sums its inputs in order from 0, then adds its bias,
 // whatever R is: a row's result does not depend on the batch it is in.
 template <int R>
-__attribute__((always_inline)) inline void dense_rows(const float* packed, const float* bias, const float* x,
+__attribute__((always_inline)) inline void dense_rows(const uint16_t* packed, const float* bias, const float* x,
                                                       int x_stride, float* y, int y_stride, int in, int out) {
   const int blocks = (out + kLanes - 1) / kLanes;
   for (int b = 0; b < blocks; ++b) {
-    const float* w = packed + static_cast<size_t>(b) * in * kLanes;
+    const uint16_t* w = packed + static_cast<size_t>(b) * in * kLanes;
     Lanes acc[R];
     for (int r = 0; r < R; ++r) acc[r] = Lanes{};
     for (int i = 0; i < in; ++i) {
-      const Lanes wi = load_lanes(w + i * kLanes);
+      const Lanes wi = widen(w + i * kLanes);
       for (int r = 0; r < R; ++r) acc[r] += x[r * x_stride + i] * wi;
     }
     const int n = std::min(kLanes, out - b * kLanes);
@@ -90,8 +203,8 @@ __attribute__((always_inline)) inline void dense_rows(const float* packed, const
   }
 }
 
-MMRL_MULTIVERSION void dense_forward(const float* packed, const float* bias, const float* x, int x_stride, float* y,
-                                     int y_stride, int in, int out, int rows) {
+MMRL_MULTIVERSION void dense_widening(const uint16_t* packed, const float* bias, const float* x, int x_stride,
+                                      float* y, int y_stride, int in, int out, int rows) {
   switch (rows) {
     case 1: return dense_rows<1>(packed, bias, x, x_stride, y, y_stride, in, out);
     case 2: return dense_rows<2>(packed, bias, x, x_stride, y, y_stride, in, out);
@@ -104,7 +217,72 @@ MMRL_MULTIVERSION void dense_forward(const float* packed, const float* bias, con
   }
 }
 
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(MMRL_NO_CLONES)
+#define MMRL_HAS_F16C_KERNEL 1
+// dense_rows with F16C's conversion (one vcvtph2ps per 8 weights): the same sums in the same
+// order as the widening kernel, so the same bits (the conversion is exact either way).
+template <int R>
+__attribute__((target("avx2,f16c"))) void dense_rows_f16c(const uint16_t* packed, const float* bias, const float* x,
+                                                          int x_stride, float* y, int y_stride, int in, int out) {
+  const int blocks = (out + kLanes - 1) / kLanes;
+  for (int b = 0; b < blocks; ++b) {
+    const uint16_t* w = packed + static_cast<size_t>(b) * in * kLanes;
+    __m256 acc[R];
+    for (int r = 0; r < R; ++r) acc[r] = _mm256_setzero_ps();
+    for (int i = 0; i < in; ++i) {
+      const __m256 wi = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(w + i * kLanes)));
+      for (int r = 0; r < R; ++r) acc[r] = _mm256_add_ps(acc[r], _mm256_mul_ps(_mm256_set1_ps(x[r * x_stride + i]), wi));
+    }
+    const int n = std::min(kLanes, out - b * kLanes);
+    for (int r = 0; r < R; ++r) {
+      float tmp[kLanes];
+      _mm256_storeu_ps(tmp, acc[r]);
+      for (int l = 0; l < n; ++l) y[r * y_stride + b * kLanes + l] = tmp[l] + bias[b * kLanes + l];
+    }
+  }
+}
+
+__attribute__((target("avx2,f16c"))) void dense_f16c(const uint16_t* packed, const float* bias, const float* x,
+                                                     int x_stride, float* y, int y_stride, int in, int out, int rows) {
+  switch (rows) {
+    case 1: return dense_rows_f16c<1>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 2: return dense_rows_f16c<2>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 3: return dense_rows_f16c<3>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 4: return dense_rows_f16c<4>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 5: return dense_rows_f16c<5>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 6: return dense_rows_f16c<6>(packed, bias, x, x_stride, y, y_stride, in, out);
+    case 7: return dense_rows_f16c<7>(packed, bias, x, x_stride, y, y_stride, in, out);
+    default: return dense_rows_f16c<8>(packed, bias, x, x_stride, y, y_stride, in, out);
+  }
+}
+#endif
+
+// Whether the F16C kernel runs (chosen once). MMRL_NO_F16C (any value) keeps to the widening
+// kernel: for the test that both agree.
+bool use_f16c() {
+#ifdef MMRL_HAS_F16C_KERNEL
+  static const bool f16c = [] {
+    __builtin_cpu_init();
+    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("f16c") && std::getenv("MMRL_NO_F16C") == nullptr;
+  }();
+  return f16c;
+#else
+  return false;
+#endif
+}
+
+// Y = X W^T + b: the F16C kernel where the CPU has it, else the widening one.
+void dense_forward(const uint16_t* packed, const float* bias, const float* x, int x_stride, float* y, int y_stride,
+                   int in, int out, int rows) {
+#ifdef MMRL_HAS_F16C_KERNEL
+  if (use_f16c()) return dense_f16c(packed, bias, x, x_stride, y, y_stride, in, out, rows);
+#endif
+  dense_widening(packed, bias, x, x_stride, y, y_stride, in, out, rows);
+}
+
 }  // namespace
+
+const char* mlp_kernel() { return use_f16c() ? "f16c" : "widening"; }
 
 void Mlp::forward(const float* in, float* out, float* scratch, int rows) const {
   const int w = max_width();
@@ -118,8 +296,7 @@ void Mlp::forward(const float* in, float* out, float* scratch, int rows) const {
     const int y_stride = last ? l.out : w;
     dense_forward(l.packed.data(), l.bias.data(), x, x_stride, y, y_stride, l.in, l.out, rows);
     if (!last)
-      for (int r = 0; r < rows; ++r)
-        for (int i = 0; i < l.out; ++i) y[r * y_stride + i] = elu(y[r * y_stride + i]);
+      for (int r = 0; r < rows; ++r) elu_inplace(y + static_cast<size_t>(r) * y_stride, l.out);
     x = y;
     x_stride = y_stride;
   }
@@ -163,7 +340,7 @@ void CompressedModel::prepare() {
 bool CompressedModel::prepared() const {
   for (const Mlp* m : {&decompressor, &stepper, &projector})
     for (const Mlp::Layer& l : m->layers)
-      if (l.packed.size() != static_cast<size_t>((l.out + kLanes - 1) / kLanes) * l.in * kLanes) return false;
+      if (!l.weight.empty() || l.packed.size() != packed_size(l)) return false;
   return true;
 }
 
@@ -182,8 +359,9 @@ size_t CompressedModel::num_parameters() const {
 }
 
 size_t CompressedModel::memory_bytes() const {
-  return sizeof(float) * (num_parameters() + y_mean.size() + y_std.size() + z_mean.size() + z_std.size() +
-                          fixed_translations.size()) + fixed_joints.size();
+  return decompressor.memory_bytes() + stepper.memory_bytes() + projector.memory_bytes() +
+         sizeof(float) * (y_mean.size() + y_std.size() + z_mean.size() + z_std.size() + fixed_translations.size()) +
+         fixed_joints.size();
 }
 
 void CompressedModel::decode(const float* state, float* pose, CompressedScratch& scratch) const {

@@ -74,27 +74,84 @@ CompressedModel random_model(uint32_t seed) {
   return m;
 }
 
-TEST(Compressed, MlpEqualsAPlainLoop) {
+// The float16 rounding of a weight, by the compiler's own conversion (the reference of pack()).
+double half_rounded(float w) { return static_cast<double>(static_cast<float>(static_cast<_Float16>(w))); }
+
+TEST(Compressed, MlpEqualsAPlainLoopOverItsFloat16Weights) {
   std::mt19937 rng(1);
-  Mlp m = random_mlp(rng, {7, 45, 5, 3}, 1.0f);  // 45: blocks of four and a remainder
+  const Mlp plain = random_mlp(rng, {7, 45, 5, 3}, 1.0f);  // 45: blocks of eight and a remainder
+  Mlp m = plain;
   m.pack();
+  EXPECT_TRUE(m.layers[0].weight.empty());  // the float32 copy is released
+  EXPECT_EQ(m.memory_bytes(), sizeof(uint16_t) * 8 * (6 * 7 + 1 * 45 + 1 * 5) + sizeof(float) * (45 + 5 + 3));
   std::vector<float> in{0.3f, -1.2f, 0.5f, 2.0f, -0.1f, 0.0f, 1.1f}, out(3), scratch(2 * kMlpMaxRows * m.max_width());
   m.forward(in.data(), out.data(), scratch.data());
   std::vector<double> x(in.begin(), in.end());
-  for (size_t k = 0; k < m.layers.size(); ++k) {
-    const auto& l = m.layers[k];
+  for (size_t k = 0; k < plain.layers.size(); ++k) {
+    const auto& l = plain.layers[k];
     std::vector<double> y(l.out);
     for (int o = 0; o < l.out; ++o) {
       double s = l.bias[o];
-      for (int i = 0; i < l.in; ++i) s += double(l.weight[o * l.in + i]) * x[i];
-      y[o] = k + 1 < m.layers.size() ? (s > 0 ? s : std::expm1(s)) : s;
+      for (int i = 0; i < l.in; ++i) s += half_rounded(l.weight[o * l.in + i]) * x[i];
+      y[o] = k + 1 < plain.layers.size() ? (s > 0 ? s : std::expm1(s)) : s;
     }
     x = y;
   }
   for (int o = 0; o < 3; ++o) EXPECT_NEAR(out[o], x[o], 1e-5);
+  m.check("net");  // a packed network checks too
   Mlp bad = m;
   bad.layers[1].in = 10;
   EXPECT_THROW(bad.check("net"), std::invalid_argument);
+  Mlp huge = plain;
+  huge.layers[0].weight[3] = 7e4f;
+  EXPECT_THROW(huge.pack(), std::invalid_argument);
+}
+
+TEST(Compressed, PackRoundsEveryWeightToTheNearestFloat16) {
+  // One layer of 1 input: out[o] = half(w[o]) * 1 + 0, over normal, subnormal and tie values.
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<float> e(-30.0f, 16.0f);
+  Mlp m;
+  Mlp::Layer l;
+  l.in = 1;
+  l.out = 4000;
+  for (int o = 0; o < l.out; ++o) {
+    float w = std::ldexp(1.0f + std::uniform_real_distribution<float>(0, 1)(rng), static_cast<int>(e(rng)));
+    if (o % 7 == 0) w = std::ldexp(1.0f + (2 * (o % 1024) + 1) / 2048.0f, -3);  // halfway between two halves
+    if (o % 11 == 0) w = std::ldexp(static_cast<float>(o % 1024) + 0.5f, -24);  // halfway between subnormals
+    l.weight.push_back(o % 2 ? -w : w);
+  }
+  l.bias.assign(l.out, 0.0f);
+  m.layers.push_back(l);
+  const std::vector<float> weights = l.weight;
+  m.pack();
+  std::vector<float> out(l.out), scratch(2 * kMlpMaxRows * m.max_width());
+  const float one = 1.0f;
+  m.forward(&one, out.data(), scratch.data());
+  for (int o = 0; o < l.out; ++o) ASSERT_EQ(out[o], half_rounded(weights[o])) << o << " " << weights[o];
+}
+
+TEST(Compressed, EluIsExpm1BelowZero) {
+  // Two identity layers: out = ELU(x), against std::expm1 over [-100, 10].
+  Mlp m;
+  for (int k = 0; k < 2; ++k) {
+    Mlp::Layer l;
+    l.in = l.out = 1;
+    l.weight = {1.0f};
+    l.bias = {0.0f};
+    m.layers.push_back(l);
+  }
+  m.pack();
+  std::vector<float> scratch(2 * kMlpMaxRows * m.max_width());
+  double worst = 0;
+  for (int k = 0; k <= 110000; ++k) {
+    const float x = -100.0f + 0.001f * static_cast<float>(k);
+    float y;
+    m.forward(&x, &y, scratch.data());
+    const double want = x > 0 ? x : std::expm1(static_cast<double>(x));
+    worst = std::max(worst, std::abs(y - want) / std::max(1e-30, std::abs(want)));
+  }
+  EXPECT_LT(worst, 5e-7);
 }
 
 TEST(Compressed, DecisionKeepsTheContinuationUnlessTheProjectionIsCloserByTheCost) {

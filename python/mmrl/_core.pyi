@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'CompressedModel', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'motion_from_pose', 'parse_request', 'select_request', 'tags_available']
+__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'CompressedModel', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'mlp_kernel', 'motion_from_pose', 'parse_request', 'select_request', 'tags_available']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -1136,6 +1136,10 @@ def ik_two_bone(hip: typing.Any, knee: typing.Any, ankle: typing.Any, target: ty
     """
 def joint_side(name: str) -> tuple[int, str]:
     ...
+def mlp_kernel() -> str:
+    """
+    The compressed networks' dense kernel in this process: 'f16c' (AVX2 and F16C) or 'widening' (any CPU, the same bits; MMRL_NO_F16C forces it).
+    """
 def motion_from_pose(db: Database, local_translations: typing.Any, local_rotations: typing.Any, source: str = '<generated>') -> Motion:
     """
     A Motion on the database's skeleton from local transforms (meters; quaternions w x y z).

@@ -32,31 +32,40 @@ constexpr int kMlpMaxRows = 8;            // rows a network evaluates together (
 constexpr int kCompressedMaxFrames = 30;  // frames one playback may decode (decision.hpp's kMaxFramesPerStep)
 
 // A dense network: layers out x in (row-major) with biases, ELU between layers, none after the last.
-// forward runs the weights as packed by pack() (blocks of 8 outputs, input-major: one load
-// per input feeds 8 outputs), in the library's 8-lane vectors, compiled for AVX2 and the
-// baseline like the search (search.hpp); every output sums its inputs in order, so the clones
-// agree bit for bit.
+// forward runs the weights as packed by pack(): IEEE float16 (rounded to nearest even), in
+// blocks of 8 outputs, input-major (one load per input feeds 8 outputs), widened to float32 and
+// summed in float32 in the library's 8-lane vectors, compiled for x86-64 with F16C (Haswell on)
+// and the baseline; every output sums its inputs in order, so the clones agree bit for bit.
+// float16 halves the bytes a frame streams through the cache (the networks are read by every
+// character every frame) at a relative weight error of at most 2^-11 (docs/compressed.md).
 struct Mlp {
   struct Layer {
     int in = 0, out = 0;
-    std::vector<float> weight, bias;
-    std::vector<float> packed;  // pack(): ceil(out / 8) blocks of in x 8 weights, zero-padded
+    std::vector<float> weight, bias;  // weight: released by pack() (the packed copy is what runs)
+    std::vector<uint16_t> packed;     // pack(): ceil(out / 8) blocks of in x 8 float16 bits, zero-padded
   };
   std::vector<Layer> layers;
 
-  // Packs every layer's weights for forward (after the layers are set and checked).
+  // Packs every layer's weights for forward (after the layers are set and checked) and releases
+  // the float32 weights; a packed layer stays packed. Throws std::invalid_argument for a weight
+  // beyond float16's range (65504).
   void pack();
   int input_dim() const { return layers.empty() ? 0 : layers.front().in; }
   int output_dim() const { return layers.empty() ? 0 : layers.back().out; }
   int max_width() const;
   size_t num_parameters() const;
-  // Throws std::invalid_argument (naming `what`) unless the layers chain and every array has its size.
+  size_t memory_bytes() const;  // the weights as held (float32 or packed) and the biases
+  // Throws std::invalid_argument (naming `what`) unless the layers chain and every array has its
+  // size (a packed layer's: its packed weights).
   void check(const std::string& what) const;
   // out = net(in) for `rows` rows (1..kMlpMaxRows; in: rows x input_dim, out: rows x
   // output_dim), pack() first; scratch: 2 * kMlpMaxRows * max_width() floats (not aliasing in or
   // out). A row's result is the same bit for bit whatever the number of rows.
   void forward(const float* in, float* out, float* scratch, int rows = 1) const;
 };
+
+// The dense kernel this process runs: "f16c" (AVX2 and F16C) or "widening" (any CPU; the same bits).
+const char* mlp_kernel();
 
 struct CompressedScratch {
   std::vector<float> a, b, state, pose_input;
@@ -81,7 +90,7 @@ class CompressedModel {
   void check() const;
   // check(), then packs the three networks: what a model needs before it runs.
   void prepare();
-  // True once prepare() has packed the networks as they are now.
+  // True once prepare() has packed the networks.
   bool prepared() const;
   CompressedScratch make_scratch() const;
   size_t num_parameters() const;
