@@ -117,7 +117,9 @@ int main(int argc, char** argv) {
     std::printf("  compressed split (us per character per frame): policy %.2f, projector %.2f, stepper %.2f, "
                 "decompressor %.2f, playback (pose, inertialization, foot locking, IK) %.2f\n", t_policy, t_project,
                 t_step, t_decode, tb - t_policy - t_project - t_step - t_decode);
-    std::printf("  networks: %zu parameters (%.2f MB float32)\n", m->num_parameters(), 4e-6 * m->num_parameters());
+    std::printf("  networks: %zu parameters (%.2f MB as float32; held as float16: %.2f MB)\n", m->num_parameters(),
+                4e-6 * m->num_parameters(),
+                1e-6 * (m->decompressor.memory_bytes() + m->stepper.memory_bytes() + m->projector.memory_bytes()));
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_compressed: %s\n", e.what());
     return 1;

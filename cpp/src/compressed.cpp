@@ -46,7 +46,7 @@ MMRL_MULTIVERSION void elu_inplace(float* y, int n) {
     const Ints bits = (k + 127) << 23;
     std::memcpy(&two_k, &bits, sizeof(two_k));
     const Lanes e = two_k * em1 + (two_k - 1.0f);
-    return x > Lanes{} ? x : e;
+    return x > Lanes{} ? x : (x == x ? e : x);  // NaN stays NaN, as std::expm1 keeps it
   };
   for (int i = 0; i < full; i += kLanes) {
     Lanes x;

@@ -6,6 +6,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <new>
 #include <random>
 #include <vector>
@@ -152,6 +153,10 @@ TEST(Compressed, EluIsExpm1BelowZero) {
     worst = std::max(worst, std::abs(y - want) / std::max(1e-30, std::abs(want)));
   }
   EXPECT_LT(worst, 5e-7);
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  float y = 0;
+  m.forward(&nan, &y, scratch.data());
+  EXPECT_TRUE(std::isnan(y));
 }
 
 TEST(Compressed, DecisionKeepsTheContinuationUnlessTheProjectionIsCloserByTheCost) {

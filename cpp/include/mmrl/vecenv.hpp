@@ -145,8 +145,10 @@ class TargetVecEnv {
   // projects the query (compressed_decision: the continuation rule with the task's transition
   // cost) and playback steps and decodes the networks (compressed_playback). Episode starts
   // still draw a database frame and start from its state: frame_states holds one row of
-  // state_dim floats per database frame (both borrowed, alive while set). Requests and the
-  // task's candidate filters do not apply to a projection. nullptr: back to the database.
+  // state_dim floats per database frame (both borrowed, alive while set). Requests and clip
+  // costs do not apply to a projection; a task filter that prices states does
+  // (CandidateFilter::state_extra_cost: the obstacles task's collision-aware search, over the
+  // projections of its compressed_shortlist's queries). nullptr: back to the database.
   // Throws std::invalid_argument for a model of another skeleton, or a task that cannot play
   // one (Task::kPlaysCompressed).
   void set_compressed(const CompressedModel* model, const float* frame_states) {

@@ -18,7 +18,9 @@
 //     path; cost = +inf refuses every candidate that hits. Costs add to the base filter's (the
 //     task's clip costs), if any.
 // The continuation is a candidate like any other: it keeps its transition-cost advantage while
-// its path is clear, and loses it (plus the hit's cost) when it is not. The filter only adds
+// its path is clear, and loses it (plus the hit's cost) when it is not. A compressed
+// controller's candidate (a state, no database row) is priced the same way through
+// state_extra_cost, its path drawn from its own trajectory features (trajectory_path). The filter only adds
 // costs, so the KD-tree search stays exact under it (tested against brute force).
 //
 // Cost: prepare() runs once per decision (the obstacles near enough to reach a path point,
