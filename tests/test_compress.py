@@ -145,14 +145,18 @@ def test_bad_files_are_refused_with_the_reason(tmp_path, capsys):
 
 
 # ----------------------------------------------------------------------------- playing it
-@pytest.fixture(scope="module")
-def trained(db, tmp_path_factory):
-    """A small compressed controller of each skeleton, trained to the end."""
+def small_compressed(db, out):
+    """A small compressed controller of db, trained to the end into out (returned)."""
     torch.set_num_threads(1)
-    out = tmp_path_factory.mktemp("compressed") / "c.pt"
     cfg = CompressConfig(iterations=300, hidden=(64, 64), latent=8, checkpoint_every=1000, **QUICK)
     train_compressed(db, out, cfg, progress=False)
     return out
+
+
+@pytest.fixture(scope="module")
+def trained(db, tmp_path_factory):
+    """A small compressed controller of each skeleton, trained to the end."""
+    return small_compressed(db, tmp_path_factory.mktemp("compressed") / "c.pt")
 
 
 def test_the_core_networks_equal_torch(db, trained):

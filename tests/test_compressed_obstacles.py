@@ -14,15 +14,14 @@ and of the query's turned copies.
 On the synthetic skeleton and on a second one (Mixamo names, other channel orders)."""
 import numpy as np
 import pytest
-import torch
 
 import mmrl
-from mmrl.compress import CompressConfig, train_compressed
 from mmrl.compress.model import CompressedController
 from mmrl.rollout import apply_stage
-from test_compress import QUICK
+from test_compress import small_compressed
 from test_import_axes_fps import other_skeleton_database
-from test_path_filter import SAMPLES, config, reference_first_hits, stepped, turned_queries
+from test_path_filter import (SAMPLES, config, moved_obstacles, nearest_obstacle, reference_first_hits, stepped,
+                              turned_queries)
 
 OFFSETS = np.array([0.0, 10.0, 20.0, 30.0])
 
@@ -36,11 +35,7 @@ def db(request, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def controller(db, tmp_path_factory):
-    torch.set_num_threads(1)
-    out = tmp_path_factory.mktemp("cobst") / "c.pt"
-    cfg = CompressConfig(iterations=300, hidden=(64, 64), latent=8, checkpoint_every=1000, **QUICK)
-    train_compressed(db, out, cfg, progress=False)
-    return CompressedController(out, db)
+    return CompressedController(small_compressed(db, tmp_path_factory.mktemp("cobst") / "c.pt"), db)
 
 
 def raw_trajectory(db, features):
@@ -76,19 +71,10 @@ def reference_state_distances(db, state, obstacles, paths, cfg, moving):
     out = []
     for t in range(1, SAMPLES[-1] + 1):
         if moving:
-            centres = centres + v * dt
-            over, under = centres > half, centres < -half
-            centres = np.where(over, 2 * half - centres, np.where(under, -2 * half - centres, centres)).astype(np.float32)
-            v = np.where(over | under, -v, v)
+            centres, v = moved_obstacles(centres, v, dt, half)
         if t in SAMPLES:
             k = int(np.flatnonzero(SAMPLES == t)[0])
-            dx = wx[:, k, None] - centres[None, :, 0]
-            dz = wz[:, k, None] - centres[None, :, 1]
-            u = np.cos(a)[None] * dx - np.sin(a)[None] * dz
-            w = np.sin(a)[None] * dx + np.cos(a)[None] * dz
-            du = np.maximum(np.abs(u) - h[None, :, 0], 0)
-            dw = np.maximum(np.abs(w) - h[None, :, 1], 0)
-            out.append(np.sqrt(du * du + dw * dw).min(axis=1))
+            out.append(nearest_obstacle(wx[:, k], wz[:, k], centres, h, a))
     return np.stack(out, axis=1)
 
 

@@ -61,19 +61,29 @@ def reference_path_distances(db, state, obstacles, rows, cfg, moving):
         cy, sy = np.cos(yaw), np.sin(yaw)
         x, z, yaw = x + cy * d[:, 0] + sy * d[:, 1], z - sy * d[:, 0] + cy * d[:, 1], yaw + d[:, 2]
         if moving:
-            c = c + v * dt
-            over, under = c > half, c < -half
-            c = np.where(over, 2 * half - c, np.where(under, -2 * half - c, c)).astype(np.float32)
-            v = np.where(over | under, -v, v)
+            c, v = moved_obstacles(c, v, dt, half)
         if t in SAMPLES:
-            dx = x[:, None] - c[None, :, 0]
-            dz = z[:, None] - c[None, :, 1]
-            u = np.cos(a)[None] * dx - np.sin(a)[None] * dz
-            w = np.sin(a)[None] * dx + np.cos(a)[None] * dz
-            du = np.maximum(np.abs(u) - h[None, :, 0], 0)
-            dw = np.maximum(np.abs(w) - h[None, :, 1], 0)
-            out.append(np.sqrt(du * du + dw * dw).min(axis=1))
+            out.append(nearest_obstacle(x, z, c, h, a))
     return np.stack(out, axis=1)
+
+
+def moved_obstacles(c, v, dt, half):
+    """One frame of the env's obstacle motion: constant velocity, mirrored at the square's border."""
+    c = c + v * dt
+    over, under = c > half, c < -half
+    c = np.where(over, 2 * half - c, np.where(under, -2 * half - c, c)).astype(np.float32)
+    return c, np.where(over | under, -v, v)
+
+
+def nearest_obstacle(x, z, c, h, a):
+    """Distance from each point (x, z) to the nearest rectangle (centres c, half sizes h, angles a)."""
+    dx = x[:, None] - c[None, :, 0]
+    dz = z[:, None] - c[None, :, 1]
+    u = np.cos(a)[None] * dx - np.sin(a)[None] * dz
+    w = np.sin(a)[None] * dx + np.cos(a)[None] * dz
+    du = np.maximum(np.abs(u) - h[None, :, 0], 0)
+    dw = np.maximum(np.abs(w) - h[None, :, 1], 0)
+    return np.sqrt(du * du + dw * dw).min(axis=1)
 
 
 def reference_first_hits(dist, radius, horizon):
