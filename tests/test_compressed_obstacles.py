@@ -99,25 +99,33 @@ def test_the_state_path_test_equals_a_numpy_reference(db, controller):
     rng = np.random.default_rng(4)
     radius = cfg.body_radius + cfg.path_margin
     reach = 6.0  # path_filter.hpp's kStateReach: farther points are pulled in
-    checked = hits = mismatched = agree = 0
+    scale = np.asarray(db.feature_scale, np.float64)[15:]
+    mean = np.asarray(db.feature_mean, np.float64)[15:]
+    checked = hits = mismatched = far = 0
     for _ in stepped(env, 20, 6):
         for i in range(env.num_envs):
             # Database frames' features and perturbed ones (what a projector may return).
+            # and trajectories stretched past the reach, which the test pulls in.
             states = feats[rng.integers(0, feats.shape[0], 200)].copy()
             states[100:] += rng.normal(0, 0.3, (100, states.shape[1])).astype(np.float32)
+            raw = raw_trajectory(db, states[180:])
+            raw[:, [0, 1, 4, 5, 8, 9]] *= 6.0
+            states[180:, 15:] = ((raw - mean) / scale).astype(np.float32)
             got = env.state_path_hits(i, states)
             paths = quadratic_paths(db, states)
-            d = np.hypot(paths[..., 0], paths[..., 1])
-            inside = (d <= reach)[:, SAMPLES <= cfg.path_horizon].all(1)  # beyond the reach points are pulled in
+            d = np.hypot(paths[..., 0], paths[..., 1])[..., None]
+            far += int((d > reach).any(axis=(1, 2)).sum())
+            paths = np.where(d > reach, paths * reach / np.maximum(d, 1e-9), paths)
             state = env.env_state(i)
             dist = reference_state_distances(db, state, env.obstacles(i), paths, cfg, state["max_speed"] > 0)
             want, near = reference_first_hits(dist, radius, cfg.path_horizon)
-            keep = inside & ~near
+            keep = ~near
             mismatched += int((got != want)[keep].sum())
             checked += int(keep.sum())
             hits += int((want[keep] > 0).sum())
     assert mismatched == 0
     assert checked >= 5000 and 0.05 * checked < hits < 0.95 * checked, (checked, hits)
+    assert far >= 500, far  # the pull-in was tested
     with pytest.raises(ValueError, match="features"):
         env.state_path_hits(0, np.zeros((2, 26), np.float32))
     with pytest.raises(ValueError, match="finite"):

@@ -132,6 +132,9 @@ void Mlp::check(const std::string& what) const {
       for (float v : l.weight)
         if (!std::isfinite(v)) throw std::invalid_argument(name + ": weight is not finite");
     }
+    for (float v : l.weight)
+      if (!(std::abs(v) <= kHalfMax))
+        throw std::invalid_argument(name + ": a weight (" + std::to_string(v) + ") is beyond float16's range (65504)");
     check_size(l.bias, static_cast<size_t>(l.out), name + " bias");
     for (float v : l.bias)
       if (!std::isfinite(v)) throw std::invalid_argument(name + ": bias is not finite");
@@ -139,14 +142,13 @@ void Mlp::check(const std::string& what) const {
 }
 
 void Mlp::pack() {
+  check("network");  // every layer fits before any is packed: pack() changes all or nothing
   for (Layer& l : layers) {
     if (l.weight.empty() && l.packed.size() == packed_size(l)) continue;  // packed already
     std::vector<uint16_t> packed(packed_size(l), 0);
     for (int o = 0; o < l.out; ++o)
       for (int i = 0; i < l.in; ++i) {
         const float w = l.weight[static_cast<size_t>(o) * l.in + i];
-        if (!(std::abs(w) <= kHalfMax))
-          throw std::invalid_argument("a weight (" + std::to_string(w) + ") is beyond float16's range (65504)");
         packed[(static_cast<size_t>(o / kLanes) * l.in + i) * kLanes + o % kLanes] = float_to_half(w);
       }
     l.packed = std::move(packed);
@@ -157,23 +159,24 @@ void Mlp::pack() {
 
 namespace {
 
-// 8 float16 weights widened to float32, exactly (finite halves; pack refuses the rest): the
-// half's exponent and mantissa bits moved into a float's place, then scaled by 2^112 (which
-// rebiases the exponent, subnormals and zero included), then the sign. Integer and float
-// vector operations only, so the AVX2 clone and the baseline give the same bits.
+// 8 float16 weights widened to float32, exactly (finite halves; pack refuses the rest), with
+// integer and float vector operations only, so the AVX2 clone and the baseline give the same
+// bits as F16C's conversion.
 __attribute__((always_inline)) inline Lanes widen(const uint16_t* p) {
   typedef uint16_t Shorts __attribute__((vector_size(kLanes * sizeof(uint16_t))));
   typedef uint32_t Words __attribute__((vector_size(kLanes * sizeof(uint32_t))));
   Shorts h;
   std::memcpy(&h, p, sizeof(h));
+  typedef int32_t Ints __attribute__((vector_size(kLanes * sizeof(int32_t))));
   const Words w = __builtin_convertvector(h, Words);
-  const Words magnitude = (w & 0x7fffu) << 13, sign = (w & 0x8000u) << 16;
+  // A normal half: its exponent rebiased (15 -> 127) by an integer add. A subnormal (exponent
+  // bits 0): mantissa x 2^-24, exact in float32 and no subnormal operand (DAZ cannot change it).
+  const Words normal = ((w & 0x7fffu) << 13) + (112u << 23);
+  const Lanes tiny = __builtin_convertvector(__builtin_convertvector(w & 0x3ffu, Ints), Lanes) * 5.9604644775390625e-08f;
+  Words tiny_bits;
+  std::memcpy(&tiny_bits, &tiny, sizeof(tiny_bits));
+  const Words bits = ((w & 0x7c00u) == 0u ? tiny_bits : normal) | ((w & 0x8000u) << 16);
   Lanes f;
-  std::memcpy(&f, &magnitude, sizeof(f));
-  f = f * 5.192296858534828e+33f;  // 2^112
-  Words bits;
-  std::memcpy(&bits, &f, sizeof(bits));
-  bits |= sign;
   std::memcpy(&f, &bits, sizeof(f));
   return f;
 }

@@ -111,7 +111,7 @@ TEST(Compressed, MlpEqualsAPlainLoopOverItsFloat16Weights) {
 TEST(Compressed, PackRoundsEveryWeightToTheNearestFloat16) {
   // One layer of 1 input: out[o] = half(w[o]) * 1 + 0, over normal, subnormal and tie values.
   std::mt19937 rng(5);
-  std::uniform_real_distribution<float> e(-30.0f, 16.0f);
+  std::uniform_real_distribution<float> e(-30.0f, 15.0f);  // |w| < 2^15 x 2, inside float16's range
   Mlp m;
   Mlp::Layer l;
   l.in = 1;
@@ -187,6 +187,73 @@ TEST(Compressed, DecisionKeepsTheContinuationUnlessTheProjectionIsCloserByTheCos
   EXPECT_GT(stays, 10);
 }
 
+// A filter that prices states only: refuses a state whose first feature is above `limit`,
+// and adds `extra` to the others.
+class StateLimit final : public CandidateFilter {
+ public:
+  StateLimit(float limit, float extra) : limit_(limit), extra_(extra) {}
+  float extra_cost(int64_t) const override { return 0.0f; }
+  float state_extra_cost(const float* f) const override {
+    return f[0] > limit_ ? std::numeric_limits<float>::infinity() : extra_;
+  }
+
+ private:
+  float limit_, extra_;
+};
+
+TEST(Compressed, AFilteredDecisionIsTheCheapestProjectionOrTheContinuation) {
+  const CompressedModel m = random_model(6);
+  CompressedScratch s = m.make_scratch();
+  const int S = m.state_dim();
+  std::mt19937 rng(7);
+  std::normal_distribution<float> n(0.0f, 1.0f);
+  int refused_all = 0, filtered = 0, transitions = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const int rows = 1 + trial % 7;
+    std::vector<float> current(S), queries(rows * kFeatureDim), chosen(S), plain(S), proj(rows * S);
+    for (float& v : current) v = n(rng);
+    for (float& v : queries) v = n(rng);
+    for (int r = 0; r < rows; ++r) m.project(&queries[r * kFeatureDim], &proj[r * S], s);
+    const float limit = trial % 5 == 0 ? -1e30f : 0.3f * n(rng), extra = trial % 3 ? 0.5f : 0.0f, tc = trial % 2;
+    const StateLimit filter(limit, extra);
+    float cost = 0;
+    const bool t = compressed_decision(m, current.data(), queries.data(), rows, tc, &filter, chosen.data(), &cost, s);
+    // Brute force: the continuation and every projection, priced; all refused: no filter.
+    auto price = [&](const float* state, bool with) {
+      const double d = feature_distance(queries.data(), state);
+      if (!with) return d;
+      return state[0] > limit ? std::numeric_limits<double>::infinity() : d + extra;
+    };
+    bool with = std::isfinite(price(current.data(), true));
+    for (int r = 0; r < rows; ++r) with = with || std::isfinite(price(&proj[r * S], true));
+    refused_all += !with;
+    filtered += with && limit > -1e29f;
+    double best = std::numeric_limits<double>::infinity();
+    int arg = 0;
+    for (int r = 0; r < rows; ++r)
+      if (price(&proj[r * S], with) < best) best = price(&proj[r * S], with), arg = r;
+    const double stay = price(current.data(), with);
+    if (std::abs(best + tc - stay) < 1e-3) continue;  // float rounding may decide
+    const bool want = best + tc < stay;
+    ASSERT_EQ(t, want) << trial;
+    transitions += t;
+    if (t)
+      for (int k = 0; k < S; ++k) ASSERT_EQ(chosen[k], proj[arg * S + k]) << trial;
+    EXPECT_NEAR(cost, want ? best : stay, 1e-3);
+  }
+  EXPECT_GT(refused_all, 20);
+  EXPECT_GT(filtered, 100);
+  EXPECT_GT(transitions, 30);
+  // One query and no filter: the unfiltered rule, bit for bit.
+  std::vector<float> current(S, 0.1f), query(kFeatureDim, 0.2f), a(S), b(S);
+  float ca = 0, cb = 0;
+  const bool ta = compressed_decision(m, current.data(), query.data(), 1.0f, a.data(), &ca, s);
+  const bool tb = compressed_decision(m, current.data(), query.data(), 1, 1.0f, nullptr, b.data(), &cb, s);
+  EXPECT_EQ(ta, tb);
+  EXPECT_EQ(ca, cb);
+  for (int k = 0; k < S; ++k) EXPECT_EQ(a[k], b[k]);
+}
+
 TEST(Compressed, PlaybackStepsAndDecodesTheChosenState) {
   const CompressedModel m = random_model(4);
   CompressedScratch s = m.make_scratch();
@@ -254,8 +321,11 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
   // A model of another skeleton is refused.
   CompressedModel other = m;
   other.num_joints += 1;
-  CompressedModel unpacked = m;
-  unpacked.stepper.layers[0].packed.clear();
+  CompressedModel unpacked = m;  // a model whose stepper was never packed
+  std::mt19937 rng9(9);
+  unpacked.stepper = random_mlp(rng9, {m.state_dim(), 16, m.state_dim()}, 0.02f);
+  unpacked.check();
+  EXPECT_FALSE(unpacked.prepared());
   EXPECT_THROW(env.set_compressed(&unpacked, states.data()), std::invalid_argument);
   EXPECT_THROW(env.set_compressed(&other, states.data()), std::invalid_argument);
 }

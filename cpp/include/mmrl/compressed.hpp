@@ -37,7 +37,8 @@ constexpr int kCompressedMaxFrames = 30;  // frames one playback may decode (dec
 // summed in float32 in the library's 8-lane vectors, compiled for x86-64 with F16C (Haswell on)
 // and the baseline; every output sums its inputs in order, so the clones agree bit for bit.
 // float16 halves the bytes a frame streams through the cache (the networks are read by every
-// character every frame) at a relative weight error of at most 2^-11 (docs/compressed.md).
+// character every frame) at a relative weight error of at most 2^-11 for |w| >= 2^-14 (an
+// absolute one of at most 2^-25 below, where float16 is subnormal; docs/compressed.md).
 struct Mlp {
   struct Layer {
     int in = 0, out = 0;
@@ -46,9 +47,9 @@ struct Mlp {
   };
   std::vector<Layer> layers;
 
-  // Packs every layer's weights for forward (after the layers are set and checked) and releases
-  // the float32 weights; a packed layer stays packed. Throws std::invalid_argument for a weight
-  // beyond float16's range (65504).
+  // Packs every layer's weights for forward and releases the float32 weights; a packed layer
+  // stays packed. check()s first, so a network that does not fit (a weight beyond float16's
+  // range, 65504, included) throws std::invalid_argument and stays as it was.
   void pack();
   int input_dim() const { return layers.empty() ? 0 : layers.front().in; }
   int output_dim() const { return layers.empty() ? 0 : layers.back().out; }

@@ -159,7 +159,7 @@ class TargetVecEnv {
       return;
     }
     if (!Task::kPlaysCompressed)
-      throw std::invalid_argument("this task does not play compressed controllers yet (the plane task does)");
+      throw std::invalid_argument("this task does not play compressed controllers (the plane and obstacles tasks do)");
     model->check();
     if (!model->prepared()) throw std::invalid_argument("set_compressed: the model is not prepared (prepare())");
     if (model->num_joints != db_.num_joints)
@@ -271,7 +271,7 @@ class TargetVecEnv {
     for (int k = 0; k < kTrajectoryDim; ++k) query[kPoseDim + k] = std::min(high_[k], std::max(low_[k], action[k]));
     // The task's filter prices the projections (state_extra_cost: the collision-aware search);
     // with its compressed_shortlist fan, the query's turned copies are projected too.
-    float queries[kMlpMaxRows * kFeatureDim];
+    float queries[kMaxShortlistQueries * kFeatureDim];  // shortlist_queries' bound (compressed_decision takes <= 8)
     const int n = shortlist_queries(db_, query, task().compressed_shortlist(), queries);
     s.last_transition = compressed_decision(*compressed_, s.cstate.data(), queries, n, s.last_transition_cost,
                                             task().candidate_filter(i),

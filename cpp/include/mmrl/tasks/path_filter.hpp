@@ -51,7 +51,9 @@ struct PathFilterConfig {
 // quadratic interpolation through the start (0, 0) and the trajectory's three positions
 // (kTrajectoryOffsets: 10, 20, 30 frames), the samples before 10 frames through 0, 10 and 20,
 // the later ones through 10, 20 and 30. For a database frame the 10-, 20- and 30-frame samples
-// equal its path samples (tests/test_compress.py bounds the others).
+// equal its path samples (tests/test_compressed_obstacles.py bounds the others); a state's test
+// pulls points beyond kStateReach in to it, whatever the database (so the runtime's start
+// windows and the training database give the same test).
 void trajectory_path(const float* raw_trajectory, float* path);
 
 class ObstaclePathFilter final : public CandidateFilter {
