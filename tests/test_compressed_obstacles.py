@@ -229,3 +229,35 @@ def test_the_runtime_plays_a_compressed_obstacles_controller_as_python_does(db, 
             if out["done"]:
                 break
     assert decisions >= 100 and transitions >= 10 and hits_seen >= 5, (decisions, transitions, hits_seen)
+
+
+def test_the_live_view_draws_a_compressed_state_s_own_path(db, controller):
+    """``mmrl play`` with a compressed obstacles controller draws the continuation's path from the
+    compressed state (the quadratic of its trajectory, placed at the root) and its path test."""
+    from mmrl import _core
+    from mmrl.rl.policies import JoystickPolicy
+    from mmrl.viewer.live import LiveSession
+
+    task = mmrl.get_task("obstacles")
+    s = LiveSession(task, db, JoystickPolicy(db), config=config(num_obstacles=60), compressed=controller)
+    try:
+        hits = 0
+        for _ in range(60):
+            s.step()
+            path = s._continuation_path()
+            env = s.run.env
+            feats = np.ascontiguousarray(env._core.compressed_state(0)[:27])
+            local = quadratic_paths(db, feats[None])[0]
+            np.testing.assert_allclose(_core.trajectory_path(raw_trajectory(db, feats).astype(np.float32)), local,
+                                       atol=1e-4)
+            st = env.env_state(0)
+            c, sn = np.cos(st["yaw"]), np.sin(st["yaw"])
+            world = local @ np.array([[c, sn], [-sn, c]]).T + np.array([st["x"], st["z"]])
+            np.testing.assert_allclose(path["points"], world, atol=1e-3)
+            first = int(env.state_path_hits(0, feats[None])[0])
+            assert path["inside"].any() == (first > 0)
+            hits += first > 0
+    finally:
+        s.close()
+    with pytest.raises(ValueError, match="raw_trajectory"):
+        _core.trajectory_path(np.zeros(11, np.float32))

@@ -57,6 +57,19 @@ py::dict obstacle_state_dict(const ObstacleVecEnv& env, int i) {
 // long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 void bind_obstacles(py::module_& m) {
   m.attr("OBSTACLE_MAP_SIDE") = kMapSide;
+  m.def(
+      "trajectory_path",
+      [](const py::handle& raw) {
+        auto t = check_array<float>(raw, "raw_trajectory", {kTrajectoryDim});
+        check_finite(t.data(), kTrajectoryDim, "raw_trajectory");
+        py::array_t<float> path({kPathSamples, 2});
+        trajectory_path(t.data(), path.mutable_data());
+        return path;
+      },
+      py::arg("raw_trajectory"),
+      "The path (PATH_SAMPLE_FRAMES x (x, z), meters, character frame) a raw trajectory (12 floats: "
+      "per horizon position then direction) implies: the collision-aware search's path of a compressed "
+      "state (tasks/path_filter.hpp's trajectory_path).");
   bind_task_config<ObstacleTaskConfig>(m, "ObstacleTaskConfig", "Numbers of the moving-obstacles task (tasks/obstacles.hpp).");
 
   using E = ObstacleVecEnv;

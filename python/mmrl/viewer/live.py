@@ -267,12 +267,21 @@ class LiveSession:
             return None
         state = env.env_state(0)
         frame = int(state["frame"])
-        if not self.db.valid_mask[frame]:
+        if getattr(self.run, "compressed", None) is not None:  # the state's own path (docs/compressed.md)
+            feats = np.ascontiguousarray(env._core.compressed_state(0)[:27])
+            if getattr(self, "_trajectory_units", None) is None:  # (scale, mean) of the trajectory features
+                self._trajectory_units = (np.asarray(self.db.feature_scale, np.float32)[15:].copy(),
+                                          np.asarray(self.db.feature_mean, np.float32)[15:].copy())
+            raw = feats[15:] * self._trajectory_units[0] + self._trajectory_units[1]
+            local = np.asarray(_core.trajectory_path(raw.astype(np.float32)), np.float64)
+            hit = int(env.state_path_hits(0, feats[None])[0])
+        elif not self.db.valid_mask[frame]:
             return None
+        else:
+            local = np.asarray(self.db.path_samples[frame], np.float64)
+            hit = int(env.path_hits(0, np.array([frame], np.int64))[0])
         c, s = np.cos(state["yaw"]), np.sin(state["yaw"])
-        local = np.asarray(self.db.path_samples[frame], np.float64)
         world = local @ np.array([[c, s], [-s, c]]).T + np.array([state["x"], state["z"]])
-        hit = int(env.path_hits(0, np.array([frame], np.int64))[0])
         inside = (np.asarray(_core.PATH_SAMPLE_FRAMES) >= hit) if hit > 0 else np.zeros(len(world), bool)
         return {"points": world.astype(np.float32), "inside": inside}
 
