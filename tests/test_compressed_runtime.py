@@ -90,3 +90,32 @@ def test_the_commands_take_a_compressed_controller(exported, tmp_path, capsys):
     bad.write_bytes(cpt.read_bytes()[:200])
     assert main(["eval", str(run), "--compressed", str(bad)]) == 2
     assert "bad.pt: corrupt" in capsys.readouterr().err
+
+
+def test_the_file_holds_float16_weights_and_a_float32_one_plays_the_same(exported, tmp_path):
+    """The exported weights are float16 (what the core runs); a file with float32 weight sections
+    (as written before) loads to the same networks and plays the same frames; a float32 weight
+    beyond float16's range is refused with the reason."""
+    run, cpt, path = exported
+    sections = read_sections(path)
+    weights = [k for k in sections if k.startswith("lmm.") and k.endswith(".weight")]
+    assert len(weights) >= 6 and all(sections[k].dtype == np.float16 for k in weights)
+    wide = {k: (v.astype(np.float32) if k in weights else v) for k, v in sections.items()}
+    p32 = tmp_path / "f32.mmrl"
+    write_sections(p32, wide)
+    assert p32.stat().st_size > path.stat().st_size
+    chars = [_core.RuntimeCharacter(_core.RuntimeController.load(str(p)), 0.0, 0.0, 0.0, 0) for p in (path, p32)]
+    for k in range(300):
+        for ch in chars:
+            if k % 60 == 0:
+                ch.set_target(3.0 * np.cos(k), 3.0 * np.sin(k))
+            ch.advance_frame()
+        np.testing.assert_array_equal(chars[0].global_positions(), chars[1].global_positions())
+    huge = dict(wide)
+    w = huge[weights[0]].copy()
+    w[0, 0] = 1e5
+    huge[weights[0]] = w
+    bad = tmp_path / "huge.mmrl"
+    write_sections(bad, huge)
+    with pytest.raises(ValueError, match="huge.mmrl.*beyond float16's range"):
+        _core.RuntimeController.load(str(bad))

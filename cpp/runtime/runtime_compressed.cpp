@@ -35,7 +35,13 @@ void RuntimeController::read_compressed(const ControllerFile& file) {
       Mlp::Layer layer;
       layer.out = static_cast<int>(w.shape[0]);
       layer.in = static_cast<int>(w.shape[1]);
-      layer.weight = file.floats(base + ".weight", {w.shape[0], w.shape[1]});
+      if (w.type == SectionType::kFloat16) {  // what mmrl export writes: the core's own precision
+        const std::vector<uint16_t> h = file.halves(base + ".weight", {w.shape[0], w.shape[1]});
+        layer.weight.resize(h.size());
+        for (size_t k = 0; k < h.size(); ++k) layer.weight[k] = float16_to_float(h[k]);  // exact
+      } else {
+        layer.weight = file.floats(base + ".weight", {w.shape[0], w.shape[1]});
+      }
       layer.bias = file.floats(base + ".bias", {w.shape[0]});
       nets[n]->layers.push_back(std::move(layer));
     }

@@ -41,6 +41,7 @@ size_t type_size(SectionType t) {
   switch (t) {
     case SectionType::kFloat32:
     case SectionType::kInt32: return 4;
+    case SectionType::kFloat16: return 2;
     case SectionType::kFloat64: return 8;
     default: return 1;
   }
@@ -53,6 +54,7 @@ const char* type_name(SectionType t) {
     case SectionType::kUInt8: return "uint8";
     case SectionType::kText: return "text";
     case SectionType::kFloat64: return "float64";
+    case SectionType::kFloat16: return "float16";
   }
   return "?";
 }
@@ -136,7 +138,7 @@ ControllerFile ControllerFile::parse(std::vector<uint8_t> bytes, const std::stri
     const std::string where = "section '" + name + "': ";
     FileSection s;
     const uint32_t type = load_le<uint32_t>(e + 64), ndim = load_le<uint32_t>(e + 68);
-    if (type < 1 || type > 5 || ndim > 4) cf.fail(where + "unknown dtype code or more than 4 dimensions");
+    if (type < 1 || type > 6 || ndim > 4) cf.fail(where + "unknown dtype code or more than 4 dimensions");
     s.type = static_cast<SectionType>(type);
     uint64_t count_values = 1;
     for (uint32_t a = 0; a < ndim; ++a) {
@@ -192,6 +194,9 @@ std::vector<int32_t> ControllerFile::ints(const std::string& name, const std::ve
 }
 std::vector<uint8_t> ControllerFile::bytes(const std::string& name, const std::vector<int64_t>& shape) const {
   return copy_values<uint8_t>(bytes_, typed(name, SectionType::kUInt8, shape));
+}
+std::vector<uint16_t> ControllerFile::halves(const std::string& name, const std::vector<int64_t>& shape) const {
+  return copy_values<uint16_t>(bytes_, typed(name, SectionType::kFloat16, shape));
 }
 std::vector<double> ControllerFile::doubles(const std::string& name, const std::vector<int64_t>& shape) const {
   return copy_values<double>(bytes_, typed(name, SectionType::kFloat64, shape));

@@ -285,6 +285,21 @@ void dense_forward(const uint16_t* packed, const float* bias, const float* x, in
 
 }  // namespace
 
+float float16_to_float(uint16_t h) {
+  const uint32_t sign = static_cast<uint32_t>(h & 0x8000u) << 16, e = (h >> 10) & 0x1fu, m = h & 0x3ffu;
+  uint32_t bits;
+  if (e == 0) {
+    const float f = static_cast<float>(m) * 5.9604644775390625e-08f;  // m x 2^-24
+    std::memcpy(&bits, &f, 4);
+  } else {
+    bits = (e == 31 ? 0x7f800000u | (m << 13) : ((e + 112u) << 23) | (m << 13));
+  }
+  bits |= sign;
+  float f;
+  std::memcpy(&f, &bits, 4);
+  return f;
+}
+
 const char* mlp_kernel() { return use_f16c() ? "f16c" : "widening"; }
 
 void Mlp::forward(const float* in, float* out, float* scratch, int rows) const {

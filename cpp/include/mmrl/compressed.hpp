@@ -65,6 +65,9 @@ struct Mlp {
   void forward(const float* in, float* out, float* scratch, int rows = 1) const;
 };
 
+// The float32 value of IEEE float16 bits (exact; infinities and NaNs too, which check() refuses).
+float float16_to_float(uint16_t bits);
+
 // The dense kernel this process runs: "f16c" (AVX2 and F16C) or "widening" (any CPU; the same bits).
 const char* mlp_kernel();
 

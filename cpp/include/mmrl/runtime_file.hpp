@@ -34,7 +34,7 @@ constexpr uint32_t kControllerEntrySize = 128;
 constexpr uint32_t kControllerNameSize = 64;
 constexpr uint32_t kControllerAlignment = 64;
 
-enum class SectionType : uint32_t { kFloat32 = 1, kInt32 = 2, kUInt8 = 3, kText = 4, kFloat64 = 5 };
+enum class SectionType : uint32_t { kFloat32 = 1, kInt32 = 2, kUInt8 = 3, kText = 4, kFloat64 = 5, kFloat16 = 6 };
 
 // One section after checking: its type, shape and bytes (a view into ControllerFile::bytes).
 struct FileSection {
@@ -64,6 +64,8 @@ class ControllerFile {
   std::vector<float> floats(const std::string& name, const std::vector<int64_t>& shape = {}) const;
   std::vector<int32_t> ints(const std::string& name, const std::vector<int64_t>& shape = {}) const;
   std::vector<uint8_t> bytes(const std::string& name, const std::vector<int64_t>& shape = {}) const;
+  // IEEE float16 values as their bits (a compressed controller's weights).
+  std::vector<uint16_t> halves(const std::string& name, const std::vector<int64_t>& shape = {}) const;
   std::vector<double> doubles(const std::string& name, const std::vector<int64_t>& shape = {}) const;
   std::vector<std::string> texts(const std::string& name) const;
 

@@ -68,7 +68,9 @@ def compressed_sections(db: Database, policy, task, task_config, compressed, sta
                                   *(len(layers[n]) for n in ("decompressor", "stepper", "projector"))], np.int32)
     for name, ls in layers.items():
         for k, (w, b) in enumerate(ls):
-            out[f"lmm.{name}.{k}.weight"] = w
+            if not np.all(np.abs(w) <= 65504.0):
+                raise ValueError(f"{compressed.path}: a weight of the {name}'s layer {k} is beyond float16's range")
+            out[f"lmm.{name}.{k}.weight"] = w.astype(np.float16)  # the core's precision (compressed.hpp)
             out[f"lmm.{name}.{k}.bias"] = b
     for key in ("y_mean", "y_std", "z_mean", "z_std"):
         out[f"lmm.{key}"] = np.ascontiguousarray(getattr(compressed, key), np.float32)

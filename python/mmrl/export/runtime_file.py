@@ -37,8 +37,8 @@ NAME_SIZE = 64
 MAX_DIMS = 4
 ALIGNMENT = 64
 #: dtype code -> numpy dtype (little-endian). "text" is UTF-8 strings, each ended by a NUL byte.
-DTYPES = {1: np.dtype("<f4"), 2: np.dtype("<i4"), 3: np.dtype("u1"), 4: "text", 5: np.dtype("<f8")}
-_CODES = {np.dtype("<f4"): 1, np.dtype("<i4"): 2, np.dtype("u1"): 3, np.dtype("<f8"): 5}
+DTYPES = {1: np.dtype("<f4"), 2: np.dtype("<i4"), 3: np.dtype("u1"), 4: "text", 5: np.dtype("<f8"), 6: np.dtype("<f2")}
+_CODES = {np.dtype("<f4"): 1, np.dtype("<i4"): 2, np.dtype("u1"): 3, np.dtype("<f8"): 5, np.dtype("<f2"): 6}
 
 _HEADER = struct.Struct("<8sIIIIQQII16x")          # magic, version, endian, header size, count, table offset,
                                                    # file size, table crc, header crc (of bytes 0..44)
@@ -69,7 +69,7 @@ def _encode(name: str, value: Section):
     if arr.dtype == np.bool_:
         dtype = np.dtype("u1")
     if dtype not in _CODES:
-        raise ValueError(f"section {name!r}: unsupported dtype {arr.dtype} (float32, int32, uint8, float64)")
+        raise ValueError(f"section {name!r}: unsupported dtype {arr.dtype} (float32, int32, uint8, float64, float16)")
     if arr.ndim > MAX_DIMS:
         raise ValueError(f"section {name!r}: {arr.ndim} dimensions, at most {MAX_DIMS}")
     return _CODES[dtype], arr.shape, np.ascontiguousarray(arr, dtype).tobytes()
