@@ -34,7 +34,9 @@ def decision_errors(task, db, policy, config, cc, episodes: int, seed: int) -> d
     compressed controller starts from the state of the database's current frame, decides on the
     same query (projector, continuation rule, the same transition cost) and plays the same
     frames; the mean joint-position error (cm, character frame, every joint) of its frames
-    against the database's, overall and where both continued / both jumped."""
+    against the database's, overall and where both continued / both jumped. ``runner_up``: at the
+    database's jumps, the same error of the search's own second answer (the nearest frame of
+    another clip) against its first: how far apart two near-equal answers of an exact search are."""
     import torch
 
     from mmrl.compress.pose import pose_targets
@@ -46,11 +48,14 @@ def decision_errors(task, db, policy, config, cc, episodes: int, seed: int) -> d
     y = pose_targets(db)
     F = run.config.frames_per_step
     states = cc.frame_states
-    errors = {"all": [], "both_continue": [], "both_jump": [], "differ": []}
+    errors = {"all": [], "both_continue": [], "both_jump": [], "differ": [], "runner_up": []}
+    feats = np.asarray(db.normalized_features, np.float32)
+    valid = np.asarray(db.valid_mask, bool)
     ended = 0
     while ended < episodes:
         frame = int(run.env.env_state(0)["frame"])
         action = policy_actions(policy, run.obs[None]).reshape(-1)
+        db_query = np.concatenate([feats[frame, :15], np.clip(action, low, high)])
         state = states[frame]
         query = np.concatenate([state[:15], np.clip(action, low, high)]).astype(np.float32)
         jump, chosen, _ = cc.core.decide(state, query, float(config.transition_cost))  # the env's rule (C++)
@@ -64,6 +69,17 @@ def decision_errors(task, db, policy, config, cc, episodes: int, seed: int) -> d
             q = _positions(torch.as_tensor(y[played], dtype=torch.float64), list(db.parents), db.num_joints)
         err = float(100.0 * (p - q).norm(dim=-1).mean())
         db_jump = bool(out["res"].transition)
+        if db_jump:  # the search's runner-up outside the winner's clip, against the winner's frames
+            j = int(out["res"].match)
+            d = ((feats - db_query) ** 2).sum(1)
+            d[~valid] = np.inf
+            lo, hi = db.clip_ranges[db.frame_clip[j]]
+            d[lo:hi] = np.inf
+            j2 = int(np.argmin(d))
+            with torch.no_grad():
+                r = _positions(torch.as_tensor(y[j2 + 1:j2 + 1 + len(played)], dtype=torch.float64), list(db.parents),
+                               db.num_joints)
+            errors["runner_up"].append(float(100.0 * (r - q).norm(dim=-1).mean()))
         errors["all"].append(err)
         errors["both_jump" if (jump and db_jump) else "both_continue" if not (jump or db_jump) else "differ"].append(err)
     return {k: {"decisions": len(v), "joint_error_cm": float(np.mean(v)) if v else None} for k, v in errors.items()}

@@ -11,6 +11,7 @@
 #include "mmrl/search.hpp"
 
 #if defined(__x86_64__)
+#include <cpuid.h>
 #include <immintrin.h>
 #endif
 
@@ -266,7 +267,10 @@ bool use_f16c() {
 #ifdef MMRL_HAS_F16C_KERNEL
   static const bool f16c = [] {
     __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("f16c") && std::getenv("MMRL_NO_F16C") == nullptr;
+    // F16C from CPUID leaf 1 (ECX bit 29): not every compiler's __builtin_cpu_supports names it.
+    unsigned a = 0, b = 0, c = 0, d = 0;
+    const bool has_f16c = __get_cpuid(1, &a, &b, &c, &d) && (c & (1u << 29)) != 0;
+    return __builtin_cpu_supports("avx2") && has_f16c && std::getenv("MMRL_NO_F16C") == nullptr;
   }();
   return f16c;
 #else

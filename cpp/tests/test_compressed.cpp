@@ -3,6 +3,7 @@
 // character play one (counted by a replaced global operator new).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstdlib>
@@ -75,8 +76,34 @@ CompressedModel random_model(uint32_t seed) {
   return m;
 }
 
-// The float16 rounding of a weight, by the compiler's own conversion (the reference of pack()).
-double half_rounded(float w) { return static_cast<double>(static_cast<float>(static_cast<_Float16>(w))); }
+// The float16 rounding of a weight (the reference of pack()): the nearest of every finite
+// half, found by search over their values (ascending with their bits), ties to the even bits.
+double half_rounded(float w) {
+  static const std::vector<float> halves = [] {
+    std::vector<float> v;
+    for (uint32_t h = 0; h < 0x7c00u; ++h) v.push_back(float16_to_float(static_cast<uint16_t>(h)));
+    return v;
+  }();
+  const float a = std::abs(w);
+  const size_t hi = std::lower_bound(halves.begin(), halves.end(), a) - halves.begin();
+  size_t best = std::min(hi, halves.size() - 1);
+  if (hi > 0) {
+    const double below = a - halves[hi - 1], above = hi < halves.size() ? halves[hi] - a : 1e30;
+    if (below < above || (below == above && (hi - 1) % 2 == 0)) best = hi - 1;
+  }
+  return w < 0 ? -static_cast<double>(halves[best]) : static_cast<double>(halves[best]);
+}
+
+TEST(Compressed, Float16BitsWidenToTheirValues) {
+  EXPECT_EQ(float16_to_float(0x3c00u), 1.0f);
+  EXPECT_EQ(float16_to_float(0xc000u), -2.0f);
+  EXPECT_EQ(float16_to_float(0x7bffu), 65504.0f);
+  EXPECT_EQ(float16_to_float(0x0001u), std::ldexp(1.0f, -24));
+  EXPECT_EQ(float16_to_float(0x03ffu), std::ldexp(1023.0f, -24));
+  EXPECT_EQ(float16_to_float(0x0400u), std::ldexp(1.0f, -14));
+  EXPECT_TRUE(std::signbit(float16_to_float(0x8000u)) && float16_to_float(0x8000u) == 0.0f);
+  EXPECT_TRUE(std::isinf(float16_to_float(0x7c00u)) && std::isnan(float16_to_float(0x7e00u)));
+}
 
 TEST(Compressed, MlpEqualsAPlainLoopOverItsFloat16Weights) {
   std::mt19937 rng(1);
