@@ -6,6 +6,7 @@
 #include <cstring>
 #include <limits>
 #include <stdexcept>
+#include <type_traits>
 
 #include "mmrl/kdtree.hpp"
 #include "mmrl/search.hpp"
@@ -207,18 +208,26 @@ __attribute__((always_inline)) inline void dense_rows(const uint16_t* packed, co
   }
 }
 
+// f(std::integral_constant<int, R>{}) with R = rows (1..kMlpMaxRows; more counts as the most):
+// the one place a row count becomes a kernel's template argument.
+template <class F>
+__attribute__((always_inline)) inline void with_rows(int rows, F&& f) {
+  static_assert(kMlpMaxRows == 8, "with_rows lists 1..8");
+  switch (rows) {
+    case 1: return f(std::integral_constant<int, 1>{});
+    case 2: return f(std::integral_constant<int, 2>{});
+    case 3: return f(std::integral_constant<int, 3>{});
+    case 4: return f(std::integral_constant<int, 4>{});
+    case 5: return f(std::integral_constant<int, 5>{});
+    case 6: return f(std::integral_constant<int, 6>{});
+    case 7: return f(std::integral_constant<int, 7>{});
+    default: return f(std::integral_constant<int, 8>{});
+  }
+}
+
 MMRL_MULTIVERSION void dense_widening(const uint16_t* packed, const float* bias, const float* x, int x_stride,
                                       float* y, int y_stride, int in, int out, int rows) {
-  switch (rows) {
-    case 1: return dense_rows<1>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 2: return dense_rows<2>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 3: return dense_rows<3>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 4: return dense_rows<4>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 5: return dense_rows<5>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 6: return dense_rows<6>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 7: return dense_rows<7>(packed, bias, x, x_stride, y, y_stride, in, out);
-    default: return dense_rows<8>(packed, bias, x, x_stride, y, y_stride, in, out);
-  }
+  with_rows(rows, [&](auto r) { dense_rows<decltype(r)::value>(packed, bias, x, x_stride, y, y_stride, in, out); });
 }
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(MMRL_NO_CLONES)
@@ -246,19 +255,6 @@ __attribute__((target("avx2,f16c"))) void dense_rows_f16c(const uint16_t* packed
   }
 }
 
-__attribute__((target("avx2,f16c"))) void dense_f16c(const uint16_t* packed, const float* bias, const float* x,
-                                                     int x_stride, float* y, int y_stride, int in, int out, int rows) {
-  switch (rows) {
-    case 1: return dense_rows_f16c<1>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 2: return dense_rows_f16c<2>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 3: return dense_rows_f16c<3>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 4: return dense_rows_f16c<4>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 5: return dense_rows_f16c<5>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 6: return dense_rows_f16c<6>(packed, bias, x, x_stride, y, y_stride, in, out);
-    case 7: return dense_rows_f16c<7>(packed, bias, x, x_stride, y, y_stride, in, out);
-    default: return dense_rows_f16c<8>(packed, bias, x, x_stride, y, y_stride, in, out);
-  }
-}
 #endif
 
 // Whether the F16C kernel runs (chosen once). MMRL_NO_F16C (any value) keeps to the widening
@@ -282,7 +278,10 @@ bool use_f16c() {
 void dense_forward(const uint16_t* packed, const float* bias, const float* x, int x_stride, float* y, int y_stride,
                    int in, int out, int rows) {
 #ifdef MMRL_HAS_F16C_KERNEL
-  if (use_f16c()) return dense_f16c(packed, bias, x, x_stride, y, y_stride, in, out, rows);
+  if (use_f16c())
+    return with_rows(rows, [&](auto r) {
+      dense_rows_f16c<decltype(r)::value>(packed, bias, x, x_stride, y, y_stride, in, out);
+    });
 #endif
   dense_widening(packed, bias, x, x_stride, y, y_stride, in, out, rows);
 }
