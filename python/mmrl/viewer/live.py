@@ -269,11 +269,8 @@ class LiveSession:
         frame = int(state["frame"])
         if getattr(self.run, "compressed", None) is not None:  # the state's own path (docs/compressed.md)
             feats = np.ascontiguousarray(env._core.compressed_state(0)[:27])
-            if getattr(self, "_trajectory_units", None) is None:  # (scale, mean) of the trajectory features
-                self._trajectory_units = (np.asarray(self.db.feature_scale, np.float32)[15:].copy(),
-                                          np.asarray(self.db.feature_mean, np.float32)[15:].copy())
-            raw = feats[15:] * self._trajectory_units[0] + self._trajectory_units[1]
-            local = np.asarray(_core.trajectory_path(raw.astype(np.float32)), np.float64)
+            raw = np.ascontiguousarray(self.db.denormalize(feats)[15:], np.float32)
+            local = np.asarray(_core.trajectory_path(raw), np.float64)
             hit = int(env.state_path_hits(0, feats[None])[0])
         elif not self.db.valid_mask[frame]:
             return None
