@@ -15,8 +15,10 @@ are tagged style, content and gait automatically). The bench:
 3. runs each style's joystick line (five speeds over that style's own walk-to-run range, under the
    same request, same episodes) and reads it at the policy's time to target;
 4. trains a specialist per style, on that style's clips alone, with the multi-style policy's own
-   number of steps, and evaluates it on the same episodes (``--no-specialists`` skips it);
+   number of steps and recipe (what a conditioned run adds, ``target_kl``, and ``--set``), and
+   evaluates it on the same episodes (``--no-specialists`` skips it);
 5. switches the request of one continuous character every ``--switch-seconds`` through the styles
+   (``--switch-rounds`` times, 105 switches by default)
    and measures the frames until the played clip carries the new request, and the pose-jump p99
    over the decisions after a switch, against the joystick's pose-jump p99;
 6. measures the size and load time of the database file and the runtime file with tags, next to
@@ -47,11 +49,20 @@ def train(cli, db_path: Path, out: Path, extra, seed: int) -> None:
         raise SystemExit(f"training {out} failed ({code})")
 
 
+def _setting(value) -> str:
+    """A config value as ``mmrl train --set`` reads it."""
+    if value is None:
+        return "none"
+    if isinstance(value, (list, tuple)):
+        return ",".join(str(v) for v in value)
+    return str(value).lower() if isinstance(value, bool) else str(value)
+
+
 def styles_of(db) -> list:
     return [t.partition("=")[2] for t in db.tag_names if t.startswith("style=")]
 
 
-def switch_run(task, db, policy, config, styles, seconds_each: float, seed: int) -> dict:
+def switch_run(task, db, policy, config, styles, seconds_each: float, seed: int, rounds: int = 3) -> dict:
     """One continuous character switching style every ``seconds_each`` s: frames from a switch
     until the shown frame's clip carries the new request, and the pose jumps over the two
     decisions after each switch (the decision that switches, and the blend after it)."""
@@ -64,7 +75,7 @@ def switch_run(task, db, policy, config, styles, seconds_each: float, seed: int)
     delays, starts = [], []
     rng = np.random.default_rng(seed)
     shown_total = 0
-    for k in range(len(styles) * 3):
+    for k in range(len(styles) * rounds):
         request = f"style={styles[(k + 1) % len(styles)]}"
         run.set_request(request)
         clips = np.asarray(_core.select_request(db._db, request)[1], bool)
@@ -171,9 +182,14 @@ def main() -> None:
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--eval-seed", type=int, default=1)
     p.add_argument("--no-specialists", action="store_true")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a training setting for the multi-style policy and the specialists alike (mmrl train --set)")
     p.add_argument("--data", default=None, help="the shared data folder (DATA/<style>/*.bvh), when the database's "
                    "clip paths do not resolve from here")
     p.add_argument("--switch-seconds", type=float, default=2.0)
+    p.add_argument("--switch-rounds", type=int, default=15,
+                   help="rounds through the styles in each switch run (15 = 105 switches: a p99 over 21 "
+                        "switches moved 0.5-1.7x between evaluation seeds)")
     p.add_argument("--figure", default="docs/styles.png")
     p.add_argument("--switches-of", default=None, metavar="RUN",
                    help="only the switch run: RUN's policy and the walking joystick through the same switches")
@@ -198,23 +214,28 @@ def main() -> None:
     if args.switches_of:
         rd = RunDir(args.switches_of)
         cfg = rd.task_config(task)
-        res = {"policy": switch_run(task, db, rd.policy(), cfg, styles, args.switch_seconds, args.eval_seed),
+        res = {"policy": switch_run(task, db, rd.policy(), cfg, styles, args.switch_seconds, args.eval_seed,
+                                    args.switch_rounds),
                "joystick": switch_run(task, db, JoystickPolicy.preset(db, "joystick"), cfg, styles,
-                                      args.switch_seconds, args.eval_seed)}
+                                      args.switch_seconds, args.eval_seed, args.switch_rounds)}
         res["ratio_after_switches"] = (res["policy"]["pose_jump_p99_after_switches_cm"] /
                                        res["joystick"]["pose_jump_p99_after_switches_cm"])
         print(json.dumps(res, indent=1))
         return
     multi = out / "multi"
     t0 = time.perf_counter()
-    train(cli, db_path, multi, ["--tags", args.tags, "--seconds", str(args.seconds)], args.seed)
+    sets = [a for kv in args.set for a in ("--set", kv)]
+    train(cli, db_path, multi, ["--tags", args.tags, "--seconds", str(args.seconds), *sets], args.seed)
     rd = RunDir(multi)
     policy, config = rd.policy(), rd.task_config(task)
     import csv
 
     with open(multi / "metrics.csv") as fh:
         steps = int(list(csv.DictReader(fh))[-1]["step"])
-    result = {"db": str(db_path), "styles": styles, "tags": args.tags, "train_seconds": args.seconds,
+    # The specialists train with the multi-style policy's recipe: what a conditioned run adds by
+    # default (the task's request_ppo_defaults, e.g. target_kl) is passed to them as well.
+    recipe = [a for k in task.request_ppo_defaults for a in ("--set", f"{k}={_setting(rd.config['ppo'][k])}")]
+    result = {"db": str(db_path), "styles": styles, "tags": args.tags, "train_seconds": args.seconds, "set": args.set,
               "train_steps": steps, "per_request": {}, "specialists": {}, "lines": {}}
 
     def ev(pol, d, request, cfg):
@@ -241,18 +262,19 @@ def main() -> None:
                 sdb.save(sdb_path)
             sdb = mmrl.Database.load(sdb_path)
             run = out / f"only-{style}"
-            train(cli, sdb_path, run, ["--steps", str(steps)], args.seed)
+            train(cli, sdb_path, run, ["--steps", str(steps), *recipe, *sets], args.seed)
             row = ev(RunDir(run).policy(), sdb, "", RunDir(run).task_config(task))
             result["specialists"][style] = row
             multi_t = result["per_request"][f"style={style}"]["mean_time_to_target_s"]
             print(f"specialist {style}: {json.dumps(row)}; multi-style time {multi_t}", flush=True)
-    result["switch"] = switch_run(task, db, policy, config, styles, args.switch_seconds, args.eval_seed)
+    result["switch"] = switch_run(task, db, policy, config, styles, args.switch_seconds, args.eval_seed,
+                                  args.switch_rounds)
     joy = evaluate_full_path(task, db, JoystickPolicy.preset(db, "joystick"), episodes=args.episodes,
                              seed=args.eval_seed, config=config.replace(request_groups=""))
     result["switch"]["joystick_pose_jump_p99_cm"] = joy.get("pose_jump_p99_cm")
     # The peer through the same switches: the walking joystick under the same requests and targets.
     result["switch"]["joystick_switch"] = switch_run(task, db, JoystickPolicy.preset(db, "joystick"), config, styles,
-                                                     args.switch_seconds, args.eval_seed)
+                                                     args.switch_seconds, args.eval_seed, args.switch_rounds)
     result["sizes"] = sizes(db, config, multi, out)
     result["figure_times"] = figure(task, db, policy, config, styles, Path(args.figure))
     result["bench_seconds"] = time.perf_counter() - t0

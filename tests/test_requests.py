@@ -166,3 +166,17 @@ def test_the_default_network_takes_other_hidden_sizes(tmp_path):
     ch = _core.RuntimeCharacter(_core.RuntimeController.load(str(path)), 0.0, 0.0, 0.0)
     obs = np.asarray(ch.observe(), np.float32)
     np.testing.assert_allclose(_core.RuntimeController.load(str(path)).act(obs), policy.act(obs[None])[0], atol=1e-5)
+
+
+def test_a_conditioned_run_stops_its_updates_past_the_task_kl(gait_run, tmp_path):
+    # docs/styles.md: one policy for many requests needs smaller updates (plane: target_kl 0.05).
+    assert RunDir(gait_run).config["ppo"]["target_kl"] == 0.05
+    runs = {}
+    for name, extra in (("own", ["--tags", "gait", "--set", "target_kl=0.2"]), ("plain", []),
+                        ("off", ["--tags", "gait", "--set", "target_kl=none"])):
+        runs[name] = tmp_path / name
+        assert main(["train", "plane", "--steps", "64", "--envs", "2", "--out", str(runs[name]), "--no-progress",
+                     *extra]) == 0
+    assert RunDir(runs["own"]).config["ppo"]["target_kl"] == 0.2
+    assert RunDir(runs["plain"]).config["ppo"]["target_kl"] is None
+    assert RunDir(runs["off"]).config["ppo"]["target_kl"] is None

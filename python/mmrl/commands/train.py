@@ -76,7 +76,8 @@ def register_cli(sub) -> None:
 # ---------------------------------------------------------------------- options
 def _configs(task: Task, args, saved: Dict[str, Any]):
     """(task config, PPOConfig, callback options) from the task's defaults, a resumed run's
-    saved values, the preset, the task's flags and --set, in that order."""
+    saved values, the preset, the task's flags and --set, in that order; a new run conditioned
+    on requests adds the task's ``request_ppo_defaults`` where the preset and --set are silent."""
     from ..rl import ppo
 
     task_cfg = task.default_config()
@@ -104,6 +105,8 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
     ppo_over, task_over = split_overrides(sets, cfg, task_cfg)
     apply_values(cfg, ppo_over)
     apply_values(task_cfg, task_over)
+    if not saved and getattr(task_cfg, "request_groups", ""):
+        apply_values(cfg, {k: v for k, v in task.request_ppo_defaults.items() if k not in ppo_over})
     return task_cfg, cfg, options
 
 

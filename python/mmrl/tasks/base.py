@@ -449,6 +449,8 @@ class Task:
     """One line for ``mmrl train --help``."""
     ppo_defaults: Mapping[str, Any] = field(default_factory=dict)
     """PPOConfig fields this task trains best with (``--set`` overrides them)."""
+    request_ppo_defaults: Mapping[str, Any] = field(default_factory=dict)
+    """More PPOConfig fields for a new run conditioned on requests (``--tags``); --set overrides them."""
     presets: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     """``--preset NAME``: overrides of task options and PPOConfig fields."""
     default_preset: Optional[str] = None
