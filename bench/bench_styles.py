@@ -49,15 +49,6 @@ def train(cli, db_path: Path, out: Path, extra, seed: int) -> None:
         raise SystemExit(f"training {out} failed ({code})")
 
 
-def _setting(value) -> str:
-    """A config value as ``mmrl train --set`` reads it."""
-    if value is None:
-        return "none"
-    if isinstance(value, (list, tuple)):
-        return ",".join(str(v) for v in value)
-    return str(value).lower() if isinstance(value, bool) else str(value)
-
-
 def styles_of(db) -> list:
     return [t.partition("=")[2] for t in db.tag_names if t.startswith("style=")]
 
@@ -234,7 +225,10 @@ def main() -> None:
         steps = int(list(csv.DictReader(fh))[-1]["step"])
     # The specialists train with the multi-style policy's recipe: what a conditioned run adds by
     # default (the task's request_ppo_defaults, e.g. target_kl) is passed to them as well.
-    recipe = [a for k in task.request_ppo_defaults for a in ("--set", f"{k}={_setting(rd.config['ppo'][k])}")]
+    recipe = []
+    for k in task.request_ppo_defaults:
+        v = rd.config["ppo"][k]
+        recipe += ["--set", f"{k}={'none' if v is None else v}"]
     result = {"db": str(db_path), "styles": styles, "tags": args.tags, "train_seconds": args.seconds, "set": args.set,
               "train_steps": steps, "per_request": {}, "specialists": {}, "lines": {}}
 
