@@ -61,6 +61,92 @@ def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0
     return out
 
 
+def drive_stick(path, task, db, config, phases, seed: int = 0, request: str = "", compressed=None, start=None,
+                runtime_actions: bool = False, stop_at_done: bool = False):
+    """The runtime driven by a stick (RuntimeCharacter.set_stick) against Python's full path driven
+    by the scripted joystick (mmrl.rl.policies.JoystickPolicy, arrive off, at the stick's speed)
+    whose target is moved before every decision to the character's root + 1000 m along the stick:
+    the joystick then asks for the stick's direction in the character frame.
+
+    ``phases``: in turn, ``("stick", (x, z), speed, decisions)``, or ``("target", (dx, dz),
+    decisions)``: set_target to the root at the phase's start + (dx, dz), both sides acting with
+    the runtime's policy (as drive_both). Obstacle tasks: the env's obstacles and velocities go to
+    the runtime before each decision; ``stop_at_done`` ends the drive with the env's episode (a
+    collision respawns the obstacles). ``runtime_actions``: the Python side plays the runtime's own
+    stick action (bit-identical) rather than the joystick's, which differs from it by float
+    rounding (``action_error``): for a compressed controller, whose continuous decisions carry
+    rounding on. ``request``, ``compressed``, ``start``: as drive_both.
+
+    Returns per decision both sides' matches and the stick flags, the largest root and pose
+    differences per frame, the largest difference between the stick's and the joystick's actions
+    (relative to max(1, |action|)), and the root at each phase's start and end."""
+    from mmrl.rl.policies import JoystickPolicy
+
+    fp = FullPath(task, db, config=config, seed=seed, record=False, continuous=True, compressed=compressed)
+    if start is not None:
+        fp.env.set_state(0, int(start[0]), 0.0, 0.0, 0.0)
+        fp._start_episode()
+    x, z, yaw = fp.ctrl.root
+    controller = _core.RuntimeController.load(str(path))
+    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.ctrl.frame if start is None else int(start[1]))
+    if request:
+        fp.set_request(request)
+        ch.set_request(request)
+    obstacles = hasattr(fp.env, "obstacles")
+    out = {"py_matches": [], "rt_matches": [], "sticks": [], "root_error": 0.0, "pose_error": 0.0, "action_error": 0.0,
+           "frame_mismatches": 0, "transitions": 0, "phase_roots": [], "stopped": False}
+    for phase in phases:
+        root0 = np.array(fp.ctrl.root)
+        if phase[0] == "stick":
+            _, direction, speed, decisions = phase
+            d = np.asarray(direction, np.float64) / np.hypot(*direction)
+            ch.set_stick(float(direction[0]), float(direction[1]), float(speed))
+            joystick = JoystickPolicy(db, speed)
+        else:
+            _, offset, decisions = phase
+            target = root0[:2] + np.asarray(offset)
+            fp.set_target(*target)
+            ch.set_target(*target)
+        for _ in range(decisions):
+            if obstacles:
+                o = fp.env.obstacles(0)
+                ch.set_obstacles(*(np.ascontiguousarray(o[k], np.float32)
+                                   for k in ("centres", "half_sizes", "angles", "velocities")))
+            if phase[0] == "stick":
+                r = fp.ctrl.root
+                fp.set_target(r[0] + 1000.0 * d[0], r[1] + 1000.0 * d[1])
+                joy, ours = joystick.act(fp.obs[None])[0], ch.stick_action()
+                out["action_error"] = max(out["action_error"],
+                                          float(np.max(np.abs(ours - joy) / np.maximum(1.0, np.abs(joy)))))
+                action = ours if runtime_actions else joy
+            else:
+                action = controller.act(fp.obs)
+            step = fp.step(action)
+            res = step["res"]
+            for k in range(res.frames.size):
+                ch.advance_frame()
+                out["frame_mismatches"] += int(ch.frame != res.frames[k])
+                out["root_error"] = max(out["root_error"], float(np.max(np.abs(np.array(ch.root) - res.roots[k]))))
+                out["pose_error"] = max(out["pose_error"],
+                                        float(np.max(np.abs(ch.global_positions() - res.positions[k]))))
+            decision = ch.last_decision()
+            out["py_matches"].append(res.match)
+            out["rt_matches"].append(decision["match"])
+            out["sticks"].append(decision["stick"])
+            out["transitions"] += int(decision["transition"])
+            if step["done"]:
+                if stop_at_done:
+                    out["stopped"] = True
+                    break
+                fp.continue_from_character(fp.target)
+        out["phase_roots"].append((root0, np.array(fp.ctrl.root)))
+        if out["stopped"]:
+            break
+    for key in ("py_matches", "rt_matches", "sticks"):
+        out[key] = np.array(out[key])
+    return out
+
+
 def built_artifact(env_var: str, pattern: str, what: str):
     """A file CMake builds (the runtime example, the C interface's library): $env_var, else
     build/*/<pattern> beside the checkout. Missing: a failure in CI, a skip elsewhere."""

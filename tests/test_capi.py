@@ -1,7 +1,7 @@
 """The C interface (cpp/capi/mmrl_runtime.h, libmmrl_runtime_c) through ctypes: it equals the C++
-runtime and the Python full path over 1,000 decisions, every error path returns its code and
-message, it serves characters on several threads at once, and the library exports only mmrl_
-symbols. CI builds the library (.ci/run's cmake build) and runs this file again against an ASan
+runtime and the Python full path over 1,000 decisions, and the runtime through a stick; every
+error path returns its code and message, it serves characters on several threads at once, and
+the library exports only mmrl_ symbols. CI builds the library (.ci/run's cmake build) and runs this file again against an ASan
 build (tools/hardening.sh, $MMRL_CAPI_LIB); elsewhere the tests look in build/*/ and skip if it is
 not built."""
 import ctypes as C
@@ -54,6 +54,7 @@ def lib():
         "mmrl_character_create": ([P, F, F, F, I64, C.POINTER(P)], C.c_int),
         "mmrl_character_destroy": ([P], None), "mmrl_character_last_error": ([P], S),
         "mmrl_character_set_target": ([P, F, F], C.c_int),
+        "mmrl_character_set_stick": ([P, F, F, F], C.c_int),
         "mmrl_character_set_request": ([P, S], C.c_int),
         "mmrl_character_update": ([P, F, fp, fp, I32, fp], C.c_int),
         "mmrl_character_root": ([P, fp], C.c_int),
@@ -203,6 +204,49 @@ def test_every_error_path_returns_its_code_and_message(lib, controller_file, tmp
     lib.mmrl_character_destroy(ch)
 
 
+def test_the_c_stick_equals_the_runtimes_and_refuses_bad_values(lib, controller_file):
+    """mmrl_character_set_stick: through a stick, a target and a stick again, the C interface's
+    poses and roots equal the C++ runtime's (the binding, whose stick tests/test_runtime.py holds
+    to the joystick's full path) bit for bit. A zero or non-finite direction, or a speed not
+    finite and > 0, is MMRL_ERROR_INVALID_ARGUMENT naming the argument, and changes nothing."""
+    ctl = load(lib, controller_file)
+    ch = create(lib, ctl, 2.0, -1.0, 0.7, 500)
+    rt = _core.RuntimeCharacter(_core.RuntimeController.load(str(controller_file)), 2.0, -1.0, 0.7, 500)
+    J = mmrl.default_database().num_joints
+    rot, tr, root = np.zeros((J, 4), np.float32), np.zeros((J, 3), np.float32), np.zeros(3, np.float32)
+    nan, inf = float("nan"), float("inf")
+    walked = []
+    for kind, args in [("stick", (0.0, -2.0, 1.0)), ("target", (6.0, 3.0)), ("stick", (3.0, 1.0, 2.5))]:
+        if kind == "stick":
+            assert lib.mmrl_character_set_stick(ch, *args) == OK
+            rt.set_stick(*args)
+        else:
+            assert lib.mmrl_character_set_target(ch, *args) == OK
+            rt.set_target(*args)
+        # Refused values on the C side only: the two characters must stay equal.
+        for bad in [(0.0, 0.0, 1.0), (nan, 1.0, 1.0), (1.0, -inf, 1.0)]:
+            assert lib.mmrl_character_set_stick(ch, *bad) == INVALID
+            assert b"direction (x, z) must be finite and not zero" in lib.mmrl_character_last_error(ch)
+        for speed in (0.0, -1.0, nan, inf):
+            assert lib.mmrl_character_set_stick(ch, 1.0, 0.0, speed) == INVALID
+            assert b"speed must be finite and > 0" in lib.mmrl_character_last_error(ch)
+            assert b"speed" in lib.mmrl_last_error()
+        start = np.array(rt.root)
+        for _ in range(100 * 6):
+            assert lib.mmrl_character_update(ch, 1.0 / 30.0, floats(rot), floats(tr), J, floats(root)) == OK
+            rt.update(1.0 / 30.0)
+            np.testing.assert_array_equal(rot, rt.local_rotations())
+            np.testing.assert_array_equal(tr, rt.local_translations())
+            np.testing.assert_array_equal(root, np.float32(rt.root))
+        assert rt.last_decision()["stick"] == (kind == "stick")
+        walked.append(root[:2] - start[:2])
+    # Not vacuous: each stick took the character its way (20 s at 1 and 2.5 m/s).
+    assert walked[0] @ (0.0, -1.0) > 10.0 and walked[2] @ (np.array([3.0, 1.0]) / np.hypot(3.0, 1.0)) > 25.0, walked
+    assert lib.mmrl_character_set_stick(None, 1.0, 0.0, 1.0) == NULL and b"character is NULL" in lib.mmrl_last_error()
+    lib.mmrl_character_destroy(ch)
+    lib.mmrl_controller_destroy(ctl)
+
+
 def test_memory_load_and_threads(lib, controller_file):
     """Characters of one controller on four threads at once (ctypes releases the GIL) make the
     same frames as the same characters one after another."""
@@ -244,7 +288,8 @@ def test_the_library_exports_only_mmrl_symbols_and_links_only_the_c_and_cpp_runt
     out = subprocess.run([nm, "-D", "--defined-only", str(path)], capture_output=True, text=True, check=True).stdout
     names = [line.split()[-1] for line in out.splitlines() if line.strip()]
     assert names and all(n.startswith("mmrl_") for n in names), [n for n in names if not n.startswith("mmrl_")]
-    assert {"mmrl_controller_load", "mmrl_character_update", "mmrl_character_set_request"} <= set(names)
+    assert {"mmrl_controller_load", "mmrl_character_update", "mmrl_character_set_request",
+            "mmrl_character_set_stick"} <= set(names)
     needed = subprocess.run(["readelf", "-d", str(path)], capture_output=True, text=True, check=True).stdout
     libs = {line.split("[")[1].split("]")[0] for line in needed.splitlines() if "(NEEDED)" in line}
     runtimes = ("libstdc++", "libm.", "libgcc_s", "libc.", "libpthread", "ld-linux", "libasan", "libubsan")

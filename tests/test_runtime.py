@@ -2,7 +2,9 @@
 
 Given the same controller file, start and targets, the runtime and mmrl.rollout.FullPath (the
 loop ``mmrl play`` runs) make the same decisions, show the same frames and roots, and the
-same poses. The runtime's policy (policy_net.hpp) matches torch's within float rounding.
+same poses. The runtime's policy (policy_net.hpp) matches torch's within float rounding. A
+character driven by a stick (set_stick) makes the decisions of the full path driven by the
+scripted joystick (mmrl.rl.policies.JoystickPolicy) toward a target kept 1000 m along the stick.
 """
 import numpy as np
 import pytest
@@ -18,7 +20,7 @@ from mmrl.runs import RunDir
 from mmrl.export.runtime_export import read_controller, write_controller
 from mmrl.tasks.plane import PlaneConfig
 from mmrl.rl.trained_policy import ObsNormalizer, Policy
-from runtime_helpers import drive_both
+from runtime_helpers import drive_both, drive_stick
 
 
 @pytest.fixture(scope="module")
@@ -173,3 +175,131 @@ def test_obstacle_runtime_equals_python_full_path(tmp_path):
                 break
     # Not vacuous: many decisions, with obstacles in the sensor maps, and clip changes.
     assert compared >= 150 and seen >= 100 and transitions >= 20, (compared, seen, transitions)
+
+
+@pytest.fixture(scope="module")
+def stick_file(tmp_path_factory):
+    """A plane controller (a random policy: a stick never runs it) on the synthetic database."""
+    path = tmp_path_factory.mktemp("stick") / "plane.mmrl"
+    write_controller(path, mmrl.default_database(), random_plane_policy(2), "plane", PlaneConfig(transition_cost=5.0))
+    return path
+
+
+def heading_and_speed(phase_roots, fps=30.0, frames=6):
+    """Per phase: (unit world displacement, mean speed in m/s over its decisions)."""
+    out = []
+    for (a, b), n in phase_roots:
+        move = b[:2] - a[:2]
+        out.append((move / np.linalg.norm(move), np.linalg.norm(move) / (n * frames / fps)))
+    return out
+
+
+def test_a_stick_decides_as_the_joystick_toward_a_far_target(stick_file):
+    """The reference: Python's full path whose target is reset before every decision to the
+    character's root + 1000 m along the stick, acting with JoystickPolicy at the stick's speed.
+    Two sticks (walking and running speeds, one direction unnormalized), then set_target hands
+    the character back to the policy, then a stick again: the same matched frames, shown frames
+    and roots as the reference, decision for decision; the stick's action equals the joystick's
+    within float rounding; and the character goes roughly where the stick points."""
+    from mmrl.rl.policies import database_speeds
+
+    db = read_controller(stick_file).db
+    walk, run = database_speeds(db)
+    phases = [("stick", (1.0, 0.0), walk, 250), ("stick", (0.6, -4.0), run, 250), ("target", (3.0, 4.0), 150),
+              ("stick", (-1.0, 1.0), 1.5, 150)]
+    out = drive_stick(stick_file, mmrl.get_task("plane"), db, PlaneConfig(transition_cost=5.0), phases)
+    np.testing.assert_array_equal(out["rt_matches"], out["py_matches"])
+    assert out["frame_mismatches"] == 0 and out["root_error"] <= 1e-5 and out["pose_error"] <= 1e-4, out
+    assert out["action_error"] <= 1e-5, out["action_error"]
+    np.testing.assert_array_equal(out["sticks"], [True] * 500 + [False] * 150 + [True] * 150)
+    assert out["transitions"] >= 40  # not vacuous: the sticks turn the character and change clips
+    sticks = [(phases[k][1], phases[k][2], phases[k][3]) for k in (0, 1, 3)]
+    walked = heading_and_speed([(out["phase_roots"][k], phases[k][-1]) for k in (0, 1, 3)])
+    for (direction, speed, _), (heading, mean_speed) in zip(sticks, walked):
+        # Within 20 degrees and half the speed: the synthetic clips turn and keep playing under the
+        # transition cost (measured: 15 degrees, 0.65 m/s for a walk of 0.88 m/s; the reference's own).
+        assert heading @ (np.array(direction) / np.hypot(*direction)) > np.cos(np.radians(20)), (direction, heading)
+        assert 0.5 * speed < mean_speed < 1.5 * speed, (speed, mean_speed)
+
+
+def test_a_stick_keeps_to_a_request(stick_file):
+    db = read_controller(stick_file).db
+    out = drive_stick(stick_file, mmrl.get_task("plane"), db, PlaneConfig(transition_cost=5.0),
+                      [("stick", (0.0, 1.0), 2.5, 200)], seed=1, request="gait=run")
+    np.testing.assert_array_equal(out["rt_matches"], out["py_matches"])
+    run = db.clip_tags[:, db.tag_names.index("gait=run")]
+    assert run[db.frame_clip[out["rt_matches"]]].all()
+
+
+def test_a_stick_goes_through_the_obstacle_tasks_path_filter(tmp_path):
+    """Moving obstacles and the collision-aware search: the stick's decisions equal the
+    joystick's full path's with the filter; a file without the filter decides otherwise."""
+    task, db = mmrl.get_task("obstacles"), mmrl.default_database()
+    config = task.default_config().replace(num_obstacles=60, obstacle_max_speed=1.0, path_filter=True,
+                                           path_cost=50.0, path_candidates=32, transition_cost=5.0)
+    with_filter, without = tmp_path / "with.mmrl", tmp_path / "without.mmrl"
+    write_controller(with_filter, db, random_obstacle_policy(3), "obstacles", config)
+    write_controller(without, db, random_obstacle_policy(3), "obstacles", config.replace(path_filter=False))
+    compared = differ = 0
+    for seed in range(8):
+        phase = [("stick", [(1.0, 0.5), (-0.2, 1.0), (0.0, -1.0)][seed % 3], [1.2, 2.5][seed % 2], 200)]
+        out = drive_stick(with_filter, task, db, config, phase, seed=seed, stop_at_done=True)
+        np.testing.assert_array_equal(out["rt_matches"], out["py_matches"])
+        assert out["action_error"] <= 1e-5
+        compared += out["rt_matches"].size
+        plain = drive_stick(without, task, db, config, phase, seed=seed, stop_at_done=True)
+        differ += not np.array_equal(plain["rt_matches"], plain["py_matches"])
+    assert compared >= 200 and differ >= 3, (compared, differ)
+
+
+def test_a_stick_on_a_compressed_controller(tmp_path):
+    """A compressed file: the stick's action goes to the projector. Its decisions are continuous,
+    so the float rounding between the stick's action and the joystick's (within 1e-5) would grow:
+    the Python compressed full path plays the runtime's own stick action, and both must agree."""
+    from mmrl.compress import CompressConfig, train_compressed
+    from mmrl.compress.model import CompressedController
+    from mmrl.export.compressed_export import write_compressed_controller
+    from mmrl.export.runtime_file import read_sections
+
+    torch.set_num_threads(1)
+    db, task, config = mmrl.default_database(), mmrl.get_task("plane"), PlaneConfig(transition_cost=5.0)
+    cfg = CompressConfig(iterations=100, hidden=(32, 32), latent=8, checkpoint_every=1000, batch=64,
+                         stepper_iterations=50, projector_iterations=50, stepper_hidden=(32, 32),
+                         projector_hidden=(32, 32), stepper_window=8)
+    train_compressed(db, tmp_path / "c.pt", cfg, progress=False)
+    compressed = CompressedController(tmp_path / "c.pt", db)
+    path = tmp_path / "c.mmrl"
+    write_compressed_controller(path, db, random_plane_policy(2), task, config, compressed)
+    source = read_sections(path)["lmm.start_sources"]
+    out = drive_stick(path, task, db, config, [("stick", (0.6, -0.8), 1.3, 100), ("stick", (-1.0, 0.0), 2.0, 100)],
+                      compressed=compressed, start=(int(source[0]), 0), runtime_actions=True)
+    assert out["root_error"] == 0.0 and out["pose_error"] <= 1e-4, out
+    assert out["action_error"] <= 1e-5 and out["transitions"] >= 5, out  # measured 4e-7 and 16
+    assert (out["rt_matches"] == -1).all()
+
+
+def test_the_stick_refuses_bad_values_and_set_target_ends_it(stick_file):
+    c = _core.RuntimeController.load(str(stick_file))
+    ch = _core.RuntimeCharacter(c, 1.0, 2.0, 0.5)
+    assert not ch.stick
+    with pytest.raises(ValueError, match="no stick"):
+        ch.stick_action()
+    ch.set_stick(0.0, 2.0, 1.2)
+    before = ch.stick_action()
+    nan, inf = float("nan"), float("inf")
+    for x, z in [(0.0, 0.0), (nan, 1.0), (1.0, inf), (-inf, 0.0)]:
+        with pytest.raises(ValueError, match=r"stick: the direction \(x, z\) must be finite and not zero"):
+            ch.set_stick(x, z, 1.0)
+    for speed in (0.0, -1.0, nan, inf):
+        with pytest.raises(ValueError, match="stick: the speed must be finite and > 0"):
+            ch.set_stick(1.0, 0.0, speed)
+    np.testing.assert_array_equal(ch.stick_action(), before)  # refused: the character is unchanged
+    # Any length: (0, 2) is (0, 1); and the heading now turns the stick into the character frame.
+    ch.set_stick(0.0, 1e-30, 1.2)
+    np.testing.assert_array_equal(ch.stick_action(), before)
+    ch.update(0.2)
+    assert ch.last_decision()["stick"]
+    ch.set_target(5.0, 5.0)
+    assert not ch.stick
+    ch.update(0.2)
+    assert not ch.last_decision()["stick"] and ch.last_decision()["count"] == 2

@@ -111,3 +111,19 @@ def test_example_refuses_a_bad_file_with_one_line(tmp_path):
     done = subprocess.run([str(example_binary()), str(bad)], capture_output=True, text=True, timeout=60)
     assert done.returncode == 2
     assert done.stderr.strip().startswith("mmrl_runtime_example: error: ") and str(bad) in done.stderr
+
+
+@pytest.mark.parametrize("flag", ["--help", "-h"])
+def test_help_prints_the_usage_and_exits_0(flag, controller):
+    """--help and -h: the usage and every option on stdout, exit 0, nothing run (even beside a
+    controller file); an unknown option stays an error naming it."""
+    done = subprocess.run([str(example_binary()), str(controller), flag, "--trace", "/nonexistent/t.jsonl"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stderr == "", done.stderr
+    assert done.stdout.startswith("usage: mmrl_runtime_example CONTROLLER")
+    for option in ("--characters", "--decisions", "--targets", "--trace", "--request", "-h, --help"):
+        assert option in done.stdout, option
+    alone = subprocess.run([str(example_binary()), flag], capture_output=True, text=True, timeout=60)
+    assert alone.returncode == 0 and alone.stdout == done.stdout
+    bad = subprocess.run([str(example_binary()), "--helpme"], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "unknown option --helpme" in bad.stderr

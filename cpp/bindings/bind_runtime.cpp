@@ -21,6 +21,7 @@ py::dict decision_dict(const RuntimeDecision& d) {
   out["match"] = d.match;
   out["transition"] = d.transition;
   out["cost"] = d.cost;
+  out["stick"] = d.stick;
   return out;
 }
 
@@ -69,7 +70,20 @@ void bind_runtime(py::module_& m) {
              return new RuntimeCharacter(std::move(c), x, z, yaw, start_frame);
            }),
            py::arg("controller"), py::arg("x"), py::arg("z"), py::arg("yaw"), py::arg("start_frame") = -1)
-      .def("set_target", &RuntimeCharacter::set_target, py::arg("x"), py::arg("z"))
+      .def("set_target", &RuntimeCharacter::set_target, py::arg("x"), py::arg("z"),
+           "The target (world meters) from the next decision on; switches a stick off.")
+      .def("set_stick", &RuntimeCharacter::set_stick, py::arg("x"), py::arg("z"), py::arg("speed"),
+           "A stick in place of the target and the policy, from the next decision on: a world direction (x, z; any "
+           "length > 0) and a speed (m/s > 0); the scripted joystick's action. ValueError naming a bad argument.")
+      .def_property_readonly("stick", &RuntimeCharacter::stick)
+      .def(
+          "stick_action",
+          [](const RuntimeCharacter& ch) {
+            py::array_t<float> action(kTrajectoryDim);
+            ch.stick_action(action.mutable_data());
+            return action;
+          },
+          "The stick's action (12 normalized floats) for the heading now, as the next decision takes it.")
       .def("set_request", &RuntimeCharacter::set_request, py::arg("request"),
            "A request over the file's tags ('style=elderly & gait=walk'; '' for every clip), from the next decision "
            "on. ValueError naming an unknown tag (the file's tags listed) or a request selecting no valid frame.")

@@ -2,7 +2,8 @@
  *
  * One shared library (libmmrl_runtime_c) and one controller file (mmrl export RUN -o x.mmrl)
  * give any engine a character driven by a trained policy: load the controller, create
- * characters, set their targets (and obstacles, and requests), call update(dt), read the pose.
+ * characters, set their targets or sticks (and obstacles, and requests), call update(dt), read
+ * the pose.
  *
  * Conventions
  *   - Every function returns an mmrl_status (MMRL_OK = 0) except the destructors, the version
@@ -14,8 +15,9 @@
  *     exists, such as a load). Strings stay valid until the next failing call on the same handle
  *     (or thread), or until the handle is destroyed. "" when there was no error.
  *   - Out-parameters are written only on MMRL_OK.
- *   - Units: meters, radians, seconds. World: Y up; the character moves on the XZ plane; yaw 0
- *     faces +Z. Quaternions are (w, x, y, z).
+ *   - Units: meters, radians, seconds, speeds in m/s. World: Y up; the character moves on the
+ *     XZ plane; yaw 0 faces +Z, +X is its left (right-handed, as BVH). Quaternions are
+ *     (w, x, y, z).
  *
  * Threads
  *   - A loaded controller is immutable: any number of threads may create characters from it
@@ -66,7 +68,7 @@ typedef struct mmrl_decision {
   int64_t match;         /* the matched database frame (played from match + 1) */
   int32_t transition;    /* 1 when it left the current clip's continuation */
   float root_x, root_z, root_yaw; /* the character frame when it was made */
-  float target_x, target_z;       /* the target it was made for */
+  float target_x, target_z;       /* the target it was made for (a stick's: the last one set) */
   float cost;                     /* the match's squared distance (normalized features) */
 } mmrl_decision;
 
@@ -109,15 +111,24 @@ MMRL_API mmrl_status mmrl_controller_start_frame(const mmrl_controller* controll
 MMRL_API mmrl_status mmrl_controller_max_obstacles(const mmrl_controller* controller, int32_t* out);
 
 /* ----------------------------------------------------------------- characters */
-/* A character at world (x, z) facing yaw, on database frame start_frame (-1: the first valid
- * frame). Its target starts where it stands. */
+/* A character at world (x, z) (meters) facing yaw (radians), on database frame start_frame
+ * (-1: the first valid frame). Its target starts where it stands. */
 MMRL_API mmrl_status mmrl_character_create(mmrl_controller* controller, float x, float z, float yaw,
                                            int64_t start_frame, mmrl_character** out);
 MMRL_API void mmrl_character_destroy(mmrl_character* character);
 MMRL_API const char* mmrl_character_last_error(const mmrl_character* character);
 
-/* The target (world meters), used from the next decision on. */
+/* The target (world meters), used from the next decision on; it switches a stick off (the
+ * policy decides again). */
 MMRL_API mmrl_status mmrl_character_set_target(mmrl_character* character, float x, float z);
+/* A stick in place of the target and the policy, from the next decision on: the player's
+ * direction (world x, z; any length > 0, normalized) and speed (m/s, > 0). Each decision then
+ * matches the scripted joystick's trajectory (positions d * speed * t at 10, 20 and 30 frames,
+ * directions d, d in the character frame) through the task's own search (transition cost,
+ * clip costs, request, path filter). mmrl_character_set_target switches it off. A zero or
+ * non-finite direction, or a speed that is not finite and > 0, is MMRL_ERROR_INVALID_ARGUMENT
+ * (the message names it); the character is then unchanged. */
+MMRL_API mmrl_status mmrl_character_set_stick(mmrl_character* character, float x, float z, float speed);
 /* Obstacle tasks: n rectangles, centres and half sizes n x 2 (x, z), angles n (radians),
  * velocities n x 2 (m/s) or NULL for standing ones. Read at the next decision. */
 MMRL_API mmrl_status mmrl_character_set_obstacles(mmrl_character* character, int32_t n, const float* centres,

@@ -303,6 +303,36 @@ void RuntimeCharacter::set_target(float x, float z) {
   if (!std::isfinite(x) || !std::isfinite(z)) throw std::invalid_argument("target must be finite");
   target_x_ = x;
   target_z_ = z;
+  stick_ = false;
+}
+
+void RuntimeCharacter::set_stick(float x, float z, float speed) {
+  const double length = std::hypot(static_cast<double>(x), static_cast<double>(z));
+  if (!std::isfinite(length) || !(length > 0))
+    throw std::invalid_argument("stick: the direction (x, z) must be finite and not zero, got (" + std::to_string(x) +
+                                ", " + std::to_string(z) + ")");
+  if (!std::isfinite(speed) || !(speed > 0))
+    throw std::invalid_argument("stick: the speed must be finite and > 0 (m/s), got " + std::to_string(speed));
+  stick_x_ = static_cast<float>(x / length);
+  stick_z_ = static_cast<float>(z / length);
+  stick_speed_ = speed;
+  stick_ = true;
+}
+
+void RuntimeCharacter::stick_action(float* out) const {
+  if (!stick_) throw std::invalid_argument("stick_action: no stick is set (set_stick)");
+  // JoystickPolicy.raw_trajectory (arrive off) for the direction d in the character frame.
+  const Database& db = controller_->database();
+  const Vec2 d = world_to_local_xz(stick_x_, stick_z_, character_.root().yaw);
+  float raw[kTrajectoryDim];
+  for (int k = 0; k < 3; ++k) {
+    const float reach = stick_speed_ * (static_cast<float>(kTrajectoryOffsets[k]) / db.fps);
+    raw[4 * k] = d.x() * reach;
+    raw[4 * k + 1] = d.y() * reach;
+    raw[4 * k + 2] = d.x();
+    raw[4 * k + 3] = d.y();
+  }
+  trajectory_normalize(db, raw, out);
 }
 
 void RuntimeCharacter::set_obstacles(int n, const float* centres, const float* half_sizes, const float* angles,
@@ -378,8 +408,11 @@ void RuntimeCharacter::decide() {
   decision_.frames_before = frames_shown_;
   decision_.target_x = target_x_;
   decision_.target_z = target_z_;
-  observe();
-  c.policy().act(obs_.data(), action_.data(), scratch_);
+  observe();  // with a stick too: the obstacle tasks' sensor maps keep their history
+  if (stick_)
+    stick_action(action_.data());
+  else
+    c.policy().act(obs_.data(), action_.data(), scratch_);
   // The training env's own decision (transition cost, bias_yields, candidate filters); the
   // character plays it.
   const int64_t j = plane_ ? plane_->decide(0, action_.data()) : obstacles_->decide(0, action_.data());
@@ -396,6 +429,7 @@ void RuntimeCharacter::decide() {
   decision_.match = character_.last_match();
   decision_.transition = character_.last_transition();
   decision_.cost = character_.last_cost();
+  decision_.stick = stick_;
   k_ = 0;
 }
 

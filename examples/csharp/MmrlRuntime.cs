@@ -4,10 +4,13 @@
 //   using (var controller = MmrlController.Load("plane.mmrl"))
 //   using (var character = controller.CreateCharacter(0, 0, 0))
 //   {
-//       character.SetTarget(3, 4);
+//       character.SetTarget(3, 4);          // world meters; or character.SetStick(0, 1, 1.4f): direction, m/s
 //       var pose = new MmrlPose(controller.NumJoints);
 //       character.Update(1f / 30f, pose);   // pose.LocalRotations (w, x, y, z per joint), pose.Root
 //   }
+//
+// mmrl's frame: meters, radians, m/s; Y up, yaw 0 faces +Z, +X is the character's left
+// (right-handed, as BVH). Unity's is left-handed: unity/MmrlCharacterBehaviour.cs converts.
 //
 // Every failing call throws MmrlException with the status and the library's message. The
 // library is found as "mmrl_runtime_c" (libmmrl_runtime_c.so, mmrl_runtime_c.dll,
@@ -76,6 +79,7 @@ namespace Mmrl
         [DllImport(Lib)] public static extern void mmrl_character_destroy(IntPtr character);
         [DllImport(Lib)] public static extern IntPtr mmrl_character_last_error(CharacterHandle character);
         [DllImport(Lib)] public static extern MmrlStatus mmrl_character_set_target(CharacterHandle character, float x, float z);
+        [DllImport(Lib)] public static extern MmrlStatus mmrl_character_set_stick(CharacterHandle character, float x, float z, float speed);
         [DllImport(Lib)] public static extern MmrlStatus mmrl_character_set_request(
             CharacterHandle character, [MarshalAs(UnmanagedType.LPUTF8Str)] string request);
         [DllImport(Lib)] public static extern MmrlStatus mmrl_character_set_obstacles(
@@ -171,6 +175,8 @@ namespace Mmrl
 
         public int JointParent(int joint) { Check(Native.mmrl_controller_joint_parent(Handle, joint, out var p)); return p; }
 
+        /// <summary>A character at world (x, z), meters, facing yaw (radians; 0 faces +Z), on a
+        /// database frame (-1: the first valid one).</summary>
         public MmrlCharacter CreateCharacter(float x, float z, float yaw, long startFrame = -1)
         {
             Check(Native.mmrl_character_create(Handle, x, z, yaw, startFrame, out var h));
@@ -191,7 +197,13 @@ namespace Mmrl
             if (status != MmrlStatus.Ok) throw new MmrlException(status, Native.Text(Native.mmrl_character_last_error(handle)));
         }
 
+        /// <summary>The target, world meters (mmrl's frame), from the next decision on; ends a stick.</summary>
         public void SetTarget(float x, float z) => Check(Native.mmrl_character_set_target(handle, x, z));
+
+        /// <summary>A stick in place of the target and the policy, from the next decision on: a world
+        /// direction (x, z in mmrl's frame; any length > 0) and a speed in m/s (> 0). SetTarget ends it.
+        /// MmrlException (InvalidArgument) for a zero or non-finite direction or a bad speed.</summary>
+        public void SetStick(float x, float z, float speed) => Check(Native.mmrl_character_set_stick(handle, x, z, speed));
         public void SetRequest(string request) => Check(Native.mmrl_character_set_request(handle, request ?? ""));
 
         public void SetObstacles(int n, float[] centres, float[] halfSizes, float[] angles, float[] velocities = null)

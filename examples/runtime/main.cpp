@@ -13,6 +13,7 @@
 // usage: mmrl_runtime_example CONTROLLER [--characters N] [--decisions D] [--targets "x,z;x,z;..."]
 //                             [--trace FILE] [--request "style=elderly"]
 // --request: every character keeps to the clips carrying these tags (docs/styles.md).
+// -h, --help: the usage on stdout, exit 0.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -27,8 +28,25 @@
 
 namespace {
 
+const char* const kUsage =
+    "usage: mmrl_runtime_example CONTROLLER [--characters N] [--decisions D] [--targets \"x,z;x,z;...\"]\n"
+    "                            [--trace FILE] [--request TAGS]\n"
+    "\n"
+    "Drives N characters with an exported controller (mmrl export RUN -o controller.mmrl) through\n"
+    "a scripted list of targets, without Python, and prints the time per character per frame.\n"
+    "\n"
+    "  CONTROLLER       the controller file (.mmrl)\n"
+    "  --characters N   characters, character i starting at (2 (i % 8), 2 (i / 8)) m facing +Z (default 1)\n"
+    "  --decisions D    decisions per character (default 100)\n"
+    "  --targets LIST   targets relative to each start, meters, \"x,z;x,z;...\" (default \"0,4;4,4;4,-2;-3,0\");\n"
+    "                   the next one once the character is within the task's success radius\n"
+    "  --trace FILE     write the JSON trace of `mmrl play --trace` (one line per decision per character)\n"
+    "  --request TAGS   keep to the clips carrying these tags, e.g. \"style=elderly & gait=walk\"\n"
+    "  -h, --help       this message\n";
+
 struct Options {
   std::string controller, trace, request;
+  bool help = false;
   int characters = 1;
   long decisions = 100;
   std::vector<std::pair<float, float>> targets = {{0.0f, 4.0f}, {4.0f, 4.0f}, {4.0f, -2.0f}, {-3.0f, 0.0f}};
@@ -58,6 +76,10 @@ Options parse(int argc, char** argv) {
       if (k + 1 >= argc) throw std::invalid_argument(a + " needs a value");
       return argv[++k];
     };
+    if (a == "-h" || a == "--help") {
+      o.help = true;
+      return o;
+    }
     if (a == "--characters") o.characters = std::stoi(value());
     else if (a == "--decisions") o.decisions = std::stol(value());
     else if (a == "--targets") o.targets = parse_targets(value());
@@ -67,7 +89,8 @@ Options parse(int argc, char** argv) {
     else if (o.controller.empty()) o.controller = a;
     else throw std::invalid_argument("one controller file only");
   }
-  if (o.controller.empty()) throw std::invalid_argument("usage: mmrl_runtime_example CONTROLLER [options]");
+  if (o.controller.empty())
+    throw std::invalid_argument("usage: mmrl_runtime_example CONTROLLER [options] (--help for the options)");
   if (o.characters < 1 || o.decisions < 1) throw std::invalid_argument("--characters and --decisions must be >= 1");
   return o;
 }
@@ -131,7 +154,12 @@ int run(const Options& o) {
 
 int main(int argc, char** argv) {
   try {
-    return run(parse(argc, argv));
+    const Options o = parse(argc, argv);
+    if (o.help) {
+      std::fputs(kUsage, stdout);
+      return 0;
+    }
+    return run(o);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "mmrl_runtime_example: error: %s\n", e.what());
     return 2;

@@ -1102,8 +1102,18 @@ class RuntimeCharacter:
         """
         A request over the file's tags ('style=elderly & gait=walk'; '' for every clip), from the next decision on. ValueError naming an unknown tag (the file's tags listed) or a request selecting no valid frame.
         """
+    def set_stick(self, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, speed: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        A stick in place of the target and the policy, from the next decision on: a world direction (x, z; any length > 0) and a speed (m/s > 0); the scripted joystick's action. ValueError naming a bad argument.
+        """
     def set_target(self, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
+        """
+        The target (world meters) from the next decision on; switches a stick off.
+        """
+    def stick_action(self) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The stick's action (12 normalized floats) for the heading now, as the next decision takes it.
+        """
     def update(self, dt: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
@@ -1117,6 +1127,9 @@ class RuntimeCharacter:
         ...
     @property
     def root(self) -> tuple[float, float, float]:
+        ...
+    @property
+    def stick(self) -> bool:
         ...
 def bvh_load(path: str, scale: typing.SupportsFloat | typing.SupportsIndex = 0.0, up: str = 'auto', fps: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> Motion:
     """

@@ -4,15 +4,17 @@
 //   auto controller = mmrl::RuntimeController::load("controller.mmrl");  // shared, read-only
 //   mmrl::RuntimeCharacter hero(controller, x, z, yaw);                  // world meters, radians
 //   hero.set_target(tx, tz);                                             // world meters
+//   hero.set_stick(dx, dz, speed);                                       // or a stick: world direction, m/s
 //   const mmrl::RuntimePose& pose = hero.update(dt);                     // seconds
 //
 // update(dt) plays the database at its own rate (30 fps): it shows one frame per 1/fps
 // seconds of accumulated time, and every frames_per_step frames (6 = 0.2 s) it decides: the
 // task's observation (plane: pose features + target in the character frame; obstacles: the
-// two sensor maps first), the policy (policy_net.hpp), then the match and playback of the
-// full path (character.hpp: inertialization, foot locking, two-bone leg IK). These are
-// exactly the decisions of Python's full path (mmrl.rollout.FullPath with the same file,
-// start and targets; tests/test_runtime.py compares them).
+// two sensor maps first), the policy (policy_net.hpp; with a stick set, the stick's
+// trajectory in its place), then the match and playback of the full path (character.hpp:
+// inertialization, foot locking, two-bone leg IK). These are exactly the decisions of Python's
+// full path (mmrl.rollout.FullPath with the same file, start and targets, or with a stick the
+// scripted joystick's actions; tests/test_runtime.py compares them).
 //
 // Spaces: world Y up, X left, Z forward for yaw 0 (forward = (sin yaw, 0, cos yaw)).
 // Threads: a RuntimeController is immutable after load and may be shared by characters on
@@ -123,20 +125,37 @@ struct RuntimeDecision {
   int64_t count = 0;          // decisions so far
   int64_t frames_before = 0;  // frames shown before it (its time is frames_before / fps)
   RootState root_before;      // the root when it was made
-  float target_x = 0, target_z = 0;
+  float target_x = 0, target_z = 0;  // the last target set (a stick's decision does not use it)
   int64_t match = -1;         // the matched frame (played from match + 1)
   bool transition = false;    // not the current clip's continuation
   float cost = 0;             // the match's squared distance (normalized, weighted features)
+  bool stick = false;         // made from the stick (set_stick), not by the policy for the target
 };
 
 class RuntimeCharacter {
  public:
-  // A character on `start_frame` (-1: the first valid frame) at world (x, z) facing yaw.
+  // A character on `start_frame` (-1: the first valid frame) at world (x, z) (meters) facing
+  // yaw (radians; 0 faces +Z). Its target starts where it stands.
   RuntimeCharacter(std::shared_ptr<const RuntimeController> controller, float x, float z, float yaw,
                    int64_t start_frame = -1);
 
-  // The target, world meters; used from the next decision on.
+  // The target, world meters; used from the next decision on. Switches a stick off: the
+  // policy decides again.
   void set_target(float x, float z);
+  // A stick in place of the target and the policy, from the next decision on: the player's
+  // direction (world x, z; any length > 0, normalized) and speed (m/s, > 0). Each decision's
+  // action is then the scripted joystick's (mmrl.rl.policies.JoystickPolicy, arrive off): the
+  // trajectory positions d * speed * t at t = 10, 20, 30 frames / fps and the directions d, d
+  // the stick's direction in the character frame, normalized with the database's feature
+  // mean and scale. Everything after the action is the policy's path: the task's transition
+  // cost, clip costs, request, path filter, a compressed controller's decision. set_target
+  // switches it off. Throws std::invalid_argument naming a non-finite or zero direction, or a
+  // non-finite or non-positive speed; the character is then unchanged.
+  void set_stick(float x, float z, float speed);
+  bool stick() const { return stick_; }
+  // The stick's action for the heading now (12 normalized floats into out), as the next
+  // decision takes it; for tools and tests. Throws std::invalid_argument without a stick.
+  void stick_action(float* out) const;
   // A request over the database's tags (tags.hpp: "style=elderly & gait=walk"; "" for every
   // clip): from the next decision on, matches keep to the clips carrying it, and a policy
   // conditioned on requests (task.request_groups) observes its code. Throws
@@ -189,6 +208,8 @@ class RuntimeCharacter {
   CompressedScratch cscratch_;  // compressed controllers: the start pose's decoding
   std::vector<float> obs_, action_, row_;
   float target_x_ = 0, target_z_ = 0;
+  bool stick_ = false;
+  float stick_x_ = 0, stick_z_ = 0, stick_speed_ = 0;  // unit world direction, m/s
   float clock_ = 0;
   int k_ = 0;  // frames of the last decision shown
   int64_t frames_shown_ = 0;
