@@ -1,12 +1,16 @@
 """The ``mmrl`` command line.
 
 Each command module registers its own subcommands through ``register_cli(subparsers)``.
+Bad input (a wrong argument, file or value) ends in one line, ``mmrl: error: ...``, and exit
+code 2, whether argparse or a command finds it; warnings are one line, ``mmrl: warning: ...``.
+Anything else is a bug and keeps its traceback.
 """
 from __future__ import annotations
 
 import argparse
 import importlib
 import sys
+import warnings
 from typing import List, Optional
 
 # Modules that contribute subcommands, in help order. A module that is missing (a partial
@@ -16,14 +20,37 @@ COMMAND_MODULES = ["mmrl.commands.db", "mmrl.motion.data", "mmrl.commands.train"
                    "mmrl.commands.compress"]
 
 
+class HelpFormatter(argparse.HelpFormatter):
+    """Every option shows its default (unless its help already says it, or it has none)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (action.option_strings and "default" not in text and default not in (None, False, [], "", argparse.SUPPRESS)
+                and action.nargs != 0):
+            text += f" (default: {default})"
+        return text
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: ``mmrl train: error: ... (mmrl train --help)``, exit 2."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+
+    def error(self, message: str):  # argparse's own: usage lines first, then the error
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from . import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="mmrl", description="Motion matching + reinforcement learning: train, watch, measure and export "
-        "character controllers.")
+        "character controllers. Start with: mmrl train plane --data YOUR_BVH_FOLDER --seconds 60")
     parser.add_argument("--version", action="version", version=f"mmrl {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
     sub.required = True
     for name in COMMAND_MODULES:
         try:
@@ -36,18 +63,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None):
+    print(f"mmrl: warning: {message}", file=file or sys.stderr, flush=True)
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    shown = warnings.showwarning
+    warnings.showwarning = _one_line_warning
     try:
+        args = parser.parse_args(argv)
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+    except BrokenPipeError:  # `mmrl db info | head`: the reader left; nothing to say
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except KeyboardInterrupt as e:
+        saved = getattr(e, "saved", None)
+        print("interrupted" + (f"; {saved}" if saved else ""), file=sys.stderr)
         return 130
     except user_errors() as e:
         # Bad input: one clear line, no traceback. Anything else is a bug and keeps its traceback.
         print(f"mmrl: error: {e}", file=sys.stderr)
         return 2
+    finally:
+        warnings.showwarning = shown
 
 
 def user_errors() -> tuple:
@@ -59,7 +100,8 @@ def user_errors() -> tuple:
     from .rl.ppo import CheckpointError
     from .compress.files import CompressedFileError
 
-    return (InputError, CompressedFileError, BVHError, JointRoleError, DatabaseFileError, CheckpointError, ChecksumError, DownloadError,
+    return (InputError, CompressedFileError, BVHError, JointRoleError, DatabaseFileError,
+            CheckpointError, ChecksumError, DownloadError,
             FileNotFoundError, FileExistsError, IsADirectoryError, NotADirectoryError, PermissionError)
 
 

@@ -31,11 +31,13 @@ CHECKPOINT_NAME = "latest.pt"
 class RunDir:
     """A run directory (see the module docstring). ``RunDir(path)`` reads an existing one."""
 
-    def __init__(self, path: "str | os.PathLike[str]"):
+    def __init__(self, path: "str | os.PathLike[str]", require_run: bool = False):
         self.path = Path(path)
         if not self.path.is_dir():
-            raise InputError(f"{self.path}: no such run directory")
+            raise not_a_run(self.path, "no such run directory" if not self.path.exists() else "a file, not a folder")
         self.config: Dict[str, Any] = self._read_config()
+        if require_run and not self.config:
+            raise not_a_run(self.path, f"no {CONFIG_NAME} in it")
         self._db = None
 
     def _read_config(self) -> Dict[str, Any]:
@@ -61,7 +63,8 @@ class RunDir:
         ``backend`` "rllib": ``ppo_config`` is an ``RLlibConfig``, recorded under "rllib"."""
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)
-        config = {"task": task.name, "data": data, "num_envs": int(num_envs), "task_config": asdict(task_config)}
+        config = {"task": task.name, "data": with_run_relative_paths(data, path), "num_envs": int(num_envs),
+                  "task_config": asdict(task_config)}
         if backend == "rllib":
             config.update(backend="rllib", rllib=asdict(ppo_config))
         else:
@@ -113,14 +116,39 @@ class RunDir:
 
     @property
     def data_spec(self) -> Dict[str, Any]:
+        """The run's data spec, its paths found again if the run or its data moved: a path
+        recorded relative to the run first, then the absolute one, then a file of the same name
+        beside the run or in it. InputError naming the missing file and ``--db`` otherwise."""
         spec = self.config.get("data")
-        return spec if spec is not None else {"synthetic": True}
+        if spec is None:
+            return {"synthetic": True}
+        if not isinstance(spec, dict):
+            return spec
+        spec = dict(spec)
+        relative = spec.pop("from_run", {}) or {}
+        if spec.get("db"):
+            spec["db"] = self._find(spec["db"], relative.get("db"), "database", "--db FILE")
+        if spec.get("data"):
+            rel = list(relative.get("data") or [])
+            spec["data"] = [self._find(p, rel[k] if k < len(rel) else None, "data", "--data DIR")
+                            for k, p in enumerate(spec["data"])]
+        return spec
+
+    def _find(self, recorded: str, relative: Optional[str], what: str, flag: str) -> str:
+        name = Path(recorded).name
+        candidates = ([self.path / relative] if relative else []) + [Path(recorded), self.path.parent / name,
+                                                                     self.path / name]
+        for c in candidates:
+            if c.exists():
+                return str(c.resolve())
+        raise InputError(f"{self.path}: its {what} {recorded} is missing (moved or deleted?); pass it with {flag}")
 
     def database(self):
         """The run's database (built or loaded once)."""
         if self._db is None:
-            db = database_from_spec(self.data_spec)
-            self.check_database(db, f"the data of {self.path} ({self.data_spec})")
+            spec = self.data_spec
+            db = database_from_spec(spec)
+            self.check_database(db, f"the data of {self.path} ({spec})")
             self._db = db
         return self._db
 
@@ -133,9 +161,32 @@ class RunDir:
         from .rl.ppo import load_policy
 
         if not self.checkpoint.is_file():
-            raise InputError(f"{self.checkpoint}: no trained policy in this run directory")
+            raise not_a_run(self.path, f"no {CHECKPOINT_NAME} in it: it stopped before its first checkpoint"
+                            if self.config else f"no {CONFIG_NAME} or {CHECKPOINT_NAME} in it")
         return load_policy(self.checkpoint, device=device)
 
+
+
+def not_a_run(path: Path, why: str) -> InputError:
+    """The one wording of "this is not a run": ``PATH: not a training run (WHY; ...)``."""
+    return InputError(f"{path}: not a training run ({why}; runs are made by mmrl train)")
+
+
+def with_run_relative_paths(spec: Any, run: Path) -> Any:
+    """A data spec that also records its paths relative to the run directory ("from_run"), so
+    a run moved together with its data still finds it."""
+    if not isinstance(spec, dict) or not (spec.get("db") or spec.get("data")):
+        return spec
+
+    def rel(p: str) -> Optional[str]:
+        try:
+            return os.path.relpath(p, Path(run).resolve())
+        except ValueError:  # another drive
+            return None
+
+    out = {k: v for k, v in spec.items() if k != "from_run"}
+    out["from_run"] = {"db": rel(spec["db"])} if spec.get("db") else {"data": [rel(p) for p in spec["data"]]}
+    return out
 
 
 def write_config(path: Path, config: Dict[str, Any]) -> None:

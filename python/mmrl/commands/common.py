@@ -8,16 +8,109 @@ from dataclasses import fields
 from pathlib import Path
 from typing import Any, Dict, List
 
+import math
+import sys
+
 from ..errors import InputError
 from ..motion.sources import data_spec, database_from_spec
 from ..tasks import Task, get_task, task_names
 
 
+# ---------------------------------------------------------------------- values checked where they are read
+def _number(text: str, kind, what: str):
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}")
+    if kind is int:
+        if value != int(value):
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r} (not a whole number)")
+        return int(value)
+    return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: a whole number >= 1 (``1e6`` reads as 1000000)."""
+    v = _number(text, int, "a whole number >= 1")
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return v
+
+
+def count(text: str) -> int:
+    """argparse type: a whole number >= 0."""
+    v = _number(text, int, "a whole number >= 0")
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    return v
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    v = _number(text, float, "a number > 0")
+    if v <= 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    return v
+
+
+def port(text: str) -> int:
+    """argparse type: a TCP port, 0 (any free one) to 65535."""
+    v = _number(text, int, "a port number 0-65535")
+    if not 0 <= v <= 65535:
+        raise argparse.ArgumentTypeError(f"expected a port number 0-65535, got {text!r}")
+    return v
+
+
+def output_path(path, flag: str, suffixes=()) -> Path:
+    """An output file named on the command line: its folder is created (as in every command),
+    and a folder or a wrong extension is refused naming ``flag``."""
+    out = Path(path)
+    if out.is_dir():
+        raise InputError(f"{flag} {out}: a folder; name the file to write")
+    if suffixes and out.suffix.lower() not in suffixes:
+        raise InputError(f"{flag} {out}: the file name must end in {' or '.join(suffixes)}")
+    if out.parent.exists() and not out.parent.is_dir():
+        raise InputError(f"{flag} {out}: {out.parent} is a file, not a folder")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def warn(message: str) -> None:
+    """One line on stderr: ``mmrl: warning: ...``."""
+    print(f"mmrl: warning: {message}", file=sys.stderr, flush=True)
+
+
+class _Deprecated(argparse.Action):
+    """An old spelling of an option: stores into the new one's dest and says so once."""
+
+    def __init__(self, option_strings, dest, new: str = "", **kwargs):
+        self.new = new
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        note = self.new(values) if callable(self.new) else f"it is now {self.new}"
+        warn(f"{option_string} is deprecated and goes in the next release: {note}")
+        if self.nargs == 0:
+            values = True
+        if isinstance(getattr(namespace, self.dest, None), list) and not isinstance(values, list):
+            values = getattr(namespace, self.dest) + [values]
+        setattr(namespace, self.dest, values)
+
+
+def deprecated_alias(p: argparse.ArgumentParser, old: str, new, dest: str, **kwargs) -> None:
+    """``old`` (hidden from --help) as a deprecated spelling of the option whose dest is ``dest``;
+    ``new``: its new spelling, or a function of the value that says what to do instead."""
+    p.add_argument(old, dest=dest, action=_Deprecated, new=new, help=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                   **kwargs)
+
+
 def add_data_options(p: argparse.ArgumentParser, *, mirror: bool = False) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--data", nargs="+", metavar="DIR|FILE",
-                   help="BVH files or directories to build the database from (default: synthetic data)")
-    g.add_argument("--db", metavar="FILE", help="a database saved by 'mmrl db build'")
+                   help="BVH files or folders to build the database from (default: the synthetic data)")
+    g.add_argument("--db", metavar="FILE", help="a database file made by 'mmrl db build'")
     if mirror:
         p.add_argument("--mirror", action="store_true", help="with --data: add mirrored copies of the clips")
 
@@ -31,26 +124,45 @@ def database_from_args(args: argparse.Namespace):
     return database_from_spec(data_spec_from_args(args))
 
 
+def run_database(run, args: argparse.Namespace):
+    """A run's database, or the one ``--db`` / ``--data`` name (which must have the run's skeleton)."""
+    if getattr(args, "db", None) or getattr(args, "data", None):
+        db = database_from_args(args)
+        run.check_database(db, "--db" if args.db else "--data")
+        return db
+    return run.database()
+
+
 # ---------------------------------------------------------------------- training options (both backends)
 def _coerce(value: str, like):
+    """``value`` read as the type of ``like`` (ValueError saying what was expected)."""
     if isinstance(like, bool):
         if value.lower() in ("1", "true", "yes", "on"):
             return True
         if value.lower() in ("0", "false", "no", "off"):
             return False
-        raise InputError(f"--set: expected true or false, got {value!r}")
-    try:
-        if isinstance(like, int):
-            return int(float(value))
-        if isinstance(like, tuple):
+        raise ValueError("expected true or false")
+    if isinstance(like, int):
+        try:
+            number = float(value)
+        except ValueError:
+            raise ValueError("expected a whole number") from None
+        if not math.isfinite(number) or number != int(number):
+            raise ValueError("expected a whole number")
+        return int(number)
+    if isinstance(like, tuple):
+        try:
             return tuple(int(v) for v in value.split(",") if v)
-    except ValueError:
-        raise InputError(f"--set: cannot read {value!r} as {type(like).__name__}") from None
+        except ValueError:
+            raise ValueError("expected whole numbers separated by commas") from None
     if isinstance(like, float) or like is None:
         try:
-            return float(value)
+            number = float(value)
         except ValueError:
             return None if value.lower() == "none" else value
+        if math.isnan(number):
+            raise ValueError("expected a number, got NaN")
+        return number
     return value
 
 
@@ -63,7 +175,10 @@ def split_overrides(items, *dataclasses_) -> List[Dict[str, Any]]:
         k, v = item.split("=", 1)
         for d, o in zip(dataclasses_, out):
             if k in {f.name for f in fields(d)}:
-                o[k] = _coerce(v, getattr(d, k))
+                try:
+                    o[k] = _coerce(v, getattr(d, k))
+                except ValueError as e:
+                    raise InputError(f"--set {k}={v}: {e}") from None
                 break
         else:
             names = sorted({f.name for d in dataclasses_ for f in fields(d)})
@@ -101,23 +216,29 @@ def resolve_run(task: Task, args, default_out: str):
     from ..runs import RunDir
 
     if args.resume:
-        run = RunDir(args.resume)
+        run = RunDir(args.resume, require_run=True)
         saved = run.config
-        if not saved:
-            raise InputError(f"{run.path}: no config.json; not a run directory")
         if run.task_name != task.name:
             raise InputError(f"{run.path} holds a '{run.task_name}' run, not '{task.name}'")
         return saved, run.path, run.data_spec
     out = Path(args.out or default_out)
     if (out / "latest.pt").exists():
-        raise InputError(f"{out} already holds a run; use --resume {out} or another --out")
+        raise InputError(f"{out} already holds a run; continue it with --resume {out}, or pass another --out")
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: a file, not a folder")
     return {}, out, data_spec_from_args(args)
+
+
+STOP_REASONS = {"steps": "the step budget (--steps) is done", "seconds": "the time budget (--seconds) is used up"}
 
 
 def report_training(steps: int, seconds: float, how: str, row: Dict[str, Any], checkpoint, callbacks) -> None:
     """The lines ``mmrl train`` ends with (either backend)."""
-    print(f"trained {steps:,} steps in {seconds:.1f} s ({how}); success {row.get('success_rate', float('nan')):.3f}, "
-          f"return {row.get('episode_return', float('nan')):.1f}; checkpoint {checkpoint}")
+    success = row.get("success_rate", float("nan"))
+    outcome = ("no training episode has ended yet" if not math.isfinite(success) else
+               f"{100 * success:.1f}% of the last iteration's training episodes succeeded")
+    print(f"trained {steps:,} steps in {seconds:.1f} s and stopped: {STOP_REASONS.get(how, how)}; {outcome}")
+    print(f"saved {checkpoint}; next: mmrl eval {Path(checkpoint).parent}")
     for cb in callbacks:
         if hasattr(cb, "describe"):
             print(cb.describe())

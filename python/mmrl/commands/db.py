@@ -11,6 +11,7 @@ from .. import _core
 from ..motion.database import DEFAULT_FPS
 from ..errors import InputError
 from ..motion.sources import load_any
+from .common import deprecated_alias, output_path, positive_float
 
 
 def parse_roles(items):
@@ -29,12 +30,15 @@ def register_cli(sub) -> None:
     dsub.required = True
 
     b = dsub.add_parser("build", help="build a database from BVH files or directories")
-    b.add_argument("data", nargs="+", help="BVH files or directories (searched recursively)")
-    b.add_argument("-o", "--output", required=True, help="output .npz file")
+    b.add_argument("data", nargs="+", help="BVH files or folders (searched recursively)")
+    b.add_argument("-o", "--output", required=True, help="output database file (.npz; its folder is created)")
     b.add_argument("--mirror", action="store_true", help="add left/right mirrored copies of every clip")
-    b.add_argument("--scale", type=float, default=None, help="file units to meters (default: inferred)")
+    b.add_argument("--scale", type=positive_float, default=None,
+                   help="meters per file unit, e.g. 0.01 for centimeters (default: inferred from the skeleton's "
+                        "height; 'mmrl db info' shows it)")
     b.add_argument("--role", action="append", metavar="ROLE=JOINT",
-                   help="override a joint role, e.g. --role left_foot=LeftAnkle (repeatable)")
+                   help="name the joint of a role when it is not found by name, e.g. --role left_foot=LeftAnkle "
+                        "(repeatable; roles: hips, left/right_upper_leg, _lower_leg, _foot, _toe)")
     add_import_arguments(b)
     t = b.add_argument_group("tags (docs/styles.md; the known datasets' naming and a top-level mmrl_tags.csv are read "
                              "unless --no-auto-tags)")
@@ -44,8 +48,9 @@ def register_cli(sub) -> None:
                    help="tag clips by their file names: {group} takes a part up to the next '_', {group:a|b} one "
                         "of the words, * anything; it must match the whole name without extension, e.g. "
                         "'dataset-2_{content}_{style}_*' (repeatable)")
-    t.add_argument("--tags", metavar="FILE", action="append", default=[],
+    t.add_argument("--tag-file", metavar="FILE", action="append", default=[], dest="tag_file",
                    help="a sidecar file of tags: CSV lines 'file,tag tag ...' or JSON {file: [tags]} (repeatable)")
+    deprecated_alias(t, "--tags", "--tag-file (train's --request-groups names tag groups)", "tag_file")
     t.add_argument("--no-auto-tags", action="store_true", help="only the tags the options above give")
     b.set_defaults(func=cmd_build)
 
@@ -58,14 +63,22 @@ def register_cli(sub) -> None:
 def add_import_arguments(parser, when: str = "") -> None:
     parser.add_argument("--up", choices=("auto", "y", "z"), default="auto",
                         help="the files' up axis; auto detects it per file from the hips and feet" + when)
-    parser.add_argument("--fps", type=float, default=DEFAULT_FPS,
+    parser.add_argument("--fps", type=_fps, default=DEFAULT_FPS,
                         help=f"the database's frame rate; other rates are resampled (default {DEFAULT_FPS:g}; "
                              "0 keeps the files' rate)" + when)
 
 
+def _fps(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        v = -1.0
+    if not 0 <= v <= 1000:
+        raise argparse.ArgumentTypeError(f"expected a frame rate 1-1000 (or 0 to keep the files' rate), got {text!r}")
+    return v
+
+
 def import_options(args: argparse.Namespace) -> dict:
-    if not args.fps >= 0:
-        raise InputError(f"--fps must be positive (or 0 to keep the files' rate), got {args.fps}")
     return {"up": None if args.up == "auto" else args.up, "fps": args.fps or None}
 
 
@@ -78,22 +91,40 @@ def tag_rules(args: argparse.Namespace):
             compile_pattern(p)
         except ValueError as e:
             raise InputError(f"--tag-pattern: {e}") from None
-    return TagRules(folder=args.tag_folder, patterns=tuple(args.tag_pattern), sidecars=tuple(args.tags),
+    return TagRules(folder=args.tag_folder, patterns=tuple(args.tag_pattern), sidecars=tuple(args.tag_file),
                     auto=not args.no_auto_tags)
 
 
 def cmd_build(args: argparse.Namespace) -> int:
     from ..motion.database import Database
 
+    out = output_path(args.output, "-o")
     t0 = time.perf_counter()
     db = Database.from_bvh(args.data, mirror=args.mirror, scale=args.scale, roles=parse_roles(args.role),
                            progress=True, tags=tag_rules(args), **import_options(args))
     t1 = time.perf_counter()
-    db.save(args.output)
-    print(f"{db!r}\nbuilt in {t1 - t0:.2f} s, saved to {args.output} in {time.perf_counter() - t1:.2f} s")
+    db.save(out)
+    print(f"built {db.num_clips} clips ({int(db.clip_mirrored.sum())} mirrored), {db.num_frames:,} frames "
+          f"({db.minutes:.1f} min at {fps_text(db.fps)} fps), {db.num_joints} joints, in {t1 - t0:.2f} s; saved "
+          f"{out} in {time.perf_counter() - t1:.2f} s")
+    print(unit_line(db, args.scale))
     for line in tag_lines(db):
         print(line)
+    print(f"next: mmrl db info {out}, or mmrl train plane --db {out} --seconds 60")
     return 0
+
+
+def fps_text(fps: float) -> str:
+    """A frame rate as people write it: 30, 29.97, 59.94 (a file's 0.033333 s frame time is 30)."""
+    return f"{round(fps, 2):g}"
+
+
+def unit_line(db, given=None) -> str:
+    """How the files' units became meters: the scale and the unit it stands for."""
+    from ..motion.database import unit_name
+
+    how = "as given by --scale" if given else "inferred from the skeleton's height; --scale overrides it"
+    return f"unit         {unit_name(db.source_scale)} (scale {db.source_scale:g} m per file unit, {how})"
 
 
 def tag_lines(db) -> list:
@@ -119,9 +150,9 @@ def source_lines(db) -> list:
     src = db.clip_source_fps
     other = np.abs(src - db.fps) > 1e-4 * db.fps
     if other.any():
-        rates = ", ".join(f"{r:g}" for r in np.unique(np.round(src[other], 3)))
+        rates = ", ".join(fps_text(r) for r in np.unique(np.round(src[other], 3)))
         lines.append(f"source fps   {int(other.sum())} of {db.num_clips} clips resampled from {rates} fps "
-                     f"to {db.fps:g} fps")
+                     f"to {fps_text(db.fps)} fps")
     z_up = db.clip_source_up == "z"
     if z_up.any():
         lines.append(f"up axis      {int(z_up.sum())} of {db.num_clips} clips were Z up, rotated to Y up")
@@ -137,8 +168,9 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"database     {args.database}")
     print(f"clips        {db.num_clips} ({int(db.clip_mirrored.sum())} mirrored), "
           f"length {lengths.min():.1f}-{lengths.max():.1f} s (median {np.median(lengths):.1f} s)")
-    print(f"frames       {db.num_frames} at {db.fps:g} fps = {db.minutes:.1f} min; "
+    print(f"frames       {db.num_frames} at {fps_text(db.fps)} fps = {db.minutes:.1f} min; "
           f"{int(db.valid_mask.sum())} valid matches")
+    print(unit_line(db, getattr(args, "scale", None)))
     for line in source_lines(db):
         print(line)
     for line in tag_lines(db):

@@ -15,19 +15,21 @@ import time
 import numpy as np
 
 from ..errors import InputError
+from .common import add_data_options, output_path, positive_int, run_database
 
 
 def register_cli(sub) -> None:
     x = sub.add_parser("export", help="export a trained run: a controller file for the C++ runtime and/or the "
                        "policy as ONNX")
     x.add_argument("run", metavar="RUN", help="a training run directory")
+    add_data_options(x)
     x.add_argument("-o", "--output", metavar="FILE", help="write the controller file (.mmrl) for mmrl_runtime")
     x.add_argument("--onnx", metavar="FILE", help="write the policy as ONNX (needs mmrl[onnx])")
     x.add_argument("--compressed", metavar="FILE", help="with -o: a compressed controller file, the networks of "
                    "FILE (mmrl compress) in place of the database (docs/compressed.md)")
-    x.add_argument("--starts", type=int, default=8, metavar="K",
+    x.add_argument("--starts", type=positive_int, default=8, metavar="K",
                    help="with --compressed: start frames kept for the characters (default: 8)")
-    x.add_argument("--check-observations", type=int, default=512, metavar="N",
+    x.add_argument("--check-observations", type=positive_int, default=512, metavar="N",
                    help="observations the ONNX check compares on (default: 512)")
     x.set_defaults(func=cmd_export)
 
@@ -55,11 +57,12 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise InputError("export: nothing to write; pass -o FILE (controller) and/or --onnx FILE")
     if args.compressed and args.output is None:
         raise InputError("export: --compressed writes a controller file; pass -o FILE")
-    run = RunDir(args.run)
+    for name in ("output", "onnx"):
+        if getattr(args, name) is not None:
+            output_path(getattr(args, name), "-o" if name == "output" else "--onnx")
+    run = RunDir(args.run, require_run=True)
     task = run.task
-    if task is None:
-        raise InputError(f"{args.run}: not a training run (no config.json)")
-    policy, db, config = run.policy(), run.database(), run.task_config(task)
+    policy, db, config = run.policy(), run_database(run, args), run.task_config(task)
     if args.output is not None:
         from ..export.runtime_export import write_controller
 
@@ -68,8 +71,6 @@ def cmd_export(args: argparse.Namespace) -> int:
             from ..compress.model import CompressedController
             from ..export.compressed_export import write_compressed_controller
 
-            if args.starts < 1:
-                raise InputError(f"--starts must be >= 1, got {args.starts}")
             try:
                 size = write_compressed_controller(args.output, db, policy, task, config,
                                                    CompressedController(args.compressed, db), args.starts)
@@ -84,8 +85,6 @@ def cmd_export(args: argparse.Namespace) -> int:
     if args.onnx is not None:
         from ..export.onnx_export import check_onnx, export_onnx
 
-        if args.check_observations < 1:
-            raise InputError(f"--check-observations must be >= 1, got {args.check_observations}")
         env = task.make_vector_env(1, db=db, config=config, num_threads=1)
         low, high = env.single_action_space.low, env.single_action_space.high
         request_tags = env.request_tags

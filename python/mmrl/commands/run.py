@@ -19,25 +19,40 @@ import numpy as np
 
 from ..errors import InputError
 from ..tasks import get_task, task_names
-from .common import add_data_options, database_from_args
+from .common import (add_data_options, count, database_from_args, deprecated_alias, output_path, positive_float,
+                     positive_int)
 
-POLICIES = ("joystick", "joystick-run")
+#: Episodes of the joystick that ``mmrl eval`` runs at the policy's speed by default (the first
+#: ones of the same seed): enough for its sliding, a fifth of a 100-episode evaluation.
+PEER_EPISODES = 20
+
+POLICIES = ("trained", "joystick", "joystick-run")
 
 
-def add_shared_options(p: argparse.ArgumentParser) -> None:
+def add_shared_options(p: argparse.ArgumentParser, motion: bool) -> None:
+    """The options of eval (``motion`` False: ``--episodes``) and of render and export-bvh
+    (``motion`` True: ``--length``)."""
     p.add_argument("run", nargs="?", metavar="RUN",
-                   help="a training run directory (uses RUN/latest.pt and the database named in RUN/config.json)")
+                   help="a training run directory (its latest.pt, task, options and database)")
     add_data_options(p)
-    p.add_argument("--env", choices=task_names(), default=None,
+    p.add_argument("--task", choices=task_names(), default=None,
                    help="the task (default: RUN's task if RUN is given, else plane)")
+    deprecated_alias(p, "--env", "--task", "task")
     staged = [n for n in task_names() if get_task(n).stages]
-    p.add_argument("--stage", type=int, default=None, metavar="K",
+    p.add_argument("--stage", type=positive_int, default=None, metavar="K",
                    help=f"curriculum stage ({', '.join(staged)}; default: the last, the hardest)")
     p.add_argument("--policy", choices=POLICIES, default=None,
-                   help="a scripted policy (default: RUN's trained policy if RUN is given, else joystick)")
-    p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
-    p.add_argument("--seconds", type=float, default=10.0, help="length of rendered/exported motion (default: 10)")
-    p.add_argument("--episodes", type=int, default=20, help="evaluation episodes (default: 20)")
+                   help="trained: RUN's policy; joystick / joystick-run: a scripted stick held toward the target at "
+                        "the data's walking / running speed (default: trained with RUN, else joystick)")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the episodes (default: 0)")
+    if motion:
+        p.add_argument("--length", type=positive_float, default=10.0, metavar="SECONDS",
+                       help="seconds of motion to write (default: 10)")
+        deprecated_alias(p, "--seconds", "--length (--seconds is a training budget)", "length", type=positive_float)
+        deprecated_alias(p, "--episodes", lambda v: "it never did anything here; drop it", "ignored_episodes")
+    else:
+        p.add_argument("--episodes", type=positive_int, default=20, help="evaluation episodes (default: 20)")
+        deprecated_alias(p, "--seconds", lambda v: "it never did anything in eval; use --episodes", "ignored_seconds")
     p.add_argument("--no-ik", action="store_true", help="switch off foot locking and leg IK")
     p.add_argument("--no-inertialization", action="store_true", help="hard switches at transitions")
     p.add_argument("--request", default="", metavar="TAGS",
@@ -49,30 +64,34 @@ def add_shared_options(p: argparse.ArgumentParser) -> None:
 
 
 def register_cli(sub) -> None:
-    e = sub.add_parser("eval", help="evaluate a policy on the task with the full character (quality metrics)")
-    add_shared_options(e)
+    e = sub.add_parser("eval", help="measure a policy on its task with the full character: success, time, foot "
+                       "sliding, against the raw mocap and a joystick")
+    add_shared_options(e, motion=False)
     e.add_argument("--json", action="store_true", help="print one JSON object")
-    e.add_argument("--line", type=int, default=None, metavar="N",
-                   help="also run N joysticks at speeds from the data's slowest walk to its fastest run on the "
+    e.add_argument("--no-peer", action="store_true",
+                   help="skip the joystick at the policy's own speed (by default it runs on the first "
+                        f"{PEER_EPISODES} of the same episodes, for the verdict)")
+    e.add_argument("--line", type=count, default=0, metavar="N",
+                   help="also run N joysticks at speeds from the data's slowest walk to its fastest run on all the "
                    "same episodes, and report the policy's IK-off foot sliding against that line at its own time "
-                   "to target (default 5 on the plane task, 0 = none elsewhere)")
+                   "to target (0: none)")
     e.add_argument("--per-request", nargs="?", const="", default=None, metavar="GROUPS",
                    help="evaluate once per value of these tag groups (comma-separated; default: the run's "
-                        "--tags groups, else every group of the database) and print a table by request")
+                        "request groups, else every group of the database) and print a table by request")
     e.set_defaults(func=cmd_eval)
 
     r = sub.add_parser("render", help="render a policy following a sequence of targets to MP4, GIF or a "
                        "standalone HTML page")
-    add_shared_options(r)
+    add_shared_options(r, motion=True)
     r.add_argument("-o", "--output", help="output .mp4 or .gif")
     r.add_argument("--html", metavar="FILE", help="output a standalone .html page with a playback bar that opens "
                    "offline in any browser (needs mmrl[viewer]); with or instead of -o")
-    r.add_argument("--size", default="640x360", help="video size WxH (default: 640x360)")
+    r.add_argument("--size", default="640x360", help="video size WxH")
     r.add_argument("--still", metavar="PNG", help="also write the middle frame as a PNG")
     r.set_defaults(func=cmd_render)
 
     x = sub.add_parser("export-bvh", help="write generated motion as BVH on the input skeleton (+ .npz of positions)")
-    add_shared_options(x)
+    add_shared_options(x, motion=True)
     x.add_argument("-o", "--output", required=True, help="output .bvh (the .npz is written beside it)")
     x.set_defaults(func=cmd_export)
 
@@ -84,12 +103,16 @@ class Setup:
     def __init__(self, args: argparse.Namespace):
         from ..runs import RunDir
 
-        run: Optional[RunDir] = RunDir(args.run) if args.run is not None else None
+        run: Optional[RunDir] = RunDir(args.run, require_run=True) if args.run is not None else None
+        if args.policy == "trained" and run is None:
+            raise InputError("--policy trained: name the training run, e.g. mmrl eval runs/plane-seed0")
+        if args.policy == "trained":
+            args.policy = None
         saved = run.task if run is not None else None
-        self.task = get_task(args.env) if args.env else (saved or get_task("plane"))
+        self.task = get_task(args.task) if args.task else (saved or get_task("plane"))
         if saved is not None and args.policy is None and self.task is not saved:
-            raise InputError(f"{args.run} is a '{saved.name}' run; its policy cannot run --env {self.task.name} "
-                             f"(pass --env {saved.name}, or --policy joystick)")
+            raise InputError(f"{args.run} is a '{saved.name}' run; its policy cannot run --task {self.task.name} "
+                             f"(pass --task {saved.name}, or --policy joystick)")
         self.stage = _check_stage(self.task, args.stage)
         self.config = run.task_config(self.task) if saved is not None else self.task.default_config()
         if args.db or args.data or run is None:
@@ -146,10 +169,8 @@ def _check_stage(task, stage: Optional[int]) -> Optional[int]:
 def _follow(args):
     from ..rollout import follow
 
-    if not args.seconds > 0:
-        raise InputError("--seconds must be positive")
     s = Setup(args)
-    return s, follow(s.task, s.db, s.policy, seconds=args.seconds, seed=args.seed, config=s.config, stage=s.stage,
+    return s, follow(s.task, s.db, s.policy, seconds=args.length, seed=args.seed, config=s.config, stage=s.stage,
                      request=s.request, compressed=s.compressed, **s.options)
 
 
@@ -157,62 +178,110 @@ def _follow(args):
 def cmd_eval(args: argparse.Namespace) -> int:
     from ..rollout import evaluate_full_path
 
-    if args.episodes < 1:
-        raise InputError("--episodes must be >= 1")
     s = Setup(args)
     if args.per_request is not None:
         return _eval_per_request(args, s)
     t0 = time.perf_counter()
-    res = evaluate_full_path(s.task, s.db, s.policy, episodes=args.episodes, seed=args.seed, config=s.config,
-                             stage=s.stage, request=s.request, compressed=s.compressed, **s.options)
+    episodes = dict(seed=args.seed, config=s.config, stage=s.stage, request=s.request, **s.options)
+    res = evaluate_full_path(s.task, s.db, s.policy, episodes=args.episodes, compressed=s.compressed, **episodes)
     if s.compressed is not None:
         res["compressed"] = str(s.compressed.path)
-    line = (5 if s.task.name == "plane" else 0) if args.line is None else args.line
-    if line:
+    from ..rl.policies import JoystickPolicy
+
+    if not args.no_peer and not isinstance(s.policy, JoystickPolicy) and res.get("mean_speed_m_per_s"):
+        speed = float(res["mean_speed_m_per_s"])
+        peer = evaluate_full_path(s.task, s.db, JoystickPolicy(s.db, speed, arrive=True),
+                                  episodes=min(args.episodes, PEER_EPISODES), **episodes)
+        peer.pop("episode_results", None)
+        res["joystick_at_speed"] = {"speed_m_per_s": speed, "episodes": min(args.episodes, PEER_EPISODES), **peer}
+    if args.line:
         from ..rl.reference import against_line, joystick_line, joystick_speeds
 
         try:
-            speeds = joystick_speeds(s.db, line, request=s.request)
+            speeds = joystick_speeds(s.db, args.line, request=s.request)
         except ValueError as e:
-            raise InputError(f"--line {line}: {e}") from None
-        res.update(against_line(res, joystick_line(s.task, s.db, speeds=speeds, episodes=args.episodes,
-                                                   seed=args.seed, config=s.config, stage=s.stage,
-                                                   request=s.request, **s.options)))
+            raise InputError(f"--line {args.line}: {e}") from None
+        res.update(against_line(res, joystick_line(s.task, s.db, speeds=speeds, episodes=args.episodes, **episodes)))
     res.update({"policy": s.policy_name, "env": s.task.name, "seed": args.seed, "ik": not args.no_ik,
                 "inertialization": not args.no_inertialization, "wall_time_s": time.perf_counter() - t0})
+    res["verdict"] = verdict(res, args.run)
     res["episode_results"] = res.pop("episode_results")  # keep the per-episode list last
     if args.json:
         json.dump(res, sys.stdout)
         sys.stdout.write("\n")
         return 0
-    fmt = lambda v: "n/a" if v is None else f"{v:.3f}"  # noqa: E731
+    print_evaluation(res, s, args.episodes)
+    return 0
+
+
+def _f(v, digits: int = 2) -> str:
+    return "n/a" if v is None else f"{v:.{digits}f}"
+
+
+def print_evaluation(res, s: "Setup", episodes: int) -> None:
+    """``mmrl eval``'s text: what ran, the numbers a person reads, the peers and a verdict."""
     where = f" (stage {res['stage']})" if "stage" in res else ""
-    print(f"{s.policy_name} on {s.task.name}{where}: {args.episodes} episodes"
+    print(f"{s.policy_name} on the {s.task.name} task{where}: {episodes} episodes, seed {res['seed']}"
           + (f", request {s.request!r}" if s.request else "")
           + (f", compressed controller {s.compressed.path}" if s.compressed is not None else ""))
-    rates = [k for k in res if k.endswith("_rate") and k != "success_rate"]
-    for k in ["success_rate", *rates, "mean_time_to_target_s", "foot_sliding_cm_per_s", "foot_sliding_ik_off_cm_per_s",
-              "transitions_per_s", "pose_jump_p99_cm", "max_pose_jump_cm", "matched_cost_mean", "mean_speed_m_per_s",
-              "request_fidelity"]:
-        if k in res:
-            print(f"  {k:<32} {fmt(res[k])}")
+    print(f"  success             {100 * res['success_rate']:.1f}%")
+    for k in (k for k in res if k.endswith("_rate") and k != "success_rate"):
+        print(f"  {k.replace('_rate', ''):<19} {100 * res[k]:.1f}%")
+    print(f"  time to target      {_f(res.get('mean_time_to_target_s'))} s (mean over successes)")
+    print(f"  mean speed          {_f(res.get('mean_speed_m_per_s'))} m/s")
+    print(f"  foot sliding        {_f(res.get('foot_sliding_cm_per_s'), 1)} cm/s with IK, "
+          f"{_f(res.get('foot_sliding_ik_off_cm_per_s'), 1)} without")
+    print(f"  transitions         {_f(res.get('transitions_per_s'))} per s; pose jump p99 "
+          f"{_f(res.get('pose_jump_p99_cm'), 1)} cm")
+    if res.get("request_fidelity") is not None:
+        print(f"  frames in request   {100 * res['request_fidelity']:.1f}%")
     floor = res.get("raw_mocap") or {}
     if floor:
-        print(f"  raw mocap (clips played straight): foot sliding {fmt(floor.get('foot_sliding_cm_per_s'))} cm/s")
+        print(f"  raw mocap (the clips played straight, no IK): foot sliding {_f(floor.get('foot_sliding_cm_per_s'), 1)}"
+              f" cm/s")
+    peer = res.get("joystick_at_speed")
+    if peer:
+        print(f"  joystick at the same speed ({peer['speed_m_per_s']:.2f} m/s), first {peer['episodes']} of the same "
+              f"episodes: success {100 * peer['success_rate']:.0f}%, time {_f(peer.get('mean_time_to_target_s'))} s, "
+              f"sliding {_f(peer.get('foot_sliding_cm_per_s'), 1)} / {_f(peer.get('foot_sliding_ik_off_cm_per_s'), 1)}"
+              f" cm/s (IK on / off)")
     if res.get("joystick_line"):
         print("  joysticks on the same episodes (the equal-speed line):")
         print(f"    {'speed m/s':>9} {'success':>8} {'time s':>7} {'sliding IK off':>15} {'transitions/s':>14}")
         for r in res["joystick_line"]:
-            print(f"    {r['speed_m_per_s']:>9.2f} {fmt(r['success_rate']):>8} {fmt(r['mean_time_to_target_s']):>7} "
-                  f"{fmt(r['foot_sliding_ik_off_cm_per_s']):>15} {fmt(r['transitions_per_s']):>14}")
+            print(f"    {r['speed_m_per_s']:>9.2f} {_f(r['success_rate'], 3):>8} {_f(r['mean_time_to_target_s']):>7} "
+                  f"{_f(r['foot_sliding_ik_off_cm_per_s'], 1):>15} {_f(r['transitions_per_s']):>14}")
         ref, ratio = res["joystick_line_sliding_ik_off_cm_per_s"], res["sliding_ik_off_vs_joystick_line"]
-        if ref is None:
-            print("  against the line: n/a (no time to target)")
-        else:
-            where = "at or below" if res["at_or_below_joystick_line"] else "above"
-            print(f"  against the line at its time to target: {fmt(res.get('foot_sliding_ik_off_cm_per_s'))} vs "
-                  f"{fmt(ref)} cm/s ({ratio:.2f}x, {where} the line)")
-    return 0
+        if ref is not None:
+            print(f"  against the line at its time to target: {_f(res.get('foot_sliding_ik_off_cm_per_s'), 1)} vs "
+                  f"{_f(ref, 1)} cm/s ({ratio:.2f}x)")
+    print(f"verdict: {res['verdict']}")
+    print(f"(took {res['wall_time_s']:.1f} s; --json prints every number)")
+
+
+def verdict(res, run: Optional[str] = None) -> str:
+    """One plain sentence on an evaluation: how often it succeeds, and how its feet compare
+    with the joystick at its own speed (IK off: what the data and the matching give) and with
+    the raw mocap."""
+    rate = res["success_rate"]
+    if rate >= 0.95:
+        out = f"reliable: it succeeds in {100 * rate:.0f}% of episodes"
+    elif rate >= 0.8:
+        out = f"mostly works: it succeeds in {100 * rate:.0f}% of episodes"
+    else:
+        out = f"not reliable yet: it succeeds in only {100 * rate:.0f}% of episodes"
+        if run:
+            out += f" (train longer: mmrl train --resume {run} --seconds S)"
+    ours = res.get("foot_sliding_ik_off_cm_per_s")
+    peer = (res.get("joystick_at_speed") or {}).get("foot_sliding_ik_off_cm_per_s")
+    floor = (res.get("raw_mocap") or {}).get("foot_sliding_cm_per_s")
+    if ours is not None and peer:
+        r = ours / peer
+        how = ("are as steady as" if r <= 1.2 else "slide somewhat more than" if r <= 2 else
+               "slide much more than")
+        out += f"; its feet {how} the joystick's at the same speed ({r:.2f}x its sliding without IK"
+        out += f", {ours / floor:.1f}x the raw mocap's)" if floor else ")"
+    return out + "."
 
 
 def _eval_per_request(args: argparse.Namespace, s: "Setup") -> int:
@@ -268,17 +337,19 @@ def _eval_per_request(args: argparse.Namespace, s: "Setup") -> int:
 def cmd_render(args: argparse.Namespace) -> int:
     if args.output is None and args.html is None:
         raise InputError("mmrl render needs -o OUT.mp4|.gif, --html OUT.html, or both")
-    if args.html is not None and Path(args.html).suffix.lower() not in (".html", ".htm"):
-        raise InputError(f"{args.html}: the --html output must end in .html")
-    if args.output is None:
-        return _render_html(args, *_follow(args))
     try:
         w, h = (int(v) for v in args.size.lower().split("x"))
     except ValueError:
         raise InputError(f"--size expects WxH, got {args.size!r}") from None
-    out = Path(args.output)
-    if out.suffix.lower() not in (".mp4", ".gif"):
-        raise InputError(f"{out}: the output must end in .mp4 or .gif")
+    if not (16 <= w <= 8192 and 16 <= h <= 8192):
+        raise InputError(f"--size {args.size}: width and height must be 16-8192 pixels")
+    if args.html is not None:
+        output_path(args.html, "--html", (".html", ".htm"))
+    if args.still is not None:
+        output_path(args.still, "--still", (".png",))
+    if args.output is None:
+        return _render_html(args, *_follow(args))
+    out = output_path(args.output, "-o", (".mp4", ".gif"))
     from ..viz.render import render_video
 
     s, rec = _follow(args)
@@ -322,12 +393,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     from .. import _core
     from ..io import atomic_write_bytes, atomic_write_npz
 
-    out = Path(args.output)
-    if out.suffix.lower() != ".bvh":
-        raise InputError(f"{out}: the output must end in .bvh")
+    out = output_path(args.output, "-o", (".bvh",))
     s, rec = _follow(args)
     db = s.db
-    out.parent.mkdir(parents=True, exist_ok=True)
     motion = _core.motion_from_pose(db._db, np.ascontiguousarray(rec["local_translations"], np.float32),
                                     np.ascontiguousarray(rec["local_rotations"], np.float32), out.name)
     atomic_write_bytes(out, motion.to_bvh().encode())

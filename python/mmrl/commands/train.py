@@ -9,7 +9,8 @@ from typing import Any, Dict
 from ..errors import InputError
 from ..rl.quality_log import MatchQualityLog
 from ..tasks import Task, get_task, task_names
-from .common import add_data_options, apply_values, report_training, resolve_run, split_overrides, task_flag_options
+from .common import (add_data_options, apply_values, count, deprecated_alias, positive_float, positive_int,
+                     report_training, resolve_run, split_overrides, task_flag_options)
 
 
 def register_cli(sub) -> None:
@@ -19,26 +20,31 @@ def register_cli(sub) -> None:
                        "terminal; metrics go to RUN/metrics.csv and TensorBoard (tensorboard --logdir RUN); "
                        "checkpoints to RUN/latest.pt (atomic) and RUN/snapshot_<step>.pt. Tasks: " +
                        "; ".join(f"{n}: {get_task(n).summary}" for n in tasks))
-    t.add_argument("task", choices=tasks)
+    t.add_argument("task", nargs="?", choices=tasks,
+                   help="the task to train (optional with --resume: the run's own)")
     add_data_options(t, mirror=True)
     budget = t.add_mutually_exclusive_group()
-    budget.add_argument("--steps", type=int, default=None, help="env steps to train (default 1,000,000)")
-    budget.add_argument("--seconds", type=float, default=None, help="wall-clock training budget")
-    t.add_argument("--seed", type=int, default=0)
-    t.add_argument("--out", default=None, help="run directory (default runs/<task>-seed<K>)")
+    budget.add_argument("--steps", type=positive_int, default=None,
+                        help="stop after this many env steps (default: 1,000,000 unless --seconds)")
+    budget.add_argument("--seconds", type=positive_float, default=None,
+                        help="stop after this many seconds of training (wall clock)")
+    t.add_argument("--seed", type=int, default=0, help="random seed of the networks, the envs and the episodes")
+    t.add_argument("--out", default=None, help="run directory (default: runs/<task>-seed<SEED>)")
     t.add_argument("--resume", metavar="RUN", default=None,
-                   help="continue the run in RUN (its options, changed by any --set, which config.json records)")
-    t.add_argument("--envs", type=int, default=None, help="parallel environments (default 64)")
-    t.add_argument("--threads", type=int, default=0, help="C++ env threads (0 = all cores)")
-    t.add_argument("--device", default="auto", help="torch device: auto, cpu, cuda")
+                   help="continue the run in RUN with its own options (changed by any --set; config.json records "
+                        "them)")
+    t.add_argument("--envs", type=positive_int, default=None, help="parallel environments (default: 64)")
+    t.add_argument("--threads", type=count, default=0, help="C++ env threads (0: all cores)")
+    t.add_argument("--device", default="auto", help="torch device: auto (CUDA when present), cpu, cuda")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a PPOConfig field or a task option, e.g. --set learning_rate=3e-4 "
                         "--set max_steps=150 (repeatable)")
-    t.add_argument("--tags", metavar="GROUPS", default=None,
-                   help="condition one policy on requests over these tag groups of the database, e.g. --tags "
-                        "style or --tags style,gait (task option request_groups; docs/styles.md): each episode "
-                        "draws a request, matching keeps to its clips, and the policy observes it")
+    t.add_argument("--request-groups", metavar="GROUPS", default=None, dest="request_groups",
+                   help="condition one policy on requests over these tag groups of the database, e.g. "
+                        "--request-groups style or style,gait (task option request_groups; docs/styles.md): each "
+                        "episode draws a request, matching keeps to its clips, and the policy observes it")
+    deprecated_alias(t, "--tags", "--request-groups (db build's --tag-file is the tag file)", "request_groups")
     presets = sorted({p for n in tasks for p in get_task(n).presets} | {"paper-rllib"})
     t.add_argument("--preset", choices=presets or None, default=None,
                    help="a task's named set of options; " + "; ".join(
@@ -52,8 +58,8 @@ def register_cli(sub) -> None:
     r.add_argument("--backend", choices=("ppo", "rllib"), default=None,
                    help="ppo: mmrl's own trainer (default); rllib: RLlib's PPO on Ray workers, the same run "
                         "directory (a resumed run keeps its backend)")
-    r.add_argument("--workers", type=int, default=None, help="rllib: EnvRunner workers (default 1)")
-    r.add_argument("--envs-per-worker", type=int, default=None,
+    r.add_argument("--workers", type=positive_int, default=None, help="rllib: EnvRunner workers (default 1)")
+    r.add_argument("--envs-per-worker", type=positive_int, default=None,
                    help="rllib: characters per worker, one C++ vector env (default 32)")
     r.add_argument("--address", default=None,
                    help="rllib: a Ray cluster to join (e.g. HEAD_IP:6379, or 'auto'); default: a local Ray")
@@ -68,8 +74,8 @@ def register_cli(sub) -> None:
     p = sub.add_parser("plot", help="plot a run's learning curves and checkpoint trajectories (PNG)")
     p.add_argument("run", help="a run directory")
     p.add_argument("-o", "--output", default=None, help="output directory (default RUN/plots)")
-    p.add_argument("--targets", type=int, default=4, help="targets in the trajectory plot")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--targets", type=positive_int, default=4, help="targets in the trajectory plot")
+    p.add_argument("--seed", type=int, default=0, help="random seed of the targets")
     p.set_defaults(func=cmd_plot)
 
 
@@ -97,10 +103,10 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
         if saved and args.preset is not None:
             raise InputError("--preset: a resumed run keeps its configuration (change options with --set)")
         sets = [f"{k}={v}" for k, v in task.presets[preset].items()] + sets
-    if getattr(args, "tags", None):
+    if getattr(args, "request_groups", None):
         if saved:
-            raise InputError("--tags: a resumed run keeps its request groups")
-        sets.append(f"request_groups={args.tags}")
+            raise InputError("--request-groups: a resumed run keeps its request groups")
+        sets.append(f"request_groups={args.request_groups}")
     options = task_flag_options(task, args, saved, sets)
     ppo_over, task_over = split_overrides(sets, cfg, task_cfg)
     apply_values(cfg, ppo_over)
@@ -114,12 +120,17 @@ def cmd_train(args: argparse.Namespace) -> int:
     from ..rl import ppo
     from ..runs import RunDir
 
-    task = get_task(args.task)
+    if args.task is None and not args.resume:
+        raise InputError(f"train: name the task ({', '.join(task_names())}), e.g. mmrl train plane --seconds 60")
     if args.resume:
-        saved_backend = RunDir(args.resume).config.get("backend", "ppo")
+        resumed = RunDir(args.resume, require_run=True)
+        if args.task is None:
+            args.task = resumed.task_name
+        saved_backend = resumed.config.get("backend", "ppo")
         if args.backend is not None and args.backend != saved_backend:
             raise InputError(f"{args.resume}: trained with --backend {saved_backend}; resume it with that backend")
         args.backend = saved_backend
+    task = get_task(args.task)
     if args.backend == "rllib":
         from .train_rllib import cmd_train_rllib
 

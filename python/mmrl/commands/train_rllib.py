@@ -104,6 +104,7 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
             run.stop()
         if started_here:
             ray.shutdown()
-    report_training(run.global_step, run.wall_s, f"RLlib, {cfg.workers} workers x {cfg.envs()} envs", row,
+    report_training(run.global_step, run.wall_s, f"its budget is used up (RLlib, {cfg.workers} workers x {cfg.envs()} "
+                    "envs)", row,
                     out / "latest.pt", callbacks)
     return 0

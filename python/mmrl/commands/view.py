@@ -14,10 +14,11 @@ import threading
 import webbrowser
 
 from ..errors import InputError
+from .common import add_data_options, deprecated_alias, output_path, port, positive_float, positive_int, run_database
 
 
 def _server_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--port", type=int, default=8080, help="port to serve on (default: 8080; the next free one if "
+    p.add_argument("--port", type=port, default=8080, help="port to serve on (default: 8080; the next free one if "
                    "busy; 0: any free port)")
     p.add_argument("--host", default="127.0.0.1",
                    help="address to bind (default: 127.0.0.1, this machine only; 0.0.0.0 opens it to the network)")
@@ -28,19 +29,23 @@ def register_cli(sub) -> None:
     v = sub.add_parser("view", help="watch a run's episodes, a BVH file or a database's clips in the browser")
     v.add_argument("source", metavar="SOURCE", help="a training run directory, a .bvh file or a database .npz")
     _server_options(v)
-    v.add_argument("--seconds", type=float, default=20.0, help="run: seconds of episodes to play (default: 20)")
+    v.add_argument("--length", type=positive_float, default=20.0, metavar="SECONDS",
+                   help="run: seconds of episodes to play (default: 20)")
+    deprecated_alias(v, "--seconds", "--length (--seconds is a training budget)", "length", type=positive_float)
     v.add_argument("--seed", type=int, default=0, help="run: random seed of the episodes (default: 0)")
-    v.add_argument("--stage", type=int, default=None, metavar="K", help="run: curriculum stage (default: the last)")
+    v.add_argument("--stage", type=positive_int, default=None, metavar="K",
+                   help="run: curriculum stage (default: the last)")
     v.set_defaults(func=cmd_view)
 
     p = sub.add_parser("play", help="steer a trained policy live in the browser (click the ground to set the target)")
     p.add_argument("run", metavar="RUN", help="a training run directory")
+    add_data_options(p)
     _server_options(p)
-    p.add_argument("--policy", choices=("trained", "joystick"), default="trained",
+    p.add_argument("--policy", choices=("trained", "joystick", "joystick-run"), default="trained",
                    help="the policy to start with (switchable in the page; default: trained)")
     p.add_argument("--trace", metavar="FILE", help="append one JSON line per decision step to FILE")
     p.add_argument("--seed", type=int, default=0, help="random seed of the start (and obstacles) (default: 0)")
-    p.add_argument("--stage", type=int, default=None, metavar="K", help="curriculum stage (default: the last)")
+    p.add_argument("--stage", type=positive_int, default=None, metavar="K", help="curriculum stage (default: the last)")
     p.add_argument("--request", default="", metavar="TAGS",
                    help="the request to start with, e.g. \"style=elderly\" (switchable in the page; docs/styles.md)")
     p.add_argument("--compressed", default=None, metavar="FILE",
@@ -86,7 +91,7 @@ def cmd_view(args: argparse.Namespace) -> int:
     from ..viewer.view_app import ViewApp
 
     check_port(args.port)
-    playback = load_playback(args.source, seconds=args.seconds, seed=args.seed, stage=args.stage)
+    playback = load_playback(args.source, seconds=args.length, seed=args.seed, stage=args.stage)
     scene = _serve(args, f"mmrl view {playback.name}")
     app = ViewApp(scene, playback)
     return _wait(scene, app.run, args)
@@ -106,14 +111,14 @@ def cmd_play(args: argparse.Namespace) -> int:
     # One observation per decision: a second torch thread only adds hand-off and contention
     # (the obstacles CNN: 0.5 ms on one thread, 25 ms on two while another process trains).
     torch.set_num_threads(1)
-    run = RunDir(args.run)
+    run = RunDir(args.run, require_run=True)
     task = run.task
-    if task is None:
-        raise InputError(f"{args.run}: not a training run (no config.json)")
     _check_stage(task, args.stage)
     from .run import check_request
 
-    db = run.database()
+    db = run_database(run, args)
+    if args.trace:
+        output_path(args.trace, "--trace")
     compressed = None
     if args.compressed:
         from ..compress.model import CompressedController

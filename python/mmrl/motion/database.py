@@ -15,7 +15,8 @@ from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 
 from .. import _core
-from .bvh import _options as _bvh_options, check_motion, warn_if_implausible
+from .bvh import MotionImportWarning, _options as _bvh_options, check_motion, warn_if_implausible
+from ..errors import InputError
 from ..arrays import MAX_ENTRIES, index_array, real_array
 from ..io import atomic_write_npz
 
@@ -36,6 +37,59 @@ FILE_VERSION = 2
 #: The database's frame rate unless told otherwise: the trajectory offsets (+10/+20/+30
 #: frames) and the decision interval (6 frames) mean 1/3, 2/3, 1 s and 0.2 s at this rate.
 DEFAULT_FPS = 30.0
+
+
+#: Median speeds (m/s, over the valid frames, from the +1 s trajectory sample) outside this
+#: range are not people moving: a wrong unit (``--scale``) is the usual cause.
+PLAUSIBLE_MEDIAN_SPEED = (0.05, 8.0)
+_UNITS = {1.0: "meters", 0.01: "centimeters", 0.0254: "inches", 0.001: "millimeters"}
+
+
+def unit_name(scale: float) -> str:
+    """The unit a file scale (file units -> meters) stands for, e.g. ``"centimeters"``."""
+    for s, name in _UNITS.items():
+        if abs(scale - s) <= 1e-6 * s:
+            return name
+    return f"{scale:g} m per unit"
+
+
+def _is_bvh(path: Path) -> bool:
+    with open(path, "rb") as fh:
+        return fh.read(64).lstrip(b"\xef\xbb\xbf \t\r\n").upper().startswith(b"HIERARCHY")
+
+
+def is_database_file(path: PathLike) -> bool:
+    """A file that starts like an ``.npz`` (a zip), whatever its name."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(4) == b"PK\x03\x04"
+    except OSError:
+        return False
+
+
+def _check_usable(core, motions) -> None:
+    """InputError when no frame can be matched; MotionImportWarning when the data's median speed
+    is not a person's (a wrong unit)."""
+    valid = core.valid_mask.view(np.bool_)
+    if not valid.any():
+        need = int(_core.TRAJECTORY_OFFSETS[-1]) + 1
+        longest = max((m.num_frames for m in motions), default=0)
+        raise InputError(f"no clip is long enough to match: a clip needs more than {need} frames "
+                         f"({need / core.fps:.2f} s at {core.fps:g} fps) and the longest of the {len(motions)} "
+                         f"has {longest}; add longer clips")
+    col = _core.TRAJECTORY_POSITION_COLUMNS[2]
+    f = core.features[valid]
+    speed = float(np.median(np.hypot(f[:, col], f[:, col + 1]))) * core.fps / _core.TRAJECTORY_OFFSETS[-1]
+    lo, hi = PLAUSIBLE_MEDIAN_SPEED
+    if not lo <= speed <= hi:
+        import warnings
+
+        scale = float(core.source_scale)
+        # The unit that would give a walking median (about 1.3 m/s), on a log scale.
+        guess = min(_UNITS, key=lambda u: abs(np.log(u / (scale * 1.3 / max(speed, 1e-9)))))
+        warnings.warn(f"the data's median speed is {speed:.3g} m/s, not a person's ({lo:g}-{hi:g} m/s): is the unit "
+                      f"right? The scale is {scale:g} ({unit_name(scale)}); if the files are in {_UNITS[guess]}, "
+                      f"pass --scale {guess:g} (scale={guess:g} from Python)", MotionImportWarning, stacklevel=4)
 
 
 class DatabaseFileError(ValueError):
@@ -201,7 +255,13 @@ class Database:
         if fps is not None:
             motions = [m.resampled(fps) if abs(m.fps - fps) > 1e-4 * fps else m for m in motions]
         w = _weights_list(weights, [DEFAULT_WEIGHTS[n] for n in BLOCK_NAMES])
-        core = _core.Database.build(motions, bool(mirror), dict(roles or {}), w)
+        try:
+            core = _core.Database.build(motions, bool(mirror), dict(roles or {}), w)
+        except _core.JointRoleError:
+            raise
+        except ValueError as e:  # the data's: two skeletons, no clip, a bad weight
+            raise InputError(str(e)) from None
+        _check_usable(core, motions)
         if clip_tags is not None and len(clip_tags[0]):
             names, matrix = list(clip_tags[0]), np.asarray(clip_tags[1])
             if matrix.shape != (len(motions), len(names)):
@@ -213,6 +273,11 @@ class Database:
         return cls(core, src_fps, src_up)
 
     # ----------------------------------------------------------------- properties
+    @property
+    def source_scale(self) -> float:
+        """The file units -> meters of the source BVH (as given or inferred)."""
+        return float(self._db.source_scale)
+
     num_frames = property(lambda self: self._db.num_frames, doc="Number of frames N.")
     num_joints = property(lambda self: self._db.num_joints, doc="Number of joints J.")
     num_clips = property(lambda self: self._db.num_clips, doc="Number of clips C.")
@@ -340,8 +405,14 @@ class Database:
             DatabaseFileError: the file is corrupt, not an mmrl database, or of another version.
         """
         path = Path(path)
+        if path.is_dir():
+            raise DatabaseFileError(f"{path}: a folder, not a database file; to use the BVH files in it pass "
+                                    f"--data {path}, or build a database first: mmrl db build {path} -o db.npz")
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such database file")
+        if _is_bvh(path):
+            raise DatabaseFileError(f"{path}: a BVH file, not a database; pass it with --data {path}, or build a "
+                                    f"database first: mmrl db build {path} -o db.npz")
         try:
             with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
                 if "format" not in z.files or str(z["format"]) != FILE_FORMAT:

@@ -13,7 +13,7 @@ import os
 from pathlib import Path
 from typing import Any, Dict, Optional, Sequence, Union
 
-from .database import Database
+from .database import Database, is_database_file
 
 PathLike = Union[str, os.PathLike]
 _DEFAULT_DB: Optional[Database] = None
@@ -67,6 +67,6 @@ def load_any(path: PathLike, **import_options) -> Database:
     """A database from a ``.npz`` file, or built from a BVH file or directory (``import_options``:
     ``Database.from_bvh``'s, e.g. ``up`` and ``fps``)."""
     p = Path(path)
-    if p.is_file() and p.suffix == ".npz":
+    if p.is_file() and (p.suffix == ".npz" or is_database_file(p)):
         return Database.load(p)
     return Database.from_bvh(p, **import_options)

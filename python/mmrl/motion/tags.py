@@ -35,6 +35,8 @@ from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
+from ..errors import InputError
+
 PathLike = Union[str, "os.PathLike[str]"]
 
 #: The naming of the datasets mmrl knows: applied to the files whose names they match.
@@ -50,9 +52,15 @@ AUTO_SIDECARS: Tuple[str, ...] = ("mmrl_tags.csv", "mmrl_tags.json")
 _WORD = re.compile(r"^[A-Za-z0-9_.\-]+$")
 
 
-class TagFileError(ValueError):
+class TagFileError(InputError):
     """A sidecar tag file is malformed or names a clip the data does not have (the message
     gives the file and line)."""
+
+
+def tag_value(name: str) -> str:
+    """A folder or file-name part as a tag value: runs of spaces and other characters a tag
+    cannot hold become one ``_`` (``Slow Walk`` -> ``Slow_Walk``)."""
+    return re.sub(r"[^A-Za-z0-9_.\-]+", "_", str(name)).strip("_")
 
 
 def check_tag(tag: str, where: str = "tag") -> str:
@@ -201,17 +209,28 @@ def clip_tags_for_files(files: Sequence[PathLike], roots: Sequence[PathLike] = (
     root_dirs = [Path(r) for r in roots if Path(r).is_dir()]
     per_file: List[set] = [set() for _ in paths]
     if rules.folder:
-        g = check_tag(f"{rules.folder}=x", "--tag-folder").partition("=")[0]
+        try:
+            g = check_tag(f"{rules.folder}=x", "--tag-folder").partition("=")[0]
+        except ValueError as e:
+            raise InputError(f"{e}: name a group, e.g. --tag-folder style") from None
         for k, p in enumerate(paths):
-            per_file[k].add(check_tag(f"{g}={p.parent.name}", f"--tag-folder {g} ({p})"))
-    patterns = [(s, compile_pattern(s)) for s in rules.patterns]
+            value = tag_value(p.parent.name)
+            if not value:
+                raise InputError(f"--tag-folder {g}: the folder of {p} has no letters or digits to make a tag of")
+            per_file[k].add(f"{g}={value}")
+    patterns = [(s, compile_pattern(s), True) for s in rules.patterns]
     if rules.auto:
-        patterns += [(s, compile_pattern(s)) for s in AUTO_PATTERNS]
-    for _, rx in patterns:
+        patterns += [(s, compile_pattern(s), False) for s in AUTO_PATTERNS]
+    for text, rx, own in patterns:
+        hits = 0
         for k, p in enumerate(paths):
             m = rx.fullmatch(p.stem)
             if m:
-                per_file[k].update(f"{g}={v}" for g, v in m.groupdict().items())
+                hits += 1
+                per_file[k].update(f"{g}={tag_value(v) or v}" for g, v in m.groupdict().items())
+        if own and not hits and paths:
+            raise InputError(f"--tag-pattern {text!r} matches none of the {len(paths)} files (names such as "
+                             f"{paths[0].stem!r}); it must match a whole name without its extension")
     sidecars = [Path(s) for s in rules.sidecars]
     if rules.auto:
         sidecars = [r / n for r in root_dirs for n in AUTO_SIDECARS if (r / n).is_file()] + sidecars

@@ -748,10 +748,13 @@ def train(envs: gym.vector.VectorEnv, cfg: PPOConfig, out_dir: str | os.PathLike
                 rng = capture_rng_state(learner.generator)
                 last_saved_step = save_due_checkpoints(learner, rng, out_dir, last_saved_step)
         save_checkpoint(learner.checkpoint(rng), latest_path)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         # Keep the progress of every completed iteration; --resume continues from there.
         if rng is not None:
             save_checkpoint(learner.checkpoint(rng), latest_path)
+            e.saved = f"saved step {learner.global_step:,} to {latest_path}; continue with: mmrl train --resume {out_dir}"
+        elif latest_path.exists():
+            e.saved = f"{latest_path} holds the last saved checkpoint; continue with: mmrl train --resume {out_dir}"
         raise
     finally:
         if progress is not None:

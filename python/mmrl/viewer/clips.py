@@ -126,11 +126,9 @@ def run_playback(path: Path, *, seconds: float = 20.0, seed: int = 0, stage: Opt
     from ..runs import RunDir
 
     if not seconds > 0:
-        raise InputError("--seconds must be positive")
-    run = RunDir(path)
+        raise InputError("--length must be positive")
+    run = RunDir(path, require_run=True)
     task = run.task
-    if task is None:
-        raise InputError(f"{path}: not a training run (no config.json)")
     if stage is not None and not 1 <= stage <= (task.stages or 0):
         raise InputError(f"--stage must be in 1..{task.stages} for a {task.name} run" if task.stages
                          else f"--stage: the {task.name} task has no curriculum stages")

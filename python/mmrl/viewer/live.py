@@ -45,7 +45,8 @@ class LiveSession:
         self.run = FullPath(task, db, config=config, stage=stage, seed=seed, record=False, continuous=True,
                             request=request, compressed=compressed)
         self.config = self.run.config
-        self.policies = {"trained": policy, "joystick": JoystickPolicy.preset(db, "joystick")}
+        self.policies = {"trained": policy, "joystick": JoystickPolicy.preset(db, "joystick"),
+                         "joystick-run": JoystickPolicy.preset(db, "joystick-run")}
         self.policy_name = "trained"
         self.fps = float(db.fps)
         self.F = int(self.config.frames_per_step)

@@ -48,7 +48,7 @@ class PlayApp:
         if sess.has_obstacles:
             help_text += "; **shift+click** picks an obstacle to drag"
         s.text(f"**{sess.task.name}** · {help_text}")
-        self.policy_menu = s.dropdown("policy", ["trained", "joystick"], sess.policy_name)
+        self.policy_menu = s.dropdown("policy", list(sess.policies), sess.policy_name)
         if sess.db.tag_names:  # a request switches the character at its next decision (docs/styles.md)
             options = ["any"] + list(sess.db.tag_names)
             self.request_menu = s.dropdown("request", options, sess.request if sess.request in options else "any")
