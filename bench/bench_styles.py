@@ -216,7 +216,7 @@ def main() -> None:
     multi = out / "multi"
     t0 = time.perf_counter()
     sets = [a for kv in args.set for a in ("--set", kv)]
-    train(cli, db_path, multi, ["--tags", args.tags, "--seconds", str(args.seconds), *sets], args.seed)
+    train(cli, db_path, multi, ["--request-groups", args.tags, "--seconds", str(args.seconds), *sets], args.seed)
     rd = RunDir(multi)
     policy, config = rd.policy(), rd.task_config(task)
     import csv

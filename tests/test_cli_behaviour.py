@@ -70,8 +70,8 @@ def test_core_trains_evaluates_and_exports_without_the_viz_extra(tmp_path):
         assert not any(m.split(".")[0] in ("matplotlib", "imageio", "tensorboard") for m in sys.modules)
         assert main(["train", "plane", "--steps", "1024", "--envs", "8", "--out", "run", "--no-progress"]) == 0
         assert main(["eval", "run", "--episodes", "2", "--json"]) == 0
-        assert main(["export-bvh", "run", "--seconds", "0.5", "-o", "out.bvh"]) == 0
-        assert main(["render", "run", "--seconds", "0.5", "-o", "out.gif"]) == 2
+        assert main(["export-bvh", "run", "--length", "0.5", "-o", "out.bvh"]) == 0
+        assert main(["render", "run", "--length", "0.5", "-o", "out.gif"]) == 2
     ''', tmp_path)
     assert r.returncode == 0, r.stdout + r.stderr
     assert (tmp_path / "run" / "metrics.csv").is_file() and (tmp_path / "out.bvh").is_file()

@@ -78,7 +78,7 @@ def test_the_commands_take_a_compressed_controller(exported, tmp_path, capsys):
     assert res["compressed"] == str(cpt) and res["episodes"] == 3 and 0.0 <= res["success_rate"] <= 1.0
     assert res["transitions_per_s"] >= 0 and res["pose_jump_p99_cm"] >= 0
     out = tmp_path / "c.bvh"
-    assert main(["export-bvh", str(run), "--compressed", str(cpt), "--seconds", "2", "-o", str(out)]) == 0
+    assert main(["export-bvh", str(run), "--compressed", str(cpt), "--length", "2", "-o", str(out)]) == 0
     assert out.is_file() and "Frames: 6" in out.read_text()[:20000]
     capsys.readouterr()
     # Refused with the reason, naming the file: a request, a missing file, a corrupt one.

@@ -22,7 +22,7 @@ def read_video(path, width, height):
 
 def test_export_bvh_round_trip_synthetic(tmp_path, capsys):
     out = tmp_path / "gen.bvh"
-    assert main(["export-bvh", "--seconds", "2", "--seed", "1", "-o", str(out)]) == 0
+    assert main(["export-bvh", "--length", "2", "--seed", "1", "-o", str(out)]) == 0
     m = mmrl.load_bvh(out)
     z = np.load(out.with_suffix(".npz"))
     assert m.num_frames == z["positions"].shape[0] == 1 + 10 * 6
@@ -36,7 +36,7 @@ def test_export_bvh_round_trip_synthetic(tmp_path, capsys):
 def test_export_bvh_on_shared_data(tmp_path, shared_data):
     out = tmp_path / "gen.bvh"
     data = sorted((shared_data / "normal").glob("*.bvh"))[:30]
-    assert main(["export-bvh", "--data", *map(str, data), "--seconds", "3", "-o", str(out)]) == 0
+    assert main(["export-bvh", "--data", *map(str, data), "--length", "3", "-o", str(out)]) == 0
     m = mmrl.load_bvh(out)
     z = np.load(out.with_suffix(".npz"))
     assert m.num_frames == z["positions"].shape[0] == 91
@@ -46,7 +46,7 @@ def test_export_bvh_on_shared_data(tmp_path, shared_data):
 def test_render_mp4_shows_the_character_moving(tmp_path, shared_data):
     out = tmp_path / "walk.mp4"
     data = sorted((shared_data / "normal").glob("*.bvh"))[:30]
-    assert main(["render", "--data", *map(str, data), "--seconds", "2", "-o", str(out),
+    assert main(["render", "--data", *map(str, data), "--length", "2", "-o", str(out),
                  "--size", "320x180", "--still", str(tmp_path / "still.png")]) == 0
     frames = read_video(out, 320, 180)
     assert len(frames) == 61 and frames[0].shape == (180, 320, 3)
@@ -56,9 +56,9 @@ def test_render_mp4_shows_the_character_moving(tmp_path, shared_data):
 
 def test_render_gif_and_bad_output(tmp_path):
     out = tmp_path / "a.gif"
-    assert main(["render", "--seconds", "0.4", "-o", str(out), "--size", "160x90"]) == 0
+    assert main(["render", "--length", "0.4", "-o", str(out), "--size", "160x90"]) == 0
     assert len(iio.mimread(str(out))) == 13
-    assert main(["render", "--seconds", "1", "-o", str(tmp_path / "a.avi")]) == 2
+    assert main(["render", "--length", "1", "-o", str(tmp_path / "a.avi")]) == 2
 
 
 def test_eval_json(capsys):

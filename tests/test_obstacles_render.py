@@ -126,7 +126,7 @@ def test_evaluate_obstacles_counts_outcomes(db):
 def test_eval_json_keys_match_the_plane_task_plus_collision_rate(capsys):
     assert main(["eval", "--policy", "joystick", "--episodes", "1", "--line", "0", "--json"]) == 0
     plane = json.loads(capsys.readouterr().out)
-    assert main(["eval", "--env", "obstacles", "--policy", "joystick", "--episodes", "3", "--stage", "2",
+    assert main(["eval", "--task", "obstacles", "--policy", "joystick", "--episodes", "3", "--stage", "2",
                  "--json"]) == 0
     obst = json.loads(capsys.readouterr().out)
     assert set(plane) <= set(obst)
@@ -135,8 +135,8 @@ def test_eval_json_keys_match_the_plane_task_plus_collision_rate(capsys):
 
 
 @pytest.mark.parametrize("argv, message", [
-    (["--env", "obstacles", "--stage", "0"], "--stage must be in 1..10"),
-    (["--env", "obstacles", "--stage", "11"], "--stage must be in 1..10"),
+    (["--task", "obstacles", "--stage", "0"], "--stage must be in 1..10"),
+    (["--task", "obstacles", "--stage", "11"], "--stage must be in 1..10"),
     (["--stage", "3"], "--stage applies to --env obstacles only"),
 ])
 def test_bad_stage_is_refused(argv, message, capsys, tmp_path):
@@ -148,7 +148,7 @@ def test_bad_stage_is_refused(argv, message, capsys, tmp_path):
 
 def test_rendered_obstacles_gif_reads_back(tmp_path, capsys):
     out, still = tmp_path / "obst.gif", tmp_path / "still.png"
-    assert main(["render", "--env", "obstacles", "--stage", "4", "--seconds", "1.5", "--size", "160x96",
+    assert main(["render", "--task", "obstacles", "--stage", "4", "--length", "1.5", "--size", "160x96",
                  "--seed", "2", "-o", str(out), "--still", str(still)]) == 0
     assert "stage 4, episodes:" in capsys.readouterr().out
     frames = iio.imread(out, index=None)

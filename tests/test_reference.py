@@ -64,5 +64,5 @@ def test_the_line_runs_each_joystick_on_the_policy_s_episodes_and_eval_reports_i
     assert res["joystick_line_sliding_ik_off_cm_per_s"] == pytest.approx(line_value(line, res["mean_time_to_target_s"]))
     assert main(["eval", "--episodes", "2", "--line", "1"]) == 2
     assert "--line 1" in capsys.readouterr().err
-    assert main(["eval", "--episodes", "2", "--env", "obstacles", "--json"]) == 0  # no line by default there
+    assert main(["eval", "--episodes", "2", "--task", "obstacles", "--json"]) == 0  # no line by default there
     assert "joystick_line" not in json.loads(capsys.readouterr().out)

@@ -20,7 +20,7 @@ from runtime_helpers import drive_both
 @pytest.fixture(scope="module")
 def gait_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("requests") / "gait"
-    assert main(["train", "plane", "--tags", "gait", "--steps", "8192", "--seed", "0", "--out", str(out),
+    assert main(["train", "plane", "--request-groups", "gait", "--steps", "8192", "--seed", "0", "--out", str(out),
                  "--no-progress"]) == 0
     return out
 
@@ -66,7 +66,7 @@ def test_eval_with_a_request_and_per_request(gait_run, capsys):
 def test_render_and_export_bvh_keep_the_request(gait_run, tmp_path):
     db = RunDir(gait_run).database()
     out = tmp_path / "walk.bvh"
-    assert main(["export-bvh", str(gait_run), "--request", "gait=run", "--seconds", "4", "-o", str(out)]) == 0
+    assert main(["export-bvh", str(gait_run), "--request", "gait=run", "--length", "4", "-o", str(out)]) == 0
     frames = np.load(out.with_suffix(".npz"))["frames"]
     run_clips = db.clip_tags[:, db.tag_names.index("gait=run")]
     assert run_clips[db.frame_clip[frames]].all()
@@ -172,8 +172,8 @@ def test_a_conditioned_run_stops_its_updates_past_the_task_kl(gait_run, tmp_path
     # docs/styles.md: one policy for many requests needs smaller updates (plane: target_kl 0.05).
     assert RunDir(gait_run).config["ppo"]["target_kl"] == 0.05
     runs = {}
-    for name, extra in (("own", ["--tags", "gait", "--set", "target_kl=0.2"]), ("plain", []),
-                        ("off", ["--tags", "gait", "--set", "target_kl=none"])):
+    for name, extra in (("own", ["--request-groups", "gait", "--set", "target_kl=0.2"]), ("plain", []),
+                        ("off", ["--request-groups", "gait", "--set", "target_kl=none"])):
         runs[name] = tmp_path / name
         assert main(["train", "plane", "--steps", "64", "--envs", "2", "--out", str(runs[name]), "--no-progress",
                      *extra]) == 0

@@ -187,7 +187,7 @@ def test_a_runtime_file_without_tags_refuses_a_request(tmp_path, mixamo_dir):
 def test_db_build_and_info_print_the_tags(mixamo_dir, tmp_path):
     out = tmp_path / "t.npz"
     r = subprocess.run([sys.executable, "-m", "mmrl", "db", "build", str(mixamo_dir), "-o", str(out), "--tag-folder",
-                        "style", "--tags", str(mixamo_dir / "tags.csv")], capture_output=True, text=True)
+                        "style", "--tag-file", str(mixamo_dir / "tags.csv")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     info = subprocess.run([sys.executable, "-m", "mmrl", "db", "info", str(out)], capture_output=True, text=True)
     assert info.returncode == 0, info.stderr

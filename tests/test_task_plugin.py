@@ -99,7 +99,7 @@ def test_train_eval_render_through_the_cli(short_walk, tmp_path, capsys):
     assert res["env"] == "short-walk" and res["episodes"] == 4
     # Every episode ends by success or by the timeout (truncation), never both.
     assert res["success_rate"] + res["timeout_rate"] == pytest.approx(1.0)
-    assert main(["render", str(run), "--seconds", "0.4", "--size", "96x64", "-o", str(tmp_path / "a.gif")]) == 0
+    assert main(["render", str(run), "--length", "0.4", "--size", "96x64", "-o", str(tmp_path / "a.gif")]) == 0
     assert (tmp_path / "a.gif").stat().st_size > 0
 
 

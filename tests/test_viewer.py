@@ -264,8 +264,8 @@ def test_bad_input_is_one_line(tmp_path, capsys):
     bad = tmp_path / "bad.bvh"
     bad.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 zero\n}\n")
     one_line_error(capsys, ["view", bad, "--no-browser"], "bad.bvh:4:")
-    one_line_error(capsys, ["render", "--seconds", "1"], "--html")
-    one_line_error(capsys, ["render", "--seconds", "1", "--html", tmp_path / "x.txt"], "x.txt", ".html")
+    one_line_error(capsys, ["render", "--length", "1"], "--html")
+    one_line_error(capsys, ["render", "--length", "1", "--html", tmp_path / "x.txt"], "x.txt", ".html")
     one_line_error(capsys, ["view", bad, "--port", "70000"], "--port")
 
 
@@ -305,7 +305,7 @@ def test_html_export_of_20_seconds(tmp_path):
     from mmrl.cli import main
 
     out = tmp_path / "plane.html"
-    assert main(["render", "--policy", "joystick", "--seconds", "20", "--html", str(out)]) == 0
+    assert main(["render", "--policy", "joystick", "--length", "20", "--html", str(out)]) == 0
     page = out.read_text()
     assert out.stat().st_size < 10e6
     assert "window.__VISER_EMBED_DATA__=" in page

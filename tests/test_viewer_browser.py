@@ -198,7 +198,7 @@ def test_html_export_opens_offline(browser, tmp_path):
     from mmrl.cli import main
 
     out = tmp_path / "episode.html"
-    assert main(["render", "--policy", "joystick", "--seconds", "6", "--html", str(out)]) == 0
+    assert main(["render", "--policy", "joystick", "--length", "6", "--html", str(out)]) == 0
     requests = []
     context = browser.new_context(viewport=VIEWPORT, offline=True)
     context.route("**/*", lambda route: (requests.append(route.request.url),

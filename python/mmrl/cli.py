@@ -69,8 +69,16 @@ def _one_line_warning(message, category, filename, lineno, file=None, line=None)
 
 def main(argv: Optional[List[str]] = None) -> int:
     parser = build_parser()
-    shown = warnings.showwarning
-    warnings.showwarning = _one_line_warning
+    with warnings.catch_warnings():
+        # The data's warnings are for the person at the terminal: one line each, never an error.
+        from .motion.bvh import MotionImportWarning
+
+        warnings.filterwarnings("always", category=MotionImportWarning)
+        warnings.showwarning = _one_line_warning
+        return _run(parser, argv)
+
+
+def _run(parser: argparse.ArgumentParser, argv: Optional[List[str]]) -> int:
     try:
         args = parser.parse_args(argv)
         return int(args.func(args) or 0)
@@ -87,8 +95,6 @@ def main(argv: Optional[List[str]] = None) -> int:
         # Bad input: one clear line, no traceback. Anything else is a bug and keeps its traceback.
         print(f"mmrl: error: {e}", file=sys.stderr)
         return 2
-    finally:
-        warnings.showwarning = shown
 
 
 def user_errors() -> tuple:

@@ -216,7 +216,7 @@ class Database:
         if progress:
             from tqdm import tqdm
 
-            bar = tqdm(total=len(files), unit="file", desc="parsing BVH")
+            bar = tqdm(total=len(files), unit="file", desc="parsing BVH", disable=None)  # None: only on a terminal
 
         def load(path):  # runs in a worker thread; the C++ releases the GIL
             motion = _core.bvh_load(os.fspath(path), s, u, f)
