@@ -33,14 +33,14 @@ class HelpFormatter(argparse.HelpFormatter):
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse with one-line errors: ``mmrl train: error: ... (mmrl train --help)``, exit 2."""
+    """argparse with one-line errors, worded as every other: ``mmrl: error: ... (see mmrl train --help)``, exit 2."""
 
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("formatter_class", HelpFormatter)
         super().__init__(*args, **kwargs)
 
     def error(self, message: str):  # argparse's own: usage lines first, then the error
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"mmrl: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -80,7 +80,12 @@ def main(argv: Optional[List[str]] = None) -> int:
 
 def _run(parser: argparse.ArgumentParser, argv: Optional[List[str]]) -> int:
     try:
-        args = parser.parse_args(argv)
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # --help and --version exit as argparse does; a bad argument returns 2
+            if e.code == 2:
+                return 2
+            raise
         return int(args.func(args) or 0)
     except BrokenPipeError:  # `mmrl db info | head`: the reader left; nothing to say
         import os

@@ -36,7 +36,7 @@ class RunDir:
         if not self.path.is_dir():
             raise not_a_run(self.path, "no such run directory" if not self.path.exists() else "a file, not a folder")
         self.config: Dict[str, Any] = self._read_config()
-        if require_run and not self.config:
+        if require_run and not (self.path / CONFIG_NAME).is_file():
             raise not_a_run(self.path, f"no {CONFIG_NAME} in it")
         self._db = None
 

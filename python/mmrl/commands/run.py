@@ -39,7 +39,7 @@ def add_shared_options(p: argparse.ArgumentParser, motion: bool) -> None:
                    help="the task (default: RUN's task if RUN is given, else plane)")
     deprecated_alias(p, "--env", "--task", "task")
     staged = [n for n in task_names() if get_task(n).stages]
-    p.add_argument("--stage", type=positive_int, default=None, metavar="K",
+    p.add_argument("--stage", type=int, default=None, metavar="K",
                    help=f"curriculum stage ({', '.join(staged)}; default: the last, the hardest)")
     p.add_argument("--policy", choices=POLICIES, default=None,
                    help="trained: RUN's policy; joystick / joystick-run: a scripted stick held toward the target at "

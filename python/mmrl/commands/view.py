@@ -33,7 +33,7 @@ def register_cli(sub) -> None:
                    help="run: seconds of episodes to play (default: 20)")
     deprecated_alias(v, "--seconds", "--length (--seconds is a training budget)", "length", type=positive_float)
     v.add_argument("--seed", type=int, default=0, help="run: random seed of the episodes (default: 0)")
-    v.add_argument("--stage", type=positive_int, default=None, metavar="K",
+    v.add_argument("--stage", type=int, default=None, metavar="K",
                    help="run: curriculum stage (default: the last)")
     v.set_defaults(func=cmd_view)
 
@@ -45,7 +45,7 @@ def register_cli(sub) -> None:
                    help="the policy to start with (switchable in the page; default: trained)")
     p.add_argument("--trace", metavar="FILE", help="append one JSON line per decision step to FILE")
     p.add_argument("--seed", type=int, default=0, help="random seed of the start (and obstacles) (default: 0)")
-    p.add_argument("--stage", type=positive_int, default=None, metavar="K", help="curriculum stage (default: the last)")
+    p.add_argument("--stage", type=int, default=None, metavar="K", help="curriculum stage (default: the last)")
     p.add_argument("--request", default="", metavar="TAGS",
                    help="the request to start with, e.g. \"style=elderly\" (switchable in the page; docs/styles.md)")
     p.add_argument("--compressed", default=None, metavar="FILE",

@@ -232,9 +232,22 @@ def register_cli(subparsers) -> None:
                               help="URL pattern with {base_url}, {file}, {style}, {content} "
                                    "(default: $MMRL_DATA_URL_TEMPLATE or '{base_url}/{file}'; "
                                    "a mirror of the cache layout: '{base_url}/{style}/{file}')")
-    fetch_parser.add_argument("--timeout", type=float, default=60.0, help="seconds per connection (default 60)")
+    fetch_parser.add_argument("--timeout", type=_seconds, default=60.0, help="seconds per connection (default 60)")
     fetch_parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     fetch_parser.set_defaults(func=_fetch_command)
+
+
+def _seconds(text: str) -> float:
+    import argparse
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds > 0, got {text!r}")
+    return value
 
 
 def _fetch_command(args) -> int:
