@@ -338,3 +338,15 @@ def test_limbs_are_closed_capsules_turned_onto_their_bones():
     np.testing.assert_allclose(rz, d / np.linalg.norm(d, axis=1, keepdims=True), atol=1e-9)
     r = limb_radii(np.array([0.4, 0.1, 0.1]), np.array([False, False, True]), 0.2)
     np.testing.assert_allclose(r, [0.06, 0.025, 0.2 / 3])
+
+
+def test_the_timing_report_measures_the_characters_playback(db):
+    """mmrl play's "matching, inertialization, IK" line times what the full path calls (it read
+    0.00 ms while it wrapped a method the full path never calls): one sample per decision, each
+    inside the decision's env + controller time."""
+    s = session(db)
+    for _ in range(6 * 5):
+        s.step()
+    controller, whole = s.timing["controller"], s.timing["env_and_controller"]
+    assert len(controller) == len(whole) == 5
+    assert all(0 < c <= w for c, w in zip(controller, whole))

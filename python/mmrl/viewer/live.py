@@ -210,16 +210,20 @@ class LiveSession:
         self._wrap_controller_timing()
 
     def _wrap_controller_timing(self) -> None:
+        """Time the character's playback of each decision: ``play`` (the database) and
+        ``play_rows`` (a compressed controller), what the full path calls."""
         ctrl = self.run.ctrl
-        inner = ctrl.step
+        for name in ("play", "play_rows"):
+            setattr(ctrl, name, self._timed(getattr(ctrl, name)))
 
-        def timed(query):
+    def _timed(self, inner):
+        def timed(*args, **kwargs):
             t0 = time.perf_counter()
-            res = inner(query)
+            res = inner(*args, **kwargs)
             self.timing["controller"].append(time.perf_counter() - t0)
             return res
 
-        ctrl.step = timed
+        return timed
 
     # ------------------------------------------------------------------ obstacles
     def _obstacle_corners(self) -> np.ndarray:
