@@ -137,7 +137,7 @@ def test_eval_json_keys_match_the_plane_task_plus_collision_rate(capsys):
 @pytest.mark.parametrize("argv, message", [
     (["--task", "obstacles", "--stage", "0"], "--stage must be in 1..10"),
     (["--task", "obstacles", "--stage", "11"], "--stage must be in 1..10"),
-    (["--stage", "3"], "--stage applies to --env obstacles only"),
+    (["--stage", "3"], "--stage applies to --task obstacles only"),
 ])
 def test_bad_stage_is_refused(argv, message, capsys, tmp_path):
     for cmd in (["eval", "--episodes", "1"], ["render", "-o", str(tmp_path / "x.gif")]):

@@ -133,7 +133,7 @@ def tag_lines(db) -> list:
 
     rows = tag_summary(db)
     if not rows:
-        return ["tags         none (mmrl db build --tag-folder / --tag-pattern / --tags; docs/styles.md)"]
+        return ["tags         none (mmrl db build --tag-folder / --tag-pattern / --tag-file; docs/styles.md)"]
     lines = [f"tags         {len(rows)} in {len({t.partition('=')[0] for t, _, _ in rows})} groups "
              f"(request them as 'group=value & group=value')"]
     for tag, clips, frames in rows:

@@ -1,8 +1,8 @@
 """``mmrl eval``, ``mmrl render`` and ``mmrl export-bvh``: run a policy on the full-path character.
 
 They share their options: an optional training run directory (its policy, task, options and
-database, read by :class:`mmrl.runs.RunDir`), ``--data``/``--db``, ``--env`` (any registered
-task), ``--policy``, ``--seed``, ``--seconds``, ``--episodes``, ``--stage`` (tasks with a
+database, read by :class:`mmrl.runs.RunDir`), ``--data``/``--db``, ``--task`` (any registered
+task), ``--policy``, ``--seed``, ``--episodes`` (eval) or ``--length`` (render, export-bvh), ``--stage`` (tasks with a
 curriculum), ``--no-ik`` and ``--no-inertialization``. The episodes run in
 :mod:`mmrl.rollout`'s full-path loop, the same for every task.
 """
@@ -159,7 +159,7 @@ def _check_stage(task, stage: Optional[int]) -> Optional[int]:
     if stage is None:
         return None
     if not task.stages:
-        staged = " or ".join(f"--env {n}" for n in task_names() if get_task(n).stages)
+        staged = " or ".join(f"--task {n}" for n in task_names() if get_task(n).stages)
         raise InputError(f"--stage applies to {staged} only")
     if not 1 <= stage <= task.stages:
         raise InputError(f"--stage must be in 1..{task.stages}, got {stage}")

@@ -59,7 +59,7 @@ def compressed_sections(db: Database, policy, task, task_config, compressed, sta
         raise ValueError(f"a compressed controller runs the plane and obstacles tasks only (this run's task is "
                          f"{task.name!r})")
     if request_group_list(getattr(task_config, "request_groups", "")):
-        raise ValueError("a compressed controller keeps to no tags; this policy observes requests (--tags)")
+        raise ValueError("a compressed controller keeps to no tags; this policy observes requests (--request-groups)")
     small, source = start_database(db, starts)
     out = controller_sections(small, policy, task.name, task_config)
     nets = compressed.networks

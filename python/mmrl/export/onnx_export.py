@@ -12,7 +12,7 @@ needs nothing else:
                               (mean +- action_limit_std * std of the database's trajectory
                               features): what the matcher receives as the query's trajectory half
 
-A policy conditioned on requests (``mmrl train --tags``, docs/styles.md) takes them as a second
+A policy conditioned on requests (``mmrl train --request-groups``, docs/styles.md) takes them as a second
 input, so an engine sets the request apart from the observation:
 
     input  ``obs``            (B, obs_dim - R): the observation without its request code

@@ -14,7 +14,7 @@ Tags come from, in this order (all of them add up):
   without its extension. Bandai-Namco's ``dataset-2_<content>_<style>_<NNN>.bvh`` is
   ``dataset-2_{content}_{style}_*``, and ``dataset-2_{gait:walk|run}*`` gives the gait of
   ``walk-turn-left`` (``--tag-pattern``);
-- **sidecar files** that a user writes (``--tags FILE``): CSV lines ``file,tag tag ...`` (tags
+- **sidecar files** that a user writes (``--tag-file FILE``): CSV lines ``file,tag tag ...`` (tags
   separated by spaces or ``;``, an optional ``file,tags`` header, ``#`` comments) or JSON
   (``{"file": ["tag", ...]}`` or ``[{"file": ..., "tags": [...]}]``). A file is named by its
   path relative to the data folder, its file name, or its name without extension;

@@ -89,7 +89,7 @@ class TaskConfig:
 
     request_groups: str = ""
     """Tag groups the policy is conditioned on (docs/styles.md), comma-separated (``"style,gait"``;
-    ``mmrl train --tags``): each episode draws a request over them (``request_any``), matching
+    ``mmrl train --request-groups``): each episode draws a request over them (``request_any``), matching
     keeps to the clips carrying it, and the observation ends with its code (per group, one float
     per value, 1 for the requested ones; all 0 where the request leaves the group free). Empty:
     no request code; matching uses every clip unless a request is set (``set_request``)."""
@@ -450,7 +450,7 @@ class Task:
     ppo_defaults: Mapping[str, Any] = field(default_factory=dict)
     """PPOConfig fields this task trains best with (``--set`` overrides them)."""
     request_ppo_defaults: Mapping[str, Any] = field(default_factory=dict)
-    """More PPOConfig fields for a new run conditioned on requests (``--tags``); --set overrides them."""
+    """More PPOConfig fields for a new run conditioned on requests (``--request-groups``); --set overrides them."""
     presets: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
     """``--preset NAME``: overrides of task options and PPOConfig fields."""
     default_preset: Optional[str] = None
