@@ -180,10 +180,85 @@ def test_export_round_trip():
     np.testing.assert_allclose(again.global_positions(), m.global_positions(), atol=1e-5)
 
 
+# Hips with a left and a right leg (frame lines: 6 + 3 + 3 values).
+LEGS = """HIERARCHY
+ROOT Hips
+{
+\tOFFSET 0 95 0
+\tCHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+\tJOINT Leg_L
+\t{
+\t\tOFFSET 10 -5 0
+\t\tCHANNELS 3 Zrotation Xrotation Yrotation
+\t\tEnd Site
+\t\t{
+\t\t\tOFFSET 0 -90 0
+\t\t}
+\t}
+\tJOINT Leg_R
+\t{
+\t\tOFFSET -10 -5 0
+\t\tCHANNELS 3 Zrotation Xrotation Yrotation
+\t\tEnd Site
+\t\t{
+\t\t\tOFFSET 0 -90 0
+\t\t}
+\t}
+}
+MOTION
+Frames: 2
+Frame Time: 0.0333333
+0 95 0 0 0 0 0 0 0 0 0 0
+10 95 5 0 20 10 30 0 0 -15 5 0
+"""
+
+
 def test_mirror_twice_is_identity():
-    text = GOOD.replace("JOINT Spine", "JOINT Leg_L").replace("End Site", "End Site")
-    m = parse(text)
+    m = parse(LEGS)
     mm = m.mirrored().mirrored()
     np.testing.assert_allclose(mm.global_positions(), m.global_positions(), atol=1e-6)
-    g1 = m.mirrored().global_positions()
-    np.testing.assert_allclose(g1[..., 0], -m.global_positions()[..., 0], atol=1e-6)
+    # The mirror image: x negated, the legs swapped.
+    g, g1 = m.global_positions(), m.mirrored().global_positions()
+    np.testing.assert_allclose(g1[:, [0, 2, 1], 0], -g[..., 0], atol=1e-6)
+    np.testing.assert_allclose(g1[:, [0, 2, 1], 1:], g[..., 1:], atol=1e-6)
+
+
+def test_mirror_refuses_a_side_joint_without_partner():
+    """Mirroring Leg_L onto itself would put the left leg on the right: an error naming it."""
+    with pytest.raises(mmrl.JointRoleError, match=r"cannot mirror: no joint on the other side pairs with 'Leg_L' \(left\)"):
+        parse(GOOD.replace("JOINT Spine", "JOINT Leg_L")).mirrored()
+
+
+@pytest.mark.parametrize("name,side,base", [
+    # Conventions read before: a side word or letter at either end.
+    ("LeftUpLeg", 0, "upleg"), ("RightToeBase", 1, "toebase"), ("mixamorig:LeftFoot", 0, "foot"),
+    ("UpperLeg_L", 0, "upperleg"), ("Toes_R", 1, "toes"), ("thigh.L", 0, "thigh"), ("l_foot", 0, "foot"),
+    ("LFoot", 0, "foot"), ("RUpLeg", 1, "upleg"), ("LHipJoint", 0, "hipjoint"), ("leftupleg", 0, "upleg"),
+    ("footright", 1, "foot"), ("Hips", -1, "hips"), ("Spine1", -1, "spine1"), ("joint_Root", -1, "jointroot"),
+    # A side token anywhere (3ds Max Biped, DAZ, any separator or camel case).
+    ("Bip01_L_Thigh", 0, "bip01thigh"), ("Bip01 R Calf", 1, "bip01calf"), ("Bip01-L-Toe0", 0, "bip01toe0"),
+    ("CC_Base_R_Foot", 1, "ccbasefoot"), ("lThigh", 0, "thigh"), ("HandL", 0, "hand"), ("Bip01_Pelvis", -1, "bip01pelvis"),
+    # Not a side: a letter inside a word, or an all-capitals word.
+    ("Bip01", -1, "bip01"), ("ROOT", -1, "root"), ("LOWERBACK", -1, "lowerback"), ("Toe0Nub", -1, "toe0nub"),
+])
+def test_joint_side_tokens(name, side, base):
+    assert mmrl._core.joint_side(name) == (side, base)
+
+
+def test_joint_names_with_spaces_parse_and_round_trip():
+    """A name is the rest of the ROOT/JOINT line, trimmed: 'Bip01 L Thigh' keeps its spaces."""
+    text = LEGS.replace("ROOT Hips", "ROOT Bip01 Pelvis \t").replace("JOINT Leg_L", "JOINT Bip01 L Thigh")
+    text = text.replace("JOINT Leg_R\n\t{", "JOINT Bip01  R Thigh {")  # the brace on the name's line
+    m = parse(text)
+    assert m.joint_names == ["Bip01 Pelvis", "Bip01 L Thigh", "Bip01  R Thigh"]
+    np.testing.assert_allclose(m.global_positions(), parse(LEGS).global_positions(), atol=1e-6)
+    again = parse(m.to_bvh())
+    assert again.joint_names == m.joint_names
+    np.testing.assert_allclose(again.global_positions(), m.global_positions(), atol=1e-5)
+
+
+def test_error_joint_without_a_name():
+    e = error(GOOD.replace("JOINT Spine", "JOINT  "), "JOINT without a joint name")
+    assert e.line == 6
+    e = error(GOOD.replace("ROOT Hips", "ROOT {"), "ROOT without a joint name")
+    assert e.line == 2

@@ -6,6 +6,7 @@ reads the channel values, scipy's Rotation turns Euler channels (intrinsic, in l
 """
 import re
 import warnings
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from typing import List
 
@@ -215,9 +216,11 @@ def test_z_up_read_as_y_up_warns(tmp_path, clips, skeleton):
     """Read without the conversion, a Z-up run goes up: a warning naming the file."""
     z_path = write(tmp_path, "z.bvh", to_z_up(clips[skeleton]))
     assert 3.3 < median_speed(build(z_path)) < 3.7
-    with pytest.warns(MotionImportWarning, match=r"z\.bvh.*(lies flat|vertically).*up='z'"):
+    # Running along the file's Y axis has no ground speed at all: the database warns about that too.
+    slow = pytest.warns(MotionImportWarning, match="median speed") if skeleton == "straight" else nullcontext()
+    with slow, pytest.warns(MotionImportWarning, match=r"z\.bvh.*(lies flat|vertically).*up='z'"):
         wrong = build(z_path, up="y")
-    if skeleton == "straight":  # running along the file's Y axis: no ground speed at all
+    if skeleton == "straight":
         assert median_speed(wrong) < 0.1
 
 

@@ -134,7 +134,9 @@ static void bind_motion(py::module_& m) {
           py::arg("overrides") = std::map<std::string, std::string>(), "Joint roles found by name: role -> joint name.")
       .def(
           "mirrored", [](const Motion& mo) { return motion_mirror(mo, skeleton_mirror_map(mo.skeleton)); },
-          "A copy mirrored across the world YZ plane (x -> -x) with left and right joints swapped.")
+          "A copy mirrored across the world YZ plane (x -> -x) with left and right joints swapped: the legs by\n"
+          "their roles (found by name), the other joints by name. JointRoleError when a joint with a side has\n"
+          "no partner.")
       .def(
           "resampled",
           [](const Motion& mo, float fps) {
@@ -167,7 +169,8 @@ void bind_bvh(py::module_& m) {
       PyExc_ValueError, nullptr);
   m.add_object("BVHError", py::handle(g_bvh_error));
   g_role_error = PyErr_NewExceptionWithDoc("mmrl._core.JointRoleError",
-                                           "Joint roles could not be found; the message lists the skeleton's joints.",
+                                           "Joint roles could not be found (the message names every missing role and lists the "
+                                           "skeleton's joints), or a joint with a side has no mirror partner.",
                                            PyExc_ValueError, nullptr);
   m.add_object("JointRoleError", py::handle(g_role_error));
   py::register_exception_translator([](std::exception_ptr p) {

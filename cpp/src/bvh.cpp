@@ -1,3 +1,5 @@
+// size: the whole BVH reader (lexer, hierarchy, frames, units, import steps) and the forward
+// kinematics it and its callers share.
 #include "mmrl/bvh.hpp"
 
 #include "mmrl/motion_import.hpp"
@@ -72,6 +74,23 @@ class Lexer {
     std::string t = next();
     if (t.empty()) fail(std::string("unexpected end of file, expected ") + what);
     return t;
+  }
+
+  // A joint name: the rest of the line after ROOT/JOINT, trimmed, internal spaces kept ("Bip01 L
+  // Thigh"); a "{" that ends the line after a space is left for expect("{").
+  std::string name_to_end_of_line(const char* keyword) {
+    while (pos_ < s_.size() && (s_[pos_] == ' ' || s_[pos_] == '\t')) ++pos_;
+    tok_line_ = line_;
+    const size_t b = pos_;
+    pos_ = std::min(s_.find('\n', b), s_.size());
+    size_t e = pos_;
+    while (e > b && is_space(s_[e - 1])) --e;
+    if (e > b && s_[e - 1] == '{' && (e - 1 == b || is_space(s_[e - 2]))) {
+      pos_ = --e;
+      while (e > b && is_space(s_[e - 1])) --e;
+    }
+    if (e == b) fail(std::string(keyword) + " without a joint name", tok_line_);
+    return s_.substr(b, e - b);
   }
 
   void expect(const char* keyword) {
@@ -198,7 +217,7 @@ void parse_joint(Lexer& lx, Skeleton& sk, int parent, const std::string& name, i
       }
       sk.channels[index] = ch;
     } else if (t == "JOINT") {
-      const std::string child = lx.expect_token("a joint name");
+      const std::string child = lx.name_to_end_of_line("JOINT");
       const int child_line = lx.token_line();
       parse_joint(lx, sk, index, child, child_line, seen);
     } else if (t == "End") {
@@ -290,7 +309,7 @@ int parse_header(Lexer& lx, Motion& m) {
     const std::string t = lx.next();
     if (t.empty()) break;
     if (t == "ROOT") {
-      const std::string name = lx.expect_token("a joint name");
+      const std::string name = lx.name_to_end_of_line("ROOT");
       parse_joint(lx, sk, -1, name, lx.token_line(), seen);
     } else if (t == "MOTION") {
       have_motion = true;

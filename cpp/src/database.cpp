@@ -352,7 +352,7 @@ Database database_build(const std::vector<const Motion*>& clips_in, const Databa
   std::vector<Motion> mirrored;
   for (const Motion* m : clips_in) clips.push_back(m);
   if (opt.mirror) {
-    const auto map = skeleton_mirror_map(db.skeleton);
+    const auto map = skeleton_mirror_map(db.skeleton, db.roles);  // the legs pair by role, overrides included
     const auto corrections = mirror_corrections(clips_in, map);  // one set for every clip of the skeleton
     mirrored.reserve(clips_in.size());
     for (const Motion* m : clips_in) mirrored.push_back(motion_mirror(*m, map, corrections));

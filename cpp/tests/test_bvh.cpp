@@ -89,6 +89,14 @@ TEST(Skeleton, RolesFromCommonConventions) {
       {"Pelvis", "L_Thigh", "L_Calf", "L_Foot", "L_Toe", "R_Thigh", "R_Calf", "R_Foot", "R_Toe"},
       {"Hips", "LThigh", "LShin", "LFoot", "LToe", "RThigh", "RShin", "RFoot", "RToe"},
       {"hip", "thigh_l", "calf_l", "foot_l", "ball_l", "thigh_r", "calf_r", "foot_r", "ball_r"},
+      // 3ds Max Biped: the side token inside the name, after the character's prefix.
+      {"Bip01_Pelvis", "Bip01_L_Thigh", "Bip01_L_Calf", "Bip01_L_Foot", "Bip01_L_Toe0", "Bip01_R_Thigh",
+       "Bip01_R_Calf", "Bip01_R_Foot", "Bip01_R_Toe0"},
+      {"Bip01 Pelvis", "Bip01 L Thigh", "Bip01 L Calf", "Bip01 L Foot", "Bip01 L Toe0", "Bip01 R Thigh",
+       "Bip01 R Calf", "Bip01 R Foot", "Bip01 R Toe0"},
+      {"CC_Base_Pelvis", "CC_Base_L_Thigh", "CC_Base_L_Calf", "CC_Base_L_Foot", "CC_Base_L_ToeBase",
+       "CC_Base_R_Thigh", "CC_Base_R_Calf", "CC_Base_R_Foot", "CC_Base_R_ToeBase"},
+      {"hip", "lThigh", "lShin", "lFoot", "lToe", "rThigh", "rShin", "rFoot", "rToe"},
   };
   for (size_t c = 0; c < conventions.size(); ++c) {
     const auto& n = conventions[c];
@@ -114,7 +122,21 @@ TEST(Skeleton, RolesFromCommonConventions) {
   }
 }
 
-TEST(Skeleton, MissingRoleListsJoints) {
+TEST(Skeleton, BipedHipsArePelvisAboveTheSpineThatHoldsTheThighs) {
+  // Biped's hierarchy: Bip01 > Bip01 Pelvis > Bip01 Spine > (thighs, Bip01 Spine1).
+  Skeleton sk;
+  sk.names = {"Bip01", "Bip01 Pelvis", "Bip01 Spine", "Bip01 L Thigh", "Bip01 L Calf", "Bip01 L Foot", "Bip01 L Toe0",
+              "Bip01 R Thigh", "Bip01 R Calf", "Bip01 R Foot", "Bip01 R Toe0", "Bip01 Spine1"};
+  sk.parents = {-1, 0, 1, 2, 3, 4, 5, 2, 7, 8, 9, 2};
+  const JointRoles r = skeleton_find_roles(sk);
+  EXPECT_EQ(r.hips, 1);
+  EXPECT_EQ(r.upper_leg[0], 3);
+  EXPECT_EQ(r.toe[1], 10);
+  const auto mirror = skeleton_mirror_map(sk, r);
+  EXPECT_EQ(mirror, (std::vector<int>{0, 1, 2, 7, 8, 9, 10, 3, 4, 5, 6, 11}));
+}
+
+TEST(Skeleton, MissingRolesAllInOneError) {
   Skeleton sk;
   sk.names = {"Root", "A", "B"};
   sk.parents = {-1, 0, 1};
@@ -122,8 +144,49 @@ TEST(Skeleton, MissingRoleListsJoints) {
     skeleton_find_roles(sk);
     FAIL();
   } catch (const RoleError& e) {
-    EXPECT_NE(std::string(e.what()).find("Root, A, B"), std::string::npos) << e.what();
+    const std::string m = e.what();
+    EXPECT_EQ(m.rfind("no joint found for roles hips, left_upper_leg, left_lower_leg, left_foot, left_toe, "
+                      "right_upper_leg, right_lower_leg, right_foot, right_toe; pass them as --role hips=JOINT "
+                      "--role left_upper_leg=JOINT",
+                      0),
+              0u)
+        << m;
+    EXPECT_NE(m.find("--role right_toe=JOINT; joints found: Root, A, B"), std::string::npos) << m;
   }
+}
+
+TEST(Skeleton, MirrorPairsTheLegsByRoleOverrides) {
+  // Names that pair the wrong joints (Leg1_L, the left upper leg, with Leg1_R, the right toe),
+  // and a centre line without vocabulary: the overrides decide.
+  Skeleton sk;
+  sk.names = {"Root0", "Leg1_L", "Leg2_L", "Leg3_L", "Leg4_L", "Leg4_R", "Leg3_R", "Leg2_R", "Leg1_R", "Arm_L", "Arm_R"};
+  sk.parents = {-1, 0, 1, 2, 3, 0, 5, 6, 7, 0, 0};
+  const std::map<std::string, std::string> overrides = {
+      {"hips", "Root0"},          {"left_upper_leg", "Leg1_L"},  {"left_lower_leg", "Leg2_L"},
+      {"left_foot", "Leg3_L"},    {"left_toe", "Leg4_L"},        {"right_upper_leg", "Leg4_R"},
+      {"right_lower_leg", "Leg3_R"}, {"right_foot", "Leg2_R"},   {"right_toe", "Leg1_R"}};
+  const auto mirror = skeleton_mirror_map(sk, skeleton_find_roles(sk, overrides));
+  EXPECT_EQ(mirror, (std::vector<int>{0, 5, 6, 7, 8, 1, 2, 3, 4, 10, 9}));
+  // By name alone (no roles found), Leg1_L pairs with Leg1_R.
+  EXPECT_EQ(skeleton_mirror_map(sk)[1], 8);
+  // A side joint that nothing pairs with is an error, not a joint mirrored onto itself.
+  sk.names[10] = "Wing_R";
+  try {
+    skeleton_mirror_map(sk);
+    FAIL();
+  } catch (const RoleError& e) {
+    EXPECT_NE(std::string(e.what()).find("'Arm_L' (left), 'Wing_R' (right)"), std::string::npos) << e.what();
+  }
+}
+
+TEST(Bvh, JointNamesWithSpaces) {
+  std::string text = two_joint_bvh("Zrotation Xrotation Yrotation", "1 2 3 10 20 30 -40 50 60");
+  text.replace(text.find("ROOT Hips"), 9, "ROOT Bip01 Pelvis \t");
+  text.replace(text.find("JOINT Child"), 11, "JOINT Bip01  L Thigh");
+  const Motion m = bvh_parse(text, "s.bvh", 1.0f);
+  EXPECT_EQ(m.skeleton.names, (std::vector<std::string>{"Bip01 Pelvis", "Bip01  L Thigh"}));
+  const Motion r = bvh_parse(bvh_write(m), "r.bvh", 1.0f);
+  EXPECT_EQ(r.skeleton.names, m.skeleton.names);
 }
 
 TEST(Math, LocalWorldRoundTrip) {

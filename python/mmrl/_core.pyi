@@ -15,7 +15,7 @@ class BVHError(ValueError):
     """
 class JointRoleError(ValueError):
     """
-    Joint roles could not be found; the message lists the skeleton's joints.
+    Joint roles could not be found (the message names every missing role and lists the skeleton's joints), or a joint with a side has no mirror partner.
     """
 class Motion:
     """
@@ -33,7 +33,9 @@ class Motion:
         """
     def mirrored(self) -> Motion:
         """
-        A copy mirrored across the world YZ plane (x -> -x) with left and right joints swapped.
+        A copy mirrored across the world YZ plane (x -> -x) with left and right joints swapped: the legs by
+        their roles (found by name), the other joints by name. JointRoleError when a joint with a side has
+        no partner.
         """
     def plausibility(self) -> dict:
         """

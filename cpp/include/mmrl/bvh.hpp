@@ -1,7 +1,9 @@
 // BVH text -> Motion (skeleton + per-frame local transforms), and Motion -> BVH text.
 //
 // Any channel layout is accepted: 0 to 6 channels per joint, position and rotation
-// channels in any order, End Sites, any frame time, tabs, CRLF and blank lines.
+// channels in any order, End Sites, any frame time, tabs, CRLF and blank lines. A joint's
+// name is the rest of the line after ROOT/JOINT, trimmed, so it may hold spaces ("Bip01 L
+// Thigh"); bvh_write writes it back the same way.
 // Position channels *replace* the matching component of the joint's OFFSET (they are not
 // added to it). Rotation channels listed as "Zrotation Xrotation Yrotation" give the local
 // rotation Rz * Rx * Ry (intrinsic, in listed order), in degrees.

@@ -19,7 +19,8 @@
 namespace mmrl {
 
 struct DatabaseOptions {
-  // Add a left/right mirrored copy of every clip (after all originals, in the same order).
+  // Add a left/right mirrored copy of every clip (after all originals, in the same order). The
+  // legs pair by their roles (overrides included), the other joints by name (skeleton_mirror_map).
   bool mirror = false;
   // Role name -> joint name, overriding detection (see skeleton.hpp).
   std::map<std::string, std::string> roles;

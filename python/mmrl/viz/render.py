@@ -50,14 +50,11 @@ def skeleton_bones(parents: Sequence[int], body_joints: Optional[Sequence[int]] 
 
 
 def joint_sides(joint_names: Sequence[str]) -> np.ndarray:
-    """(J,) side of each joint from its name: 0 center, 1 left, 2 right (``_l``, ``Left...``, ...)."""
-    side = np.zeros(len(joint_names), np.int64)
-    for j, n in enumerate(n.lower() for n in joint_names):
-        if n.endswith(("_l", ".l", "left")) or n.startswith(("left", "l_")) or ":left" in n:
-            side[j] = 1
-        elif n.endswith(("_r", ".r", "right")) or n.startswith(("right", "r_")) or ":right" in n:
-            side[j] = 2
-    return side
+    """(J,) side of each joint from its name: 0 center, 1 left, 2 right, read as the joint roles
+    read it (``_core.joint_side``: ``L``/``R``/``Left``/``Right`` tokens anywhere in the name)."""
+    from .. import _core
+
+    return np.array([_core.joint_side(n)[0] + 1 for n in joint_names], np.int64)
 
 
 def _rectangle_corners(rect) -> np.ndarray:
