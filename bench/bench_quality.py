@@ -8,7 +8,7 @@ joysticks on the same episodes (issue 14, docs/quality.md).
 ``--dbs`` (issue 25): on each database (a ``.npz``, a BVH file or folder, ``synthetic``: the
 package's own data, or ``other-skeleton``: synthetic clips on a second skeleton with other joint
 names and channel orders), train the default ``mmrl train plane --seconds S`` (``--train-args``
-adds options), evaluate it and the equal-speed joystick line (``mmrl.rl.reference``, ``--line``
+adds options), evaluate it and the equal-speed joystick line (``mmrl.eval.reference``, ``--line``
 speeds) on the same episodes, and write one table, OUT/quality-dbs.json and one figure
 (``--figure``, default docs/quality_dbs.png) with a panel per database.
 
@@ -117,7 +117,7 @@ def run_databases(args) -> None:
     import mmrl
     from mmrl.cli import main as cli
     from mmrl.io import atomic_write_text
-    from mmrl.rl.reference import against_line, joystick_line, joystick_speeds
+    from mmrl.eval.reference import against_line, joystick_line, joystick_speeds
     from mmrl.rollout import evaluate_full_path
     from mmrl.runs import RunDir
 

@@ -190,7 +190,7 @@ def main() -> None:
     from mmrl.cli import main as cli
     from mmrl.io import atomic_write_text
     from mmrl.rl.policies import JoystickPolicy
-    from mmrl.rl.reference import against_line, joystick_line, joystick_speeds
+    from mmrl.eval.reference import against_line, joystick_line, joystick_speeds
     from mmrl.rollout import evaluate_full_path
     from mmrl.runs import RunDir
 

@@ -78,7 +78,7 @@ def instrument() -> None:
     import mmrl.motion.data
     import mmrl.motion.database
     import mmrl.io
-    import mmrl.rl.logger
+    import mmrl.logs
     import mmrl.rl.ppo
 
     started = []
@@ -108,7 +108,7 @@ def instrument() -> None:
 
     mmrl.rl.ppo.collect_rollout = first_work(phased("rollout", slow_steps(mmrl.rl.ppo.collect_rollout)))
     mmrl.rl.ppo._learn = phased("update", mmrl.rl.ppo._learn)
-    mmrl.rl.logger.MetricsLogger.write = phased("log", mmrl.rl.logger.MetricsLogger.write)
+    mmrl.logs.MetricsLogger.write = phased("log", mmrl.logs.MetricsLogger.write)
     save = phased("checkpoint", mmrl.rl.checkpoints.save_checkpoint)
     mmrl.rl.checkpoints.save_checkpoint = mmrl.rl.ppo.save_checkpoint = save
     mmrl.motion.database.Database.save = first_work(phased("save", mmrl.motion.database.Database.save))
@@ -120,7 +120,7 @@ def instrument() -> None:
         with real_open(*args, **kwargs) as file:
             yield SlowFile(file) if SLOW > 0 else file
 
-    for module in (mmrl.io, mmrl.rl.checkpoints, mmrl.motion.data, mmrl.rl.logger):
+    for module in (mmrl.io, mmrl.rl.checkpoints, mmrl.motion.data, mmrl.logs):
         module.atomic_open = slow_atomic_open
 
 

@@ -131,10 +131,58 @@ def test_no_import_circles_in_mmrl():
 
 
 # ------------------------------------------------------------------------------------------
+# Rooms in layers: a room imports only rooms of its own layer or below
+# ------------------------------------------------------------------------------------------
+#: The package's rooms (a subpackage, or a top-level module) by layer, lowest first. The motion
+#: layer is the data and the two motion sources (the database, the compressed networks) and the
+#: character that plays them; tasks decide and reward; rl trains; eval measures; viz, viewer and
+#: export show and ship; integrations and commands drive everything. ``mmrl/__init__`` (the
+#: public names) and ``__main__`` sit above all.
+LAYERS = (
+    {"_core", "_compat", "errors", "io", "arrays", "logs"},
+    {"motion", "character", "compress", "metrics"},
+    {"tasks"},
+    {"rl"},
+    {"eval", "rollout", "runs"},
+    {"viz", "viewer", "export"},
+    {"integrations"},
+    {"commands"},
+    {"cli"},
+    {"mmrl", "__main__"},
+)
+
+
+def room(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "mmrl"
+
+
+def layering_violations(graph: Dict[str, Set[str]], layers=LAYERS) -> List[str]:
+    """Every import of a module from a higher layer's room (function-level imports count). The
+    package itself (``from . import __version__``) is no edge: it runs before any of its modules."""
+    level = {r: k for k, rooms in enumerate(layers) for r in rooms}
+    return sorted(f"{a} -> {b}" for a, targets in graph.items() for b in targets
+                  if "." in b and level[room(a)] < level[room(b)])
+
+
+def test_layering_against_a_hand_made_graph():
+    layers = ({"a"}, {"b"}, {"c"})
+    graph = {"pkg.a.x": {"pkg.b.y", "pkg"}, "pkg.b.y": {"pkg.a.z"}, "pkg.a.z": set(), "pkg.c": {"pkg.a.x", "pkg.b.y"}}
+    assert layering_violations(graph, layers) == ["pkg.a.x -> pkg.b.y"]
+
+
+def test_every_room_imports_only_its_layer_and_below():
+    graph = import_graph(PACKAGE)
+    rooms = {room(m) for m in graph}
+    assert rooms <= set().union(*LAYERS), f"rooms without a layer: {sorted(rooms - set().union(*LAYERS))}"
+    assert layering_violations(graph) == [], "an import up the layers (inject it, or move the code down)"
+
+
+# ------------------------------------------------------------------------------------------
 # The layout itself
 # ------------------------------------------------------------------------------------------
 #: The top folder keeps the cross-cutting modules only; everything else sits in a subpackage.
-TOP_LEVEL = {"__init__", "__main__", "_compat", "arrays", "cli", "character", "errors", "io", "metrics",
+TOP_LEVEL = {"__init__", "__main__", "_compat", "arrays", "cli", "character", "errors", "io", "logs", "metrics",
              "rollout", "runs"}
 
 

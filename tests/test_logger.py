@@ -1,4 +1,4 @@
-"""mmrl.rl.logger: the progress bar counts what bounds the run; TensorBoard is optional."""
+"""mmrl.logs: the progress bar counts what bounds the run; TensorBoard is optional."""
 from __future__ import annotations
 
 import io
@@ -11,8 +11,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 from _toyenv import PointMassTargetVecEnv  # noqa: E402
 
-from mmrl.rl import logger  # noqa: E402
-from mmrl.rl.logger import ProgressBar, progress_settings  # noqa: E402
+from mmrl import logs as logger  # noqa: E402
+from mmrl.logs import ProgressBar, progress_settings  # noqa: E402
 from mmrl.rl.ppo import PPOConfig, train  # noqa: E402
 
 ROW = {"sps": 300.0, "episode_return": 12.3, "success_rate": 0.25}

@@ -78,7 +78,7 @@ def test_layout_matches_the_network_default():
 
     assert OBSTACLE_LAYOUT == (("maps", 512), ("pose", 15), ("goal", 2))
     assert OBSTACLE_MAP_RANGE == (0, 512)
-    from mmrl.tasks.obstacles import obstacle_policy_factory
+    from mmrl.rl.networks import obstacle_policy_factory
 
     with pytest.raises(ValueError, match="obs_dim 17"):
         obstacle_policy_factory()(17, 12)

@@ -1,4 +1,4 @@
-"""The equal-speed reference (mmrl/reference.py): joysticks at speeds spanning the data's gaits,
+"""The equal-speed reference (mmrl/eval/reference.py): joysticks at speeds spanning the data's gaits,
 on the same episodes as the policy, read at the policy's own time to target."""
 import json
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import mmrl
-from mmrl.rl.reference import MIN_GAIT_SPEED, against_line, joystick_line, joystick_speeds, line_value
+from mmrl.eval.reference import MIN_GAIT_SPEED, against_line, joystick_line, joystick_speeds, line_value
 from mmrl.rl.policies import JoystickPolicy, frame_speeds
 from mmrl.rollout import evaluate_full_path
 from test_import_axes_fps import other_skeleton_database

@@ -17,7 +17,7 @@ import torch
 
 import mmrl
 from mmrl.cli import main
-from mmrl.rl.logger import MetricsLogger
+from mmrl.logs import MetricsLogger
 
 if os.environ.get("CI"):
     import ray  # noqa: F401  (CI installs mmrl[rllib]: a missing Ray fails here)

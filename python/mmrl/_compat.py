@@ -20,12 +20,15 @@ from typing import Optional
 MOVED = {
     **{f"mmrl.{m}": f"mmrl.motion.{m}" for m in ("bvh", "data", "database", "search", "sources", "synth",
                                                  "synth_motion")},
-    **{f"mmrl.{m}": f"mmrl.rl.{m}" for m in ("checkpoints", "logger", "networks", "policies", "ppo",
-                                             "quality_log", "trained_policy")},
+    **{f"mmrl.{m}": f"mmrl.rl.{m}" for m in ("checkpoints", "networks", "policies", "ppo", "quality_log",
+                                             "trained_policy")},
+    # The metrics log and progress bar serve every training (PPO and the compressed networks').
+    "mmrl.logger": "mmrl.logs", "mmrl.rl.logger": "mmrl.logs",
     **{f"mmrl.{m}": f"mmrl.export.{m}" for m in ("runtime_export", "runtime_file")},
     "mmrl.integrations.onnx_export": "mmrl.export.onnx_export",
     **{f"mmrl.{m}": f"mmrl.viz.{m}" for m in ("camera", "plots", "render")},
-    "mmrl.controller": "mmrl.character",  # mmrl.Controller is mmrl.Character (one name per concept)
+    "mmrl.controller": "mmrl.character",
+    "mmrl.reference": "mmrl.eval.reference", "mmrl.rl.reference": "mmrl.eval.reference",  # mmrl.Controller is mmrl.Character (one name per concept)
 }
 
 #: Old public names -> (module, new name): ``mmrl.Controller`` is ``mmrl.Character``.

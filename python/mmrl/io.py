@@ -141,3 +141,26 @@ def remove_stale_temps(path: PathLike, min_age_s: float = 0.0) -> List[Path]:
         except FileNotFoundError:
             pass  # removed meanwhile (its writer finished)
     return removed
+
+
+def load_plain_torch_file(path: Path, error_type: type, unreadable: str, map_location: Any = "cpu") -> Any:
+    """``torch.load(path, weights_only=True)``: tensors and plain values only, never code. A file
+    holding pickled Python objects raises ``error_type`` saying it is refused (naming the object's
+    class); any other failure (corrupt, truncated, foreign) raises ``error_type`` with
+    ``unreadable`` (formatted with ``path`` and ``error``)."""
+    import pickle
+    import re
+
+    import torch
+
+    try:
+        return torch.load(path, map_location=map_location, weights_only=True)
+    except pickle.UnpicklingError as error:
+        if "Weights only load failed" not in str(error):
+            raise error_type(unreadable.format(path=path, error=error)) from error
+        found = re.search(r"Unsupported global: GLOBAL (\S+)", str(error))
+        what = f" ({found.group(1)})" if found else ""
+        raise error_type(f"{path}: refused: it holds pickled Python objects{what}, not only tensors and plain "
+                         f"values; mmrl never unpickles them, since loading them could run code") from None
+    except Exception as error:  # torch raises several types for truncated or foreign files
+        raise error_type(unreadable.format(path=path, error=error)) from error

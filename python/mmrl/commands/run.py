@@ -195,7 +195,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
         peer.pop("episode_results", None)
         res["joystick_at_speed"] = {"speed_m_per_s": speed, "episodes": min(args.episodes, PEER_EPISODES), **peer}
     if args.line:
-        from ..rl.reference import against_line, joystick_line, joystick_speeds
+        from ..eval.reference import against_line, joystick_line, joystick_speeds
 
         try:
             speeds = joystick_speeds(s.db, args.line, request=s.request)

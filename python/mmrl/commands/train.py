@@ -182,14 +182,17 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 def _policy_factory(task: Task, envs, network: str):
     """The task's network factory for ``--set network=NAME`` ("default": the task's own choice)."""
-    if task.policy_factory is None:
+    from ..rl.networks import task_policy_factory
+
+    factory = task_policy_factory(task)
+    if factory is None:
         if network != "default":
             raise InputError(f"--set network={network}: the {task.name} task has one network (default)")
         return None
     if network == "default":
-        return task.policy_factory(envs)
+        return factory(envs)
     try:
-        return task.policy_factory(envs, network=network)
+        return factory(envs, network=network)
     except (TypeError, ValueError) as e:
         raise InputError(f"--set network={network}: {e}") from e
 

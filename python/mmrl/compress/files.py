@@ -54,7 +54,7 @@ def save_compressed(path, nets: Dict[str, Any], data, cfg, db,
 def load_compressed(path, db=None) -> Dict[str, Any]:
     """A compressed file's contents (tensors and plain values only: never unpickles code).
     With ``db``, refuses a file made for another database, naming the difference."""
-    from ..rl.checkpoints import load_plain_torch_file
+    from ..io import load_plain_torch_file
 
     path = Path(path)
     if not path.is_file():

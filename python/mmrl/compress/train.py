@@ -29,7 +29,7 @@ from .networks import STAGES, CompressConfig, CompressData, _positions, build_ne
 
 def _logger():
     """metrics.csv (appended on resume) and TensorBoard, with the compressor's columns."""
-    from ..rl.logger import MetricsLogger
+    from ..logs import MetricsLogger
 
     class CompressLogger(MetricsLogger):
         BASE_COLUMNS = ("step", "wall_s", "stage", "iteration", "learning_rate", "loss", "pose", "positions_m",

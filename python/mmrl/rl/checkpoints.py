@@ -11,9 +11,7 @@ is rebuilt from the registry in ``mmrl.rl.networks``, never by importing a modul
 from __future__ import annotations
 
 import os
-import pickle
 import random
-import re
 from pathlib import Path
 from typing import Any, Optional
 
@@ -21,7 +19,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from ..io import atomic_open
+from ..io import atomic_open, load_plain_torch_file
 from .networks import network_class, registered_networks
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint",
@@ -47,24 +45,6 @@ def save_checkpoint(state: dict, path: str | os.PathLike) -> Path:
     with atomic_open(path, "wb") as file:
         torch.save(payload, file)
     return path
-
-
-def load_plain_torch_file(path: Path, error_type: type, unreadable: str, map_location: Any = "cpu") -> Any:
-    """``torch.load(path, weights_only=True)``: tensors and plain values only, never code. A file
-    holding pickled Python objects raises ``error_type`` saying it is refused (naming the object's
-    class); any other failure (corrupt, truncated, foreign) raises ``error_type`` with
-    ``unreadable`` (formatted with ``path`` and ``error``)."""
-    try:
-        return torch.load(path, map_location=map_location, weights_only=True)
-    except pickle.UnpicklingError as error:
-        if "Weights only load failed" not in str(error):
-            raise error_type(unreadable.format(path=path, error=error)) from error
-        found = re.search(r"Unsupported global: GLOBAL (\S+)", str(error))
-        what = f" ({found.group(1)})" if found else ""
-        raise error_type(f"{path}: refused: it holds pickled Python objects{what}, not only tensors and plain "
-                         f"values; mmrl never unpickles them, since loading them could run code") from None
-    except Exception as error:  # torch raises several types for truncated or foreign files
-        raise error_type(unreadable.format(path=path, error=error)) from error
 
 
 def load_checkpoint(path: str | os.PathLike, map_location: Any = "cpu") -> dict:

@@ -24,10 +24,12 @@ Observations arrive already normalized by PPO (see ``PPOConfig.obs_norm``).
 from __future__ import annotations
 
 import math
-from typing import Optional, TypeVar
+from typing import Callable, Dict, Optional, TypeVar
 
 import torch
 from torch import nn
+
+from .. import _core
 
 __all__ = ["PlaneActorCritic", "MLPActorCritic", "ObstacleActorCritic", "OBSTACLE_DEFAULT_LAYOUT", "register_network",
            "registered_networks", "network_class", "network_name"]
@@ -305,3 +307,48 @@ class ObstacleActorCritic(nn.Module):
                 raise ValueError(f"ObstacleActorCritic: expected obs with {self.obs_dim} entries, got {tuple(obs.shape)}")
             return self.critic(obs).squeeze(-1)
         return self.critic(*self._split(obs)).squeeze(-1)
+
+
+# ------------------------------------------------------------------------------------------
+# The networks a task trains with (tasks name none of them: rl comes after tasks)
+# ------------------------------------------------------------------------------------------
+#: The networks ``obstacle_policy_factory`` builds (``--set network=NAME``; "default" is "cnn").
+OBSTACLE_NETWORKS = ("cnn", "small-cnn", "mlp")
+#: "small-cnn": the paper's tower with conv 8@4x4, conv 8@3x3, FC 64, head 64 (about 66k actor
+#: weights against 573k), and an MLP critic 128 x 128 on the flat observation.
+SMALL_CNN = dict(channels=(8, 8), map_features=64, head=(64,), critic_hidden=(128, 128))
+
+
+def obstacle_policy_factory(envs=None, network: str = "default"):
+    """``policy_factory(obs_dim, act_dim)`` for ``ppo.train``: "cnn" (the default) is the paper's
+    CNN actor-critic (:class:`ObstacleActorCritic`) with this env's observation
+    layout; "small-cnn" the same tower with an eighth of the actor's weights and an MLP critic
+    (``--preset mmrl-small``); "mlp" is ``MLPActorCritic`` (actor 64 x 64, critic 128 x 128, ReLU)
+    on the flat observation."""
+    layout = getattr(envs, "layout", OBSTACLE_DEFAULT_LAYOUT)
+    map_shape = getattr(envs, "map_shape", (2, _core.OBSTACLE_MAP_SIDE, _core.OBSTACLE_MAP_SIDE))
+    network = "cnn" if network == "default" else network
+    if network not in OBSTACLE_NETWORKS:
+        raise ValueError(f"network: the obstacles task builds {', '.join(OBSTACLE_NETWORKS)} (or default), "
+                         f"got {network!r}")
+
+    def factory(obs_dim: int, act_dim: int):
+        if obs_dim != sum(size for _, size in layout):
+            raise ValueError(f"obstacle_policy_factory: obs_dim {obs_dim} does not match the layout {layout}")
+        if network == "mlp":
+            return MLPActorCritic(obs_dim, act_dim)
+        small = SMALL_CNN if network == "small-cnn" else {}
+        return ObstacleActorCritic(act_dim, layout=layout, map_shape=map_shape, **small)
+
+    return factory
+
+
+#: Task name -> its ``policy_factory(envs, network=...)``; a task absent here (and without its
+#: own ``Task.policy_factory``) trains PPO's default MLP.
+TASK_NETWORKS: Dict[str, Callable[..., Callable[[int, int], nn.Module]]] = {"obstacles": obstacle_policy_factory}
+
+
+def task_policy_factory(task) -> Optional[Callable[..., Callable[[int, int], nn.Module]]]:
+    """The factory a task's policy is built by: the task's own (a plug-in's), else the one
+    registered for its name in :data:`TASK_NETWORKS`, else None (PPO's default)."""
+    return task.policy_factory or TASK_NETWORKS.get(task.name)

@@ -67,7 +67,7 @@ class JoystickPolicy:
         arrive: never ask to go past the target: each trajectory position is at most the
             target's distance away (a player easing the stick at the target). Off for the
             ``joystick`` baselines (as measured in the docs); on for the equal-speed line
-            (:mod:`mmrl.rl.reference`), whose fast joysticks would otherwise circle the target.
+            (:mod:`mmrl.eval.reference`), whose fast joysticks would otherwise circle the target.
     """
 
     def __init__(self, db: Database, speed: Optional[float] = None, arrive: bool = False):

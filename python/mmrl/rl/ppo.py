@@ -6,7 +6,7 @@ Reads top to bottom like cleanrl's single file: the config, GAE, rollout collect
 update, and ``train``'s short loop (collect a rollout, compute advantages, update, log,
 checkpoint). The rest lives in modules of its own and is re-exported here: checkpoint files
 and RNG capture in ``mmrl.rl.checkpoints``, the learner's state in
-``mmrl.rl.training_state``, the metrics log and progress bar in ``mmrl.rl.logger``, the
+``mmrl.rl.training_state``, the metrics log and progress bar in ``mmrl.logs``, the
 observation normalizer in ``mmrl.rl.normalizers``, the policy loader used by ``mmrl
 eval``/``render`` in ``mmrl.rl.trained_policy``, the networks in ``mmrl.rl.networks``.
 
@@ -59,7 +59,7 @@ from torch import nn
 
 from ..io import remove_stale_temps
 from .checkpoints import CheckpointError, capture_rng_state, load_checkpoint, save_checkpoint, save_due_checkpoints
-from .logger import MetricsLogger, ProgressBar
+from ..logs import MetricsLogger, ProgressBar
 from .normalizers import ObsNormalizer, RunningMeanStd
 from .trained_policy import NonFiniteError, Policy, load_policy, resolve_device
 from .training_state import TrainingState

@@ -460,7 +460,7 @@ class Task:
     flags: Tuple[TaskFlag, ...] = ()
     """Task-specific ``mmrl train`` switches."""
     policy_factory: Optional[Callable[[TargetVectorEnv], Callable[[int, int], Any]]] = None
-    """``policy_factory(envs)(obs_dim, act_dim)`` builds the actor-critic (None: PPO's default MLP)."""
+    """``policy_factory(envs)(obs_dim, act_dim)``: a plug-in's actor-critic (None: rl.networks.TASK_NETWORKS')."""
     callbacks: Optional[Callable[[TargetVectorEnv, Mapping[str, Any]], Sequence[Any]]] = None
     """``callbacks(envs, options)``: trainer callbacks (e.g. a curriculum); ``options`` holds
     the ``mmrl train`` switches this task reads (``curriculum``)."""

@@ -57,39 +57,6 @@ OBSTACLE_MAP_SHAPE = (2, _core.OBSTACLE_MAP_SIDE, _core.OBSTACLE_MAP_SIDE)
 OBSTACLE_MAP_RANGE = (0, 2 * _core.OBSTACLE_MAP_SIDE ** 2)
 
 
-#: The networks ``obstacle_policy_factory`` builds (``--set network=NAME``; "default" is "cnn").
-OBSTACLE_NETWORKS = ("cnn", "small-cnn", "mlp")
-#: "small-cnn": the paper's tower with conv 8@4x4, conv 8@3x3, FC 64, head 64 (about 66k actor
-#: weights against 573k), and an MLP critic 128 x 128 on the flat observation.
-SMALL_CNN = dict(channels=(8, 8), map_features=64, head=(64,), critic_hidden=(128, 128))
-
-
-def obstacle_policy_factory(envs=None, network: str = "default"):
-    """``policy_factory(obs_dim, act_dim)`` for ``ppo.train``: "cnn" (the default) is the paper's
-    CNN actor-critic (``mmrl.rl.networks.ObstacleActorCritic``) with this env's observation
-    layout; "small-cnn" the same tower with an eighth of the actor's weights and an MLP critic
-    (``--preset mmrl-small``); "mlp" is ``MLPActorCritic`` (actor 64 x 64, critic 128 x 128, ReLU)
-    on the flat observation."""
-    layout = getattr(envs, "layout", OBSTACLE_LAYOUT)
-    map_shape = getattr(envs, "map_shape", OBSTACLE_MAP_SHAPE)
-    network = "cnn" if network == "default" else network
-    if network not in OBSTACLE_NETWORKS:
-        raise ValueError(f"network: the obstacles task builds {', '.join(OBSTACLE_NETWORKS)} (or default), "
-                         f"got {network!r}")
-
-    def factory(obs_dim: int, act_dim: int):
-        if obs_dim != sum(size for _, size in layout):
-            raise ValueError(f"obstacle_policy_factory: obs_dim {obs_dim} does not match the layout {layout}")
-        from ..rl.networks import MLPActorCritic, ObstacleActorCritic
-
-        if network == "mlp":
-            return MLPActorCritic(obs_dim, act_dim)
-        small = SMALL_CNN if network == "small-cnn" else {}
-        return ObstacleActorCritic(act_dim, layout=layout, map_shape=map_shape, **small)
-
-    return factory
-
-
 @dataclass
 class ObstaclesConfig(TaskConfig):
     """Numbers of the moving-obstacles task. The defaults are the paper's hardest stage."""
@@ -402,7 +369,6 @@ TASK = Task(
     flags=(TaskFlag("--no-hit-reward", "hit_reward", False, "drop the hit reward (ablation)"),
            TaskFlag("--no-curriculum", "curriculum", False, "start at the hardest stage (ablation)",
                     target="callbacks")),
-    policy_factory=obstacle_policy_factory,
     callbacks=_callbacks,
     stages=10,
     set_stage=_set_stage,

@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from .. import _core
+from .drawing import drawing
 from .base import SingleEnv, TargetVectorEnv, Task, TaskConfig
 
 
@@ -45,9 +46,7 @@ class PlaneVectorEnv(TargetVectorEnv):
     config_type = PlaneConfig
 
     def render(self):
-        from ..viz.render import render_topdown
-
-        return render_topdown([self.env_state(i) for i in range(self.num_envs)])
+        return drawing("topdown")([self.env_state(i) for i in range(self.num_envs)])
 
 
 class PlaneEnv(SingleEnv):
@@ -57,9 +56,7 @@ class PlaneEnv(SingleEnv):
     vector_type = PlaneVectorEnv
 
     def render(self):
-        from ..viz.render import render_state
-
-        return render_state(self.db, self._vec.env_state(0))
+        return drawing("state")(self.db, self._vec.env_state(0))
 
 
 #: ``mmrl train plane --preset NAME``. "paper" is the task as written. "quality" (what ``mmrl

@@ -24,6 +24,7 @@ import numpy as np
 from ..errors import require_extra
 from .camera import Camera
 from ..io import atomic_path
+from ..tasks.drawing import register_drawing
 
 SKY = (0.86, 0.90, 0.95)
 GROUND = (0.80, 0.80, 0.77)
@@ -471,3 +472,7 @@ def render_topdown(states, size: int = 256, extent: float = 8.0) -> np.ndarray:
         u, v = px(s["x"], s["z"])
         img[max(0, v - 3):v + 4, max(0, u - 3):u + 4] = (40, 40, 200)
     return img
+
+
+register_drawing("topdown", render_topdown)
+register_drawing("state", render_state)

@@ -25,9 +25,9 @@ import torch
 
 from ...rl.checkpoints import load_checkpoint, save_checkpoint
 from ...errors import InputError
-from ...rl.logger import MetricsLogger, ProgressBar
+from ...logs import MetricsLogger, ProgressBar
 from ...metrics import rate_per_second
-from ...rl.networks import network_name
+from ...rl.networks import network_name, task_policy_factory
 from .config import RLlibConfig
 from .envs import ENV_PREFIX, drain_worker, register_envs, set_worker_stage, share_database
 from .module import MMRLTorchModule, range_mean_std_filter
@@ -202,8 +202,9 @@ class RLlibRun:
         torch.manual_seed(cfg.seed)
         if cfg.torch_threads > 0:
             torch.set_num_threads(cfg.torch_threads)
-        if task.policy_factory is not None:
-            self.model = task.policy_factory(probe)(self.obs_dim, self.act_dim)
+        factory = task_policy_factory(task)
+        if factory is not None:
+            self.model = factory(probe)(self.obs_dim, self.act_dim)
         else:
             from ...rl.networks import PlaneActorCritic
             self.model = PlaneActorCritic(self.obs_dim, self.act_dim, init_log_std=cfg.init_log_std)

@@ -15,7 +15,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..io import atomic_open
+from .io import atomic_open
 
 __all__ = ["MetricsLogger", "ProgressBar", "progress_settings"]
 

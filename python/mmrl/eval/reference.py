@@ -17,7 +17,7 @@ from typing import Any, Dict, List, Optional, Sequence
 import numpy as np
 
 from ..motion.database import Database
-from .policies import TRAJECTORY_FRAMES, JoystickPolicy, frame_speeds
+from ..rl.policies import TRAJECTORY_FRAMES, JoystickPolicy, frame_speeds
 
 #: What each joystick of the line reports (evaluate_full_path's keys).
 LINE_KEYS = ("success_rate", "mean_time_to_target_s", "foot_sliding_ik_off_cm_per_s", "foot_sliding_cm_per_s",
