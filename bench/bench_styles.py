@@ -74,7 +74,7 @@ def switch_run(task, db, policy, config, styles, seconds_each: float, seed: int,
         delay = None
         for s in range(steps_each):
             if s % 10 == 0:
-                x, z, _ = run.ctrl.root
+                x, z, _ = run.character.root
                 run.set_target(x + rng.uniform(-4, 4), z + rng.uniform(-4, 4))
             out = run.step(policy_actions(policy, run.obs[None]).reshape(-1))
             frames = out["res"].frames
@@ -139,7 +139,7 @@ def figure(task, db, policy, config, styles, path: Path, target=(4.0, 3.0), seed
         # The same start for every style: each request's first valid frame, at the origin facing +Z.
         start = int(np.flatnonzero(np.asarray(run.request_clips)[db.frame_clip] & db.valid_mask)[0])
         run.env.set_state(0, start, 0.0, 0.0, 0.0)
-        run.ctrl.reset(start, (0.0, 0.0), 0.0)
+        run.character.reset(start, (0.0, 0.0), 0.0)
         run.set_target(*target)
         for _ in range(100):
             out = run.step(policy_actions(policy, run.obs[None]).reshape(-1))

@@ -25,9 +25,9 @@ def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0
     if start is not None:
         fp.env.set_state(0, int(start[0]), 0.0, 0.0, 0.0)
         fp._start_episode()
-    x, z, yaw = fp.ctrl.root
+    x, z, yaw = fp.character.root
     controller = _core.RuntimeController.load(str(path))
-    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.ctrl.frame if start is None else int(start[1]))
+    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.character.frame if start is None else int(start[1]))
     if request:  # the same request on both sides (tags.hpp)
         fp.env.set_request(0, request)
         fp.obs = fp.env.observe(0)
@@ -39,7 +39,7 @@ def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0
     out = {"py_matches": [], "rt_matches": [], "frame_mismatches": 0, "root_error": 0.0, "pose_error": 0.0,
            "obs_error": 0.0, "targets_reached": 0}
     for _ in range(decisions):
-        root = fp.ctrl.root
+        root = fp.character.root
         if np.hypot(root[0] - targets[t][0], root[1] - targets[t][1]) < success_radius:
             t += 1
             fp.set_target(*targets[t])
@@ -86,9 +86,9 @@ def drive_stick(path, task, db, config, phases, seed: int = 0, request: str = ""
     if start is not None:
         fp.env.set_state(0, int(start[0]), 0.0, 0.0, 0.0)
         fp._start_episode()
-    x, z, yaw = fp.ctrl.root
+    x, z, yaw = fp.character.root
     controller = _core.RuntimeController.load(str(path))
-    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.ctrl.frame if start is None else int(start[1]))
+    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.character.frame if start is None else int(start[1]))
     if request:
         fp.set_request(request)
         ch.set_request(request)
@@ -96,7 +96,7 @@ def drive_stick(path, task, db, config, phases, seed: int = 0, request: str = ""
     out = {"py_matches": [], "rt_matches": [], "sticks": [], "root_error": 0.0, "pose_error": 0.0, "action_error": 0.0,
            "frame_mismatches": 0, "transitions": 0, "phase_roots": [], "stopped": False}
     for phase in phases:
-        root0 = np.array(fp.ctrl.root)
+        root0 = np.array(fp.character.root)
         if phase[0] == "stick":
             _, direction, speed, decisions = phase
             d = np.asarray(direction, np.float64) / np.hypot(*direction)
@@ -113,7 +113,7 @@ def drive_stick(path, task, db, config, phases, seed: int = 0, request: str = ""
                 ch.set_obstacles(*(np.ascontiguousarray(o[k], np.float32)
                                    for k in ("centres", "half_sizes", "angles", "velocities")))
             if phase[0] == "stick":
-                r = fp.ctrl.root
+                r = fp.character.root
                 fp.set_target(r[0] + 1000.0 * d[0], r[1] + 1000.0 * d[1])
                 joy, ours = joystick.act(fp.obs[None])[0], ch.stick_action()
                 out["action_error"] = max(out["action_error"],
@@ -139,7 +139,7 @@ def drive_stick(path, task, db, config, phases, seed: int = 0, request: str = ""
                     out["stopped"] = True
                     break
                 fp.continue_from_character(fp.target)
-        out["phase_roots"].append((root0, np.array(fp.ctrl.root)))
+        out["phase_roots"].append((root0, np.array(fp.character.root)))
         if out["stopped"]:
             break
     for key in ("py_matches", "rt_matches", "sticks"):

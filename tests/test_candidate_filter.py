@@ -172,7 +172,7 @@ def test_mmrl_play_honours_the_filter(db):
         if k % 30 == 0:
             s.set_target(*targets[k // 30])
         s.step()
-        shown.append(s.run.ctrl.frame)
+        shown.append(s.run.character.frame)
     shown = np.array(shown[6:])  # the start frame is the session's, not a match
     assert len(set(shown)) > 50 and not np.any(db.frame_clip[shown] == clip)
 

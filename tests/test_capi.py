@@ -121,10 +121,10 @@ def test_the_c_interface_equals_the_runtime_and_the_full_path(lib, controller_fi
     from mmrl.rollout import FullPath
 
     fp = FullPath(mmrl.get_task("plane"), db, config=config, seed=0, record=False, continuous=True)
-    x, z, yaw = fp.ctrl.root
+    x, z, yaw = fp.character.root
     ctl = load(lib, controller_file)
-    ch = create(lib, ctl, x, z, yaw, fp.ctrl.frame)
-    rt = _core.RuntimeCharacter(_core.RuntimeController.load(str(controller_file)), x, z, yaw, fp.ctrl.frame)
+    ch = create(lib, ctl, x, z, yaw, fp.character.frame)
+    rt = _core.RuntimeCharacter(_core.RuntimeController.load(str(controller_file)), x, z, yaw, fp.character.frame)
     targets = scripted_targets(1001, 0)
     J = db.num_joints
     rot, tr, root = np.zeros((J, 4), np.float32), np.zeros((J, 3), np.float32), np.zeros(3, np.float32)

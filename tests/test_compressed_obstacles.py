@@ -211,7 +211,7 @@ def test_the_runtime_plays_a_compressed_obstacles_controller_as_python_does(db, 
         fp.env.set_state(0, int(source[k * WINDOW]), 0.0, 0.0, 0.0)
         fp._start_episode()
         fp.set_target(*fp.target)  # and the observation of the new start
-        ch = _core.RuntimeCharacter(rt, *fp.ctrl.root, k * WINDOW)
+        ch = _core.RuntimeCharacter(rt, *fp.character.root, k * WINDOW)
         ch.set_target(*fp.target)
         for _ in range(60):
             hand_obstacles(ch, fp.env)

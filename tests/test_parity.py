@@ -62,7 +62,7 @@ def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path
     rng = np.random.default_rng(0)
     decisions = episodes = transitions = filtered = yielded = 0
     while decisions < 1000:
-        character = _core.RuntimeCharacter(controller, *fp.ctrl.root, fp.ctrl.frame)  # each episode's start
+        character = _core.RuntimeCharacter(controller, *fp.character.root, fp.character.frame)  # each episode's start
         character.set_target(*fp.target)
         episodes += 1
         while True:

@@ -127,7 +127,7 @@ def test_play_switches_the_request_at_the_next_decision():
         if k % 30 == 0:
             s.set_target(3.0 * (k // 30 + 1), 2.0)
         s.step()
-        assert walk[db.frame_clip[s.run.ctrl.frame]]
+        assert walk[db.frame_clip[s.run.character.frame]]
     with pytest.raises(ValueError, match="no tag 'gait=hop'"):
         s.set_request("gait=hop")
     s.set_request("gait=run")
@@ -137,7 +137,7 @@ def test_play_switches_the_request_at_the_next_decision():
     assert s.request == "gait=run" and run[db.frame_clip[s.last.match]]
     for _ in range(60):
         s.step()
-        assert run[db.frame_clip[s.run.ctrl.frame]]
+        assert run[db.frame_clip[s.run.character.frame]]
 
 
 def test_obstacles_take_requests_too():

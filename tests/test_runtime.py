@@ -156,7 +156,7 @@ def test_obstacle_runtime_equals_python_full_path(tmp_path):
     compared = transitions = seen = 0
     for seed in range(20):
         fp = FullPath(task, db, config=config, seed=seed, record=False)
-        ch = _core.RuntimeCharacter(c, *fp.ctrl.root, fp.ctrl.frame)
+        ch = _core.RuntimeCharacter(c, *fp.character.root, fp.character.frame)
         ch.set_target(*fp.target)
         for _ in range(300):
             o = fp.env.obstacles(0)

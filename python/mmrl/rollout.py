@@ -184,7 +184,7 @@ class FullPath:
             self.set_request(request)
         self.config = self.env.config
         self.stage = apply_stage(task, self.env, stage)
-        self.ctrl = Character(db, frames_per_step=self.config.frames_per_step,
+        self.character = Character(db, frames_per_step=self.config.frames_per_step,
                                inertialization_halflife=inertialization_halflife, ik=ik, foot_locking=foot_locking,
                                fast=fast, action_limit_std=self.config.action_limit_std, record=record,
                                transition_cost=self.config.transition_cost)
@@ -194,13 +194,21 @@ class FullPath:
         self.last_recording: Optional[Dict[str, np.ndarray]] = None
         self._start_episode()
 
+    @property
+    def ctrl(self):
+        """Deprecated: :attr:`character` (goes in the next release)."""
+        import warnings
+
+        warnings.warn("FullPath.ctrl is deprecated; use FullPath.character", DeprecationWarning, stacklevel=2)
+        return self.character
+
     def _start_episode(self) -> None:
         s = self.env.env_state(0)
         if self.compressed is not None:
             row = self.compressed.decode(self.env._core.compressed_state(0)[None])[0]
-            self.ctrl.reset_row(row, (float(s["x"]), float(s["z"])), float(s["yaw"]))
+            self.character.reset_row(row, (float(s["x"]), float(s["z"])), float(s["yaw"]))
         else:
-            self.ctrl.reset(int(s["frame"]), (float(s["x"]), float(s["z"])), float(s["yaw"]))
+            self.character.reset(int(s["frame"]), (float(s["x"]), float(s["z"])), float(s["yaw"]))
         self.target = np.array(s["target"], np.float64)
         self.episode_steps = 0
 
@@ -226,10 +234,10 @@ class FullPath:
         target, one is drawn by the task's episode-start rule (uniform in the square of
         ``target_half_extent``, not too close) around the character, from the env's own random
         stream (the C++ rule, not a copy of it)."""
-        x, z, yaw = self.ctrl.root
+        x, z, yaw = self.character.root
         if self.compressed is not None:  # where the playback ended (the env's autoreset drew a new start)
             self.env._core.set_compressed_state(0, self.env._core.compressed_played(0))
-        self.env.set_state(0, self.ctrl.frame, x, z, yaw)  # frame -1 (compressed): the env keeps its state
+        self.env.set_state(0, self.character.frame, x, z, yaw)  # frame -1 (compressed): the env keeps its state
         if target is None:
             target = self.env._core.draw_target_around_root(0, float(self.config.target_half_extent))
         self.set_target(float(target[0]), float(target[1]))
@@ -247,10 +255,10 @@ class FullPath:
         # The controller plays the env's decision; it never decides again, so it cannot drift.
         match, cost = self.env.last_step_decision(0)
         if self.compressed is not None:
-            res = self.ctrl.play_rows(self.env._core.compressed_rows(0), bool(self.env._step_transitions[0]), cost,
+            res = self.character.play_rows(self.env._core.compressed_rows(0), bool(self.env._step_transitions[0]), cost,
                                       a[0])
         else:
-            res = self.ctrl.play(match, cost, a[0])
+            res = self.character.play(match, cost, a[0])
         self.episode_steps += 1
         done = bool(term[0] or trunc[0])
         shown = int(self.env.step_frames[0])
@@ -267,7 +275,7 @@ class FullPath:
             out["goal_error"] = self._goal_error(info["final_obs"][0, g:g + 2], res.roots[shown - 1])
             self.obs = obs[0]
             if not self.continuous:
-                if self.ctrl._record:
+                if self.character._record:
                     self.last_recording = self.recording(trim=res.frames.size - shown)
                 self._start_episode()
         else:
@@ -281,7 +289,7 @@ class FullPath:
 
     def recording(self, trim: int = 0) -> Dict[str, np.ndarray]:
         """The controller's recording of the current episode without its last ``trim`` shown frames."""
-        rec = self.ctrl.recording()
+        rec = self.character.recording()
         if trim:
             for k in FRAME_KEYS + ("natural_motion",):  # natural_motion: one row per frame after the first
                 if k in rec:
@@ -291,9 +299,9 @@ class FullPath:
     def root_error(self) -> tuple:
         """(|frame difference|, max |root difference|) between the env and the controller now."""
         s = self.env.env_state(0)
-        d = np.abs(np.array([s["x"], s["z"]]) - np.array(self.ctrl.root[:2]))
-        dyaw = abs((s["yaw"] - self.ctrl.root[2] + np.pi) % (2 * np.pi) - np.pi)
-        return abs(int(s["frame"]) - self.ctrl.frame), float(max(d.max(), dyaw))
+        d = np.abs(np.array([s["x"], s["z"]]) - np.array(self.character.root[:2]))
+        dyaw = abs((s["yaw"] - self.character.root[2] + np.pi) % (2 * np.pi) - np.pi)
+        return abs(int(s["frame"]) - self.character.frame), float(max(d.max(), dyaw))
 
 
 class EpisodeSummary:
@@ -381,7 +389,7 @@ def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, 
     summary = EpisodeSummary(task, db, fast, run.stage)
     summary.request_clips = run.request_clips
     for _ in range(episodes):
-        start = np.array(run.ctrl.root[:2], np.float64)
+        start = np.array(run.character.root[:2], np.float64)
         if target_distance is not None:
             angle = rng.uniform(-np.pi, np.pi)
             run.set_target(*(start + float(target_distance) * np.array([np.sin(angle), np.cos(angle)])))
@@ -432,7 +440,7 @@ def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int
     log = FollowLog(run)
     while log.frames_so_far() < total:
         action = policy_actions(policy, run.obs[None]).reshape(-1)
-        points, directions = _world_query(db, np.clip(action, low, high), run.ctrl.root)
+        points, directions = _world_query(db, np.clip(action, low, high), run.character.root)
         out = run.step(action)
         log.add_step(out, points, directions)
         if out["done"]:

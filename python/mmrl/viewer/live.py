@@ -67,8 +67,8 @@ class LiveSession:
                        for k in ("policy", "env_and_controller", "controller", "click_to_decision")}
         self._wrap_controller_timing()
         self._trace = open(trace, "a", encoding="utf-8") if trace else None
-        pos, _ = self.run.ctrl.pose()
-        self.shown = self._frame_values(pos, self.db.contacts[self.run.ctrl.frame])
+        pos, _ = self.run.character.pose()
+        self.shown = self._frame_values(pos, self.db.contacts[self.run.character.frame])
 
     # ------------------------------------------------------------------ user edits (any thread)
     def set_target(self, x: float, z: float) -> None:
@@ -125,7 +125,7 @@ class LiveSession:
 
     @property
     def root(self) -> tuple:
-        return self.run.ctrl.root
+        return self.run.character.root
 
     # ------------------------------------------------------------------ the loop
     def step(self) -> Dict[str, Any]:
@@ -170,8 +170,8 @@ class LiveSession:
         t1 = time.perf_counter()
         low, high = run.env.single_action_space.low, run.env.single_action_space.high
         clipped = np.clip(action, low, high)
-        points, directions = _world_query(self.db, clipped, run.ctrl.root)
-        root_before = run.ctrl.root
+        points, directions = _world_query(self.db, clipped, run.character.root)
+        root_before = run.character.root
         continuation = self._continuation_path()
         scene_before = self._obstacles_after_step() if self.has_obstacles else None
         out = run.step(action)
@@ -197,22 +197,22 @@ class LiveSession:
 
     # ------------------------------------------------------------------ controller options
     def _new_controller(self) -> None:
-        old = self.run.ctrl
+        old = self.run.character
         frame, (x, z, yaw) = old.frame, old.root
-        self.run.ctrl = Character(self.db, frames_per_step=self.F,
+        self.run.character = Character(self.db, frames_per_step=self.F,
                                    inertialization_halflife=0.1 if self.inertialization else 0.0, ik=self.ik,
                                    foot_locking=self.ik, action_limit_std=self.config.action_limit_std,
                                    transition_cost=self.config.transition_cost,
                                    start_frame=None if frame < 0 else frame, position=(x, z), yaw=yaw)
         if self.run.compressed is not None:  # start the new character on the pose shown now
             row = self.run.compressed.decode(self.run.env._core.compressed_state(0)[None])[0]
-            self.run.ctrl.reset_row(row, (x, z), yaw)
+            self.run.character.reset_row(row, (x, z), yaw)
         self._wrap_controller_timing()
 
     def _wrap_controller_timing(self) -> None:
         """Time the character's playback of each decision: ``play`` (the database) and
         ``play_rows`` (a compressed controller), what the full path calls."""
-        ctrl = self.run.ctrl
+        ctrl = self.run.character
         for name in ("play", "play_rows"):
             setattr(ctrl, name, self._timed(getattr(ctrl, name)))
 

@@ -54,7 +54,7 @@ def rollout_to_targets(policy, db, targets, seed: int = 0, max_steps: int = 100,
     for tx, tz in targets:
         run = FullPath(task, db, config=config, seed=seed, fast=True, record=False)
         run.set_target(tx, tz)
-        path = [run.ctrl.root[:2]]
+        path = [run.character.root[:2]]
         while True:
             out = run.step(policy_actions(policy, run.obs[None]).reshape(-1))
             path.extend(map(tuple, out["res"].roots[:out["shown"], :2]))
