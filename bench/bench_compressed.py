@@ -146,7 +146,7 @@ def main(argv=None) -> int:
     import torch
 
     from mmrl.cli import main as cli
-    from mmrl.compress.model import CompressedController
+    from mmrl.compress.model import CompressedModel
     from mmrl.rl.policies import JoystickPolicy
     from mmrl.rollout import evaluate_full_path
     from mmrl.runs import RunDir
@@ -154,7 +154,7 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     r = RunDir(args.run)
     task, db, policy, config = r.task, r.database(), r.policy(), r.task_config()
-    cc = CompressedController(args.compressed, db)
+    cc = CompressedModel(args.compressed, db)
     out = {"run": args.run, "compressed": args.compressed, "episodes": args.episodes, "seed": args.seed}
     for name, pol, comp in (("database", policy, None), ("compressed", policy, cc),
                             ("joystick_database", JoystickPolicy.preset(db, "joystick"), None)):

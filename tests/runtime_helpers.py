@@ -17,7 +17,7 @@ def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0
     """``decisions`` decisions of the runtime and of the Python full path from the same start,
     through the same scripted targets (the next one once the root is within success_radius at
     a decision). ``python_act(obs) -> action`` is the Python side's policy. ``compressed``: the
-    Python side's CompressedController; ``start``: (the Python side's start frame, the runtime's)
+    Python side's CompressedModel; ``start``: (the Python side's start frame, the runtime's)
     when they differ (a compressed file keeps only its start windows).
 
     Returns per decision the matches of both, and the largest root and pose differences per frame."""

@@ -160,11 +160,11 @@ def trained(db, tmp_path_factory):
 
 
 def test_the_core_networks_equal_torch(db, trained):
-    from mmrl.compress.model import CompressedController
+    from mmrl.compress.model import CompressedModel
 
     import copy
 
-    cc = CompressedController(trained, db)
+    cc = CompressedModel(trained, db)
     # The core runs float16 weights (compressed.hpp): the reference is torch over the same
     # weights rounded to float16 (IEEE, nearest even), computed in float32.
     nets = {n: copy.deepcopy(cc.networks[n]) for n in ("decompressor", "stepper", "projector")}
@@ -208,13 +208,13 @@ def test_both_kernels_give_the_same_bits(db, trained, tmp_path):
     import subprocess
     import sys
 
-    from mmrl.compress.model import CompressedController
+    from mmrl.compress.model import CompressedModel
 
-    cc = CompressedController(trained, db)
+    cc = CompressedModel(trained, db)
     s = np.random.default_rng(4).standard_normal((16, cc.core.state_dim)).astype(np.float32)
     np.save(tmp_path / "s.npy", s)
-    script = (f"import numpy as np, mmrl; from mmrl import _core; from mmrl.compress.model import CompressedController; "
-              f"cc = CompressedController({str(trained)!r}, mmrl.Database.load({str(tmp_path / 'db.npz')!r})); "
+    script = (f"import numpy as np, mmrl; from mmrl import _core; from mmrl.compress.model import CompressedModel; "
+              f"cc = CompressedModel({str(trained)!r}, mmrl.Database.load({str(tmp_path / 'db.npz')!r})); "
               f"s = np.load({str(tmp_path / 's.npy')!r}); "
               f"np.savez({str(tmp_path / 'out.npz')!r}, k=_core.mlp_kernel(), d=cc.core.decode(s), t=cc.core.step(s), "
               f"p=cc.core.project(np.ascontiguousarray(s[:, :27])))")
@@ -235,12 +235,12 @@ def test_the_full_path_plays_the_projector_and_the_stepper(db, trained):
     """Each decision against its rule computed here with torch: the continuation unless the
     projection is closer to the query by more than the transition cost; the rows shown are the
     chosen state stepped and decoded; the character's root is the env's, frame by frame."""
-    from mmrl.compress.model import CompressedController
+    from mmrl.compress.model import CompressedModel
     from mmrl.rl.policies import JoystickPolicy
     from mmrl.rollout import FullPath, policy_actions
     from mmrl.tasks import get_task
 
-    cc = CompressedController(trained, db)
+    cc = CompressedModel(trained, db)
     task = get_task("plane")
     run = FullPath(task, db, compressed=cc, seed=1, ik=False, foot_locking=False, inertialization_halflife=0.0)
     pol = JoystickPolicy(db)
@@ -291,11 +291,11 @@ def test_the_full_path_plays_the_projector_and_the_stepper(db, trained):
 
 
 def test_a_compressed_controller_is_refused_with_the_reason(db, trained, tmp_path):
-    from mmrl.compress.model import CompressedController
+    from mmrl.compress.model import CompressedModel
     from mmrl.rollout import FullPath
     from mmrl.tasks import get_task
 
-    cc = CompressedController(trained, db)
+    cc = CompressedModel(trained, db)
     with pytest.raises(ValueError, match="keeps to no tags"):
         FullPath(get_task("plane"), db, compressed=cc, request="gait=walk")
     state = load_compressed(trained)
@@ -303,26 +303,26 @@ def test_a_compressed_controller_is_refused_with_the_reason(db, trained, tmp_pat
     partial = tmp_path / "partial.pt"
     torch.save(state, partial)
     with pytest.raises(CompressedFileError, match="partial.pt: its training stopped in the projector stage"):
-        CompressedController(partial, db)
+        CompressedModel(partial, db)
     broken = dict(load_compressed(trained))
     broken["stepper"] = {k: v[:, :3] if v.ndim == 2 else v for k, v in broken["stepper"].items()}
     bad = tmp_path / "bad-stepper.pt"
     torch.save(broken, bad)
     with pytest.raises(CompressedFileError, match="stepper does not fit"):
-        CompressedController(bad, db)
+        CompressedModel(bad, db)
 
 
 def test_mmrl_play_steers_a_compressed_character(db, trained):
     """The live session (mmrl play --compressed): a click acts at the next decision, the IK and
     inertialization switches keep the character where it stands, a request is refused."""
-    from mmrl.compress.model import CompressedController
+    from mmrl.compress.model import CompressedModel
     from mmrl.rl.policies import JoystickPolicy
     from mmrl.tasks import get_task
     from mmrl.viewer.live import LiveSession
 
     t = get_task("plane")
     s = LiveSession(t, db, JoystickPolicy.preset(db, "joystick"), config=t.default_config(),
-                    compressed=CompressedController(trained, db))
+                    compressed=CompressedModel(trained, db))
     try:
         x, z, _ = s.root
         s.set_target(x + 3.0, z)
@@ -378,13 +378,13 @@ def test_the_obstacles_task_plays_a_compressed_controller(db, trained):
     """Moving obstacles with a compressed controller: the env's collisions, hit points and
     sensor maps follow the compressed character (its root is the env's), and the task's tests
     of the played path read the chosen state's trajectory."""
-    from mmrl.compress.model import CompressedController
+    from mmrl.compress.model import CompressedModel
     from mmrl.rl.policies import JoystickPolicy
     from mmrl.rollout import FullPath, policy_actions
     from mmrl.tasks import get_task
 
     task = get_task("obstacles")
-    cc = CompressedController(trained, db)
+    cc = CompressedModel(trained, db)
     run = FullPath(task, db, compressed=cc, seed=2, stage=10, ik=False, foot_locking=False)
     pol = JoystickPolicy(db)
     endings = {"success": 0, "collision": 0, "other": 0}

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import mmrl
-from mmrl.compress.model import CompressedController
+from mmrl.compress.model import CompressedModel
 from mmrl.rollout import apply_stage
 from test_compress import small_compressed
 from test_import_axes_fps import other_skeleton_database
@@ -35,7 +35,7 @@ def db(request, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def controller(db, tmp_path_factory):
-    return CompressedController(small_compressed(db, tmp_path_factory.mktemp("cobst") / "c.pt"), db)
+    return CompressedModel(small_compressed(db, tmp_path_factory.mktemp("cobst") / "c.pt"), db)
 
 
 def raw_trajectory(db, features):

@@ -9,7 +9,7 @@ import mmrl
 from mmrl import _core
 from mmrl.cli import main
 from mmrl.compress import CompressConfig, train_compressed
-from mmrl.compress.model import CompressedController
+from mmrl.compress.model import CompressedModel
 from mmrl.export.runtime_export import read_controller
 from mmrl.export.runtime_file import read_sections, write_sections
 from mmrl.runs import RunDir
@@ -38,7 +38,7 @@ def test_the_runtime_equals_the_python_compressed_path_for_1000_decisions(export
     assert controller.compressed and controller.num_frames == 8 * 31  # the start windows only
     source = read_sections(path)["lmm.start_sources"]
     out = drive_both(path, r.task, db, r.task_config(), controller.act, 1000,
-                     compressed=CompressedController(cpt, db), start=(int(source[0]), 0))
+                     compressed=CompressedModel(cpt, db), start=(int(source[0]), 0))
     assert out["obs_error"] == 0.0
     assert out["root_error"] <= 1e-4 and out["pose_error"] <= 1e-4, out
     assert (out["rt_matches"] == -1).all() and (out["py_matches"] == -1).all()

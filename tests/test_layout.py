@@ -277,3 +277,15 @@ def test_a_checkpoint_and_config_json_name_no_module_paths(tmp_path):
         assert b"mmrl." not in f.read()
     assert isinstance(mmrl.load_policy(run / "latest.pt").model, PlaneActorCritic)
     assert torch.is_tensor(state["model"]["log_std"])
+
+
+def test_this_releases_renamed_names_warn_and_are_the_same_objects(monkeypatch):
+    from mmrl.compress import model
+    from mmrl.rollout import FullPath
+
+    with pytest.warns(DeprecationWarning, match="use CompressedModel"):
+        assert model.CompressedController is model.CompressedModel
+    path = FullPath.__new__(FullPath)
+    path.character = object()
+    with pytest.warns(DeprecationWarning, match="FullPath.character"):
+        assert path.ctrl is path.character

@@ -257,7 +257,7 @@ def test_a_stick_on_a_compressed_controller(tmp_path):
     so the float rounding between the stick's action and the joystick's (within 1e-5) would grow:
     the Python compressed full path plays the runtime's own stick action, and both must agree."""
     from mmrl.compress import CompressConfig, train_compressed
-    from mmrl.compress.model import CompressedController
+    from mmrl.compress.model import CompressedModel
     from mmrl.export.compressed_export import write_compressed_controller
     from mmrl.export.runtime_file import read_sections
 
@@ -267,7 +267,7 @@ def test_a_stick_on_a_compressed_controller(tmp_path):
                          stepper_iterations=50, projector_iterations=50, stepper_hidden=(32, 32),
                          projector_hidden=(32, 32), stepper_window=8)
     train_compressed(db, tmp_path / "c.pt", cfg, progress=False)
-    compressed = CompressedController(tmp_path / "c.pt", db)
+    compressed = CompressedModel(tmp_path / "c.pt", db)
     path = tmp_path / "c.mmrl"
     write_compressed_controller(path, db, random_plane_policy(2), task, config, compressed)
     source = read_sections(path)["lmm.start_sources"]

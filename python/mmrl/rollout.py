@@ -154,7 +154,7 @@ class FullPath:
             calls :meth:`continue_from_character`) instead of moving it to the env's new start;
         request: a request over the database's tags (``"style=elderly"``, docs/styles.md),
             pinned on the env before its first episode, so episodes start and play inside it;
-        compressed: a :class:`~mmrl.compress.model.CompressedController` of ``db``: the env
+        compressed: a :class:`~mmrl.compress.model.CompressedModel` of ``db``: the env
             decides by its projector and plays by its stepper and decompressor (episode starts
             stay the database frames the env draws, from their states); the character shows the
             decoded poses. The same policy, decision interval and transition cost

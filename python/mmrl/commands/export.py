@@ -68,12 +68,12 @@ def cmd_export(args: argparse.Namespace) -> int:
 
         t0 = time.perf_counter()
         if args.compressed:
-            from ..compress.model import CompressedController
+            from ..compress.model import CompressedModel
             from ..export.compressed_export import write_compressed_controller
 
             try:
                 size = write_compressed_controller(args.output, db, policy, task, config,
-                                                   CompressedController(args.compressed, db), args.starts)
+                                                   CompressedModel(args.compressed, db), args.starts)
             except ValueError as e:
                 raise InputError(f"export --compressed: {e}") from None
             print(f"wrote {args.output}: {size / 1e6:.2f} MB, the compressed networks of {args.compressed} and "

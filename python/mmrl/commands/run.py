@@ -127,11 +127,11 @@ class Setup:
         self.request = check_request(self.db, getattr(args, "request", "") or "")
         self.compressed = None
         if getattr(args, "compressed", None):
-            from ..compress.model import CompressedController
+            from ..compress.model import CompressedModel
 
             if self.request:
                 raise InputError("--compressed: a compressed controller keeps to no tags; drop --request")
-            self.compressed = CompressedController(args.compressed, self.db)
+            self.compressed = CompressedModel(args.compressed, self.db)
 
     def _policy(self, args, run):
         from ..rl.policies import JoystickPolicy

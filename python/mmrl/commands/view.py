@@ -121,11 +121,11 @@ def cmd_play(args: argparse.Namespace) -> int:
         output_path(args.trace, "--trace")
     compressed = None
     if args.compressed:
-        from ..compress.model import CompressedController
+        from ..compress.model import CompressedModel
 
         if args.request:
             raise InputError("--compressed: a compressed controller keeps to no tags; drop --request")
-        compressed = CompressedController(args.compressed, db)
+        compressed = CompressedModel(args.compressed, db)
     session = LiveSession(task, db, run.policy(), config=run.task_config(task), stage=args.stage,
                           seed=args.seed, trace=args.trace, request=check_request(db, args.request),
                           compressed=compressed)

@@ -18,7 +18,7 @@ from .pose import pose_dim, pose_layout
 from .files import CompressedFileError, all_networks_from, load_compressed, stage_of
 from .networks import CompressData
 
-__all__ = ["CompressedController", "linear_layers"]
+__all__ = ["CompressedModel", "linear_layers"]
 
 
 def linear_layers(net) -> list:
@@ -30,7 +30,7 @@ def linear_layers(net) -> list:
             for m in net if isinstance(m, nn.Linear)]
 
 
-class CompressedController:
+class CompressedModel:
     """The compressed controller of ``path`` for database ``db`` (CompressedFileError when the
     file is corrupt, for another database, or not trained to the end)."""
 
@@ -101,3 +101,13 @@ def natural_motion(rows: np.ndarray, parents) -> np.ndarray:
     prev[..., 0] = c[:, None] * x - s[:, None] * z
     prev[..., 2] = s[:, None] * x + c[:, None] * z
     return p[1:] - prev
+
+
+def __getattr__(name: str):
+    if name == "CompressedController":  # the name until this release: one name per concept
+        import warnings
+
+        warnings.warn("mmrl.compress.model.CompressedController is deprecated; use CompressedModel (the C++ "
+                      "core's name too)", DeprecationWarning, stacklevel=2)
+        return CompressedModel
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -50,7 +50,7 @@ def start_database(db: Database, starts: int = 8):
 
 
 def compressed_sections(db: Database, policy, task, task_config, compressed, starts: int = 8) -> Dict[str, Section]:
-    """Every section of a compressed controller file (``compressed``: a CompressedController of ``db``)."""
+    """Every section of a compressed controller file (``compressed``: a CompressedModel of ``db``)."""
     from ..compress.model import linear_layers
     from ..motion.tags import request_group_list
 
