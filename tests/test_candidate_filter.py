@@ -11,7 +11,7 @@ import pytest
 
 import mmrl
 from mmrl import _core
-from mmrl.character import clip_cost_array
+from mmrl.motion.clip_costs import clip_cost_array
 from mmrl.rl.policies import JoystickPolicy
 from mmrl.rollout import FullPath
 from mmrl.export.runtime_export import read_controller, write_controller

@@ -148,7 +148,7 @@ def controller_sections(db, policy, task_name: str, task_config,
     out.update(_numbers("task", numbers))
     clip_costs = getattr(task_config, "clip_costs", "")
     if clip_costs:  # the decision's clip-cost filter, one cost per clip (docs/runtime.md)
-        from ..character import clip_cost_array
+        from ..motion.clip_costs import clip_cost_array
 
         out["task.clip_costs"] = clip_cost_array(clip_costs, db)
     from ..motion.tags import request_group_list

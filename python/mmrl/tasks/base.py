@@ -33,7 +33,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from ..character import clip_cost_array
+from ..motion.clip_costs import clip_cost_array
 from ..motion.tags import request_group_list
 from .requests import RequestMethods
 from ..motion.database import Database
