@@ -12,6 +12,19 @@ def scripted_targets(n: int, seed: int, half: float = 6.0) -> np.ndarray:
     return np.random.default_rng(seed).uniform(-half, half, (n, 2))
 
 
+def start_both(path, task, db, config, seed, compressed, start):
+    """The Python full path and a runtime character of the controller file ``path`` on the same
+    start (``start``: see drive_both), and the loaded controller."""
+    fp = FullPath(task, db, config=config, seed=seed, record=False, continuous=True, compressed=compressed)
+    if start is not None:
+        fp.env.set_state(0, int(start[0]), 0.0, 0.0, 0.0)
+        fp._start_episode()
+    x, z, yaw = fp.character.root
+    controller = _core.RuntimeController.load(str(path))
+    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.character.frame if start is None else int(start[1]))
+    return fp, ch, controller
+
+
 def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0, success_radius: float = 0.5,
                request: str = "", compressed=None, start=None):
     """``decisions`` decisions of the runtime and of the Python full path from the same start,
@@ -21,13 +34,7 @@ def drive_both(path, task, db, config, python_act, decisions: int, seed: int = 0
     when they differ (a compressed file keeps only its start windows).
 
     Returns per decision the matches of both, and the largest root and pose differences per frame."""
-    fp = FullPath(task, db, config=config, seed=seed, record=False, continuous=True, compressed=compressed)
-    if start is not None:
-        fp.env.set_state(0, int(start[0]), 0.0, 0.0, 0.0)
-        fp._start_episode()
-    x, z, yaw = fp.character.root
-    controller = _core.RuntimeController.load(str(path))
-    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.character.frame if start is None else int(start[1]))
+    fp, ch, controller = start_both(path, task, db, config, seed, compressed, start)
     if request:  # the same request on both sides (tags.hpp)
         fp.env.set_request(0, request)
         fp.obs = fp.env.observe(0)
@@ -82,13 +89,7 @@ def drive_stick(path, task, db, config, phases, seed: int = 0, request: str = ""
     (relative to max(1, |action|)), and the root at each phase's start and end."""
     from mmrl.rl.policies import JoystickPolicy
 
-    fp = FullPath(task, db, config=config, seed=seed, record=False, continuous=True, compressed=compressed)
-    if start is not None:
-        fp.env.set_state(0, int(start[0]), 0.0, 0.0, 0.0)
-        fp._start_episode()
-    x, z, yaw = fp.character.root
-    controller = _core.RuntimeController.load(str(path))
-    ch = _core.RuntimeCharacter(controller, x, z, yaw, fp.character.frame if start is None else int(start[1]))
+    fp, ch, controller = start_both(path, task, db, config, seed, compressed, start)
     if request:
         fp.set_request(request)
         ch.set_request(request)
