@@ -115,6 +115,20 @@ def test_db_info_reads_a_database_saved_under_another_extension(data, tmp_path, 
     (["db", "build", "x", "-o", "y.npz", "--scale", "0"], "--scale"),
     (["db", "build", "x", "-o", "y.npz", "--fps", "-30"], "--fps"),
     (["compress", "-o", "x.pt", "--iterations", "0"], "--iterations"),
+    (["train", "plane", "--steps", "64", "--set", "device=cpu"], "--set device: use --device instead"),
+    (["train", "plane", "--steps", "64", "--set", "gamma=2"], "--set gamma=2.0: expected a value above 0 up to 1"),
+    (["train", "plane", "--steps", "64", "--set", "learning_rate=-1"], "learning_rate"),
+    (["train", "plane", "--steps", "64", "--set", "log_interval=0"], "log_interval"),
+    (["train", "plane", "--steps", "64", "--set", "hidden=0"], "layer widths >= 1"),
+    (["train", "plane", "--seed", "-1"], "expected a seed from 0 to 4294967295"),
+    (["train", "plane", "--envs", "1e30"], "--envs"),
+    (["train", "plane", "--threads", "100000"], "--threads"),
+    (["train", "plane", "--steps", "1e30"], "--steps"),
+    (["train", "plane", "--db", "x.npz", "--mirror"], "--mirror applies to --data"),
+    (["eval", "--episodes", "1e9"], "--episodes"),
+    (["render", "--length", "1e9", "-o", "x.gif"], "--length"),
+    (["db", "build", "x", "-o", "y.npz", "--fps", "0.5"], "--fps"),
+    (["compress", "-o", "x.pt", "--stages", "foo"], "no stage 'foo'; the stages are decompressor, stepper"),
     (["train"], "name the task"),
     (["train", "plane", "--bogus"], "unrecognized arguments: --bogus"),
 ])
@@ -263,3 +277,30 @@ def test_outputs_make_their_folders_and_runs_survive_a_move(small_run, data, tmp
     assert run(capsys, "export-bvh", small_run, "--length", "0.5", "-o", tmp_path / "a" / "b" / "m.bvh")[0] == 0
     one_line_error(capsys, ["export-bvh", small_run, "-o", tmp_path / "m.txt"], "must end in .bvh")
     assert np.load(tmp_path / "a" / "b" / "m.npz")["positions"].ndim == 3
+
+
+def test_outputs_of_the_wrong_kind_are_refused(small_run, data, tmp_path, capsys):
+    one_line_error(capsys, ["export", small_run, "-o", tmp_path / "m.onnx"], "for a .onnx file use --onnx")
+    one_line_error(capsys, ["export", small_run, "--onnx", tmp_path / "m.mmrl"], "for a .mmrl file use -o")
+    one_line_error(capsys, ["export", small_run, "-o", tmp_path / "m.mmrl", "--starts", "3"],
+                   "--starts applies with --compressed only")
+    one_line_error(capsys, ["db", "build", data / "data", "-o", tmp_path / "x.bvh"], "name it .npz")
+    assert not any(tmp_path.iterdir())
+    # export-bvh writes positions beside the BVH: never over a database of that name.
+    assert run(capsys, "db", "build", data / "data", "-o", tmp_path / "walk.npz")[0] == 0
+    one_line_error(capsys, ["export-bvh", small_run, "--length", "0.4", "-o", tmp_path / "walk.bvh"],
+                   "walk.npz exists and is not an earlier export-bvh output")
+    from mmrl import Database
+
+    assert Database.load(tmp_path / "walk.npz").num_clips == 2  # untouched
+    assert run(capsys, "export-bvh", small_run, "--length", "0.4", "-o", tmp_path / "m.bvh")[0] == 0
+    assert run(capsys, "export-bvh", small_run, "--length", "0.4", "-o", tmp_path / "m.bvh")[0] == 0  # its own: replaced
+
+
+def test_a_database_given_as_data_and_a_corrupt_checkpoint_say_what_to_do(small_run, data, tmp_path, capsys):
+    assert run(capsys, "db", "build", data / "data", "-o", tmp_path / "db.npz")[0] == 0
+    one_line_error(capsys, ["eval", "--data", tmp_path / "db.npz"], "a database file, not BVH", "--db")
+    broken = tmp_path / "broken"
+    shutil.copytree(small_run, broken)
+    (broken / "latest.pt").write_bytes(b"PK\x03\x04 not a checkpoint")
+    one_line_error(capsys, ["eval", broken, "--episodes", "1"], "latest.pt", "train again")

@@ -163,7 +163,15 @@ class RunDir:
         if not self.checkpoint.is_file():
             raise not_a_run(self.path, f"no {CHECKPOINT_NAME} in it: it stopped before its first checkpoint"
                             if self.config else f"no {CONFIG_NAME} or {CHECKPOINT_NAME} in it")
-        return load_policy(self.checkpoint, device=device)
+        from .rl.ppo import CheckpointError
+
+        try:
+            return load_policy(self.checkpoint, device=device)
+        except CheckpointError as e:
+            snapshots = sorted(self.path.glob("snapshot_*.pt"), key=lambda p: p.stat().st_mtime)
+            hint = (f"; its newest snapshot {snapshots[-1].name} may still be good: copy it over {CHECKPOINT_NAME}"
+                    if snapshots else "; train again, or restore latest.pt from a copy")
+            raise CheckpointError(str(e).splitlines()[0][:300] + hint) from None
 
 
 

@@ -31,27 +31,40 @@ def _number(text: str, kind, what: str):
     return value
 
 
-def positive_int(text: str) -> int:
-    """argparse type: a whole number >= 1 (``1e6`` reads as 1000000)."""
+def positive_int(text: str, high: int = 10**12) -> int:
+    """argparse type: a whole number 1..``high`` (``1e6`` reads as 1000000)."""
     v = _number(text, int, "a whole number >= 1")
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    if not 1 <= v <= high:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 1 to {high:,}, got {text!r}")
     return v
 
 
-def count(text: str) -> int:
-    """argparse type: a whole number >= 0."""
+def bounded_int(high: int):
+    """argparse type: a whole number 1..``high`` (environments, episodes: beyond it is a typo)."""
+    return lambda text: positive_int(text, high)
+
+
+def seed(text: str) -> int:
+    """argparse type: a random seed, 0 to 2**32 - 1."""
+    v = _number(text, int, "a seed, a whole number from 0 to 4294967295")
+    if not 0 <= v < 2**32:
+        raise argparse.ArgumentTypeError(f"expected a seed from 0 to 4294967295, got {text!r}")
+    return v
+
+
+def count(text: str, high: int = 1024) -> int:
+    """argparse type: a whole number 0..``high``."""
     v = _number(text, int, "a whole number >= 0")
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected a whole number >= 0, got {text!r}")
+    if not 0 <= v <= high:
+        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to {high}, got {text!r}")
     return v
 
 
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0."""
+def positive_float(text: str, high: float = 1e7) -> float:
+    """argparse type: a finite number in (0, ``high``] (seconds: 1e7 is four months)."""
     v = _number(text, float, "a number > 0")
-    if v <= 0:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    if not 0 < v <= high:
+        raise argparse.ArgumentTypeError(f"expected a number > 0 and at most {high:g}, got {text!r}")
     return v
 
 
@@ -184,6 +197,32 @@ def split_overrides(items, *dataclasses_) -> List[Dict[str, Any]]:
             names = sorted({f.name for d in dataclasses_ for f in fields(d)})
             raise InputError(f"--set: unknown option {k!r}; options are {', '.join(names)}")
     return out
+
+
+#: --set PPO fields that command-line flags own, and the flag to use.
+FLAG_OWNED = {"device": "--device", "max_seconds": "--seconds", "total_steps": "--steps", "seed": "--seed",
+              "progress": "--no-progress"}
+#: Ranges of --set PPO fields: (low, high, low inclusive).
+PPO_RANGES = {"learning_rate": (0, 10, False), "gamma": (0, 1, False), "gae_lambda": (0, 1, True),
+              "clip_coef": (0, 10, False), "ent_coef": (0, 10, True), "vf_coef": (0, 100, True),
+              "max_grad_norm": (0, 1e6, False), "num_steps": (1, 10**6, True), "update_epochs": (1, 1000, True),
+              "num_minibatches": (1, 10**6, True), "log_interval": (1, 10**9, True),
+              "checkpoint_interval_steps": (1, 10**12, True), "torch_threads": (1, 1024, True),
+              "obs_clip": (0, 1e9, False), "target_kl": (0, 100, False)}
+
+
+def check_ppo_overrides(values: Dict[str, Any]) -> None:
+    """InputError for a --set PPO value out of its range, or one a flag owns."""
+    for k, v in values.items():
+        if k in FLAG_OWNED:
+            raise InputError(f"--set {k}: use {FLAG_OWNED[k]} instead")
+        if k in PPO_RANGES and v is not None:
+            lo, hi, closed = PPO_RANGES[k]
+            if not ((lo <= v if closed else lo < v) and v <= hi):
+                raise InputError(f"--set {k}={v}: expected a value {'from' if closed else 'above'} {lo:g} "
+                                 f"up to {hi:g}")
+        if k == "hidden" and (not v or min(v) < 1):
+            raise InputError(f"--set hidden={','.join(map(str, v))}: expected layer widths >= 1, e.g. 64,64")
 
 
 def apply_values(obj, values: Dict[str, Any]) -> None:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 from ..errors import InputError
 from .common import (add_data_options, apply_values, database_from_args, output_path, positive_float, positive_int,
-                     split_overrides, warn)
+                     seed, split_overrides, warn)
 
 
 def register_cli(sub) -> None:
@@ -18,14 +18,16 @@ def register_cli(sub) -> None:
     c.add_argument("-o", "--output", default=None, help="output compressed.pt (metrics beside it)")
     c.add_argument("--seconds", type=positive_float, default=None,
                    help="stop after this many seconds of training (default: --iterations only)")
-    c.add_argument("--iterations", type=positive_int, default=None, help="iterations (default: 50,000)")
+    c.add_argument("--iterations", type=positive_int, default=None,
+                   help="the decompressor's iterations (default: 50,000); the stepper's and projector's are "
+                        "--set stepper_iterations=N / projector_iterations=N")
     c.add_argument("--resume", nargs="?", const="", default=None, metavar="FILE",
                    help="continue the training saved in FILE (a compressed.pt of mmrl compress)")
     c.add_argument("--stages", default=None, metavar="LIST",
                    help="train these stages of the finished OUTPUT again from fresh networks, with the whole "
                         "budget (comma-separated: decompressor, stepper, projector), e.g. --stages projector "
                         "--seconds 900 --set projector_iterations=80000")
-    c.add_argument("--seed", type=int, default=0, help="random seed of the networks and the batches")
+    c.add_argument("--seed", type=seed, default=0, help="random seed of the networks and the batches")
     c.add_argument("--device", default="auto", help="torch device: auto (CUDA when present), cpu, cuda")
     c.add_argument("--no-progress", action="store_true", help="no progress bar")
     c.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -78,6 +80,11 @@ def cmd_compress(args: argparse.Namespace) -> int:
     db = _database(args)
     cfg = CompressConfig(seed=args.seed, device=args.device)
     stages = [x.strip() for x in args.stages.split(",") if x.strip()] if args.stages else None
+    from ..compress.networks import STAGES
+
+    for stage in stages or ():
+        if stage not in STAGES:
+            raise InputError(f"--stages: no stage {stage!r}; the stages are {', '.join(STAGES)}")
     if resume or stages:
         if not out.is_file():
             raise InputError(f"--{'resume' if resume else 'stages'}: {out} does not exist")
@@ -96,6 +103,11 @@ def cmd_compress(args: argparse.Namespace) -> int:
         if stages is None:
             raise
         raise InputError(f"--stages: {e}") from None
+    if not res.get("iteration"):
+        if not resume and not stages:
+            out.unlink(missing_ok=True)
+        raise InputError(f"compress: the budget ended before the first iteration (setting up takes a few seconds); "
+                         f"nothing {'changed' if resume or stages else 'written'}: give more --seconds")
     held = res.get("holdout_joint_error_cm")
     print(f"wrote {out}: {res['iteration']} iterations; joint error {res.get('joint_error_cm', float('nan')):.2f} cm "
           f"on training frames" + ("" if held is None else f", {held:.2f} cm on held-back clips"))

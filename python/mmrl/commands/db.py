@@ -11,7 +11,7 @@ from .. import _core
 from ..motion.database import DEFAULT_FPS
 from ..errors import InputError
 from ..motion.sources import load_any
-from .common import deprecated_alias, output_path, positive_float
+from .common import deprecated_alias, output_path, positive_float, warn
 
 
 def parse_roles(items):
@@ -55,7 +55,7 @@ def register_cli(sub) -> None:
     b.set_defaults(func=cmd_build)
 
     i = dsub.add_parser("info", help="print clips, frames, skeleton roles and feature statistics")
-    i.add_argument("database", help="a .npz database, a BVH file or a directory")
+    i.add_argument("database", metavar="SOURCE", help="a database file, a BVH file or a folder of BVH files")
     add_import_arguments(i, " (when given BVH files)")
     i.set_defaults(func=cmd_info)
 
@@ -73,7 +73,7 @@ def _fps(text: str) -> float:
         v = float(text)
     except ValueError:
         v = -1.0
-    if not 0 <= v <= 1000:
+    if not (v == 0 or 1 <= v <= 1000):
         raise argparse.ArgumentTypeError(f"expected a frame rate 1-1000 (or 0 to keep the files' rate), got {text!r}")
     return v
 
@@ -99,6 +99,8 @@ def cmd_build(args: argparse.Namespace) -> int:
     from ..motion.database import Database
 
     out = output_path(args.output, "-o")
+    if out.suffix.lower() == ".bvh":
+        raise InputError(f"-o {out}: the database is written there, not BVH; name it .npz")
     t0 = time.perf_counter()
     db = Database.from_bvh(args.data, mirror=args.mirror, scale=args.scale, roles=parse_roles(args.role),
                            progress=True, tags=tag_rules(args), **import_options(args))
@@ -163,6 +165,10 @@ def cmd_info(args: argparse.Namespace) -> int:
     from ..motion.database import FEATURE_BLOCKS
     from ..metrics import raw_mocap_floor
 
+    from ..motion.checks import is_database_file
+
+    if is_database_file(args.database) and (args.fps != DEFAULT_FPS or args.up != "auto"):
+        warn("--fps and --up apply to BVH input; a database keeps the rate and axes it was built with")
     db = load_any(args.database, **import_options(args))
     lengths = np.diff(db.clip_ranges, axis=1)[:, 0] / db.fps
     print(f"database     {args.database}")

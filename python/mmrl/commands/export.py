@@ -27,7 +27,7 @@ def register_cli(sub) -> None:
     x.add_argument("--onnx", metavar="FILE", help="write the policy as ONNX (needs mmrl[onnx])")
     x.add_argument("--compressed", metavar="FILE", help="with -o: a compressed controller file, the networks of "
                    "FILE (mmrl compress) in place of the database (docs/compressed.md)")
-    x.add_argument("--starts", type=positive_int, default=8, metavar="K",
+    x.add_argument("--starts", type=positive_int, default=None, metavar="K",
                    help="with --compressed: start frames kept for the characters (default: 8)")
     x.add_argument("--check-observations", type=positive_int, default=512, metavar="N",
                    help="observations the ONNX check compares on (default: 512)")
@@ -57,6 +57,13 @@ def cmd_export(args: argparse.Namespace) -> int:
         raise InputError("export: nothing to write; pass -o FILE (controller) and/or --onnx FILE")
     if args.compressed and args.output is None:
         raise InputError("export: --compressed writes a controller file; pass -o FILE")
+    if args.starts is not None and not args.compressed:
+        raise InputError("--starts applies with --compressed only")
+    args.starts = args.starts or 8
+    for flag, path, wrong, right in (("-o", args.output, ".onnx", "--onnx"), ("--onnx", args.onnx, ".mmrl", "-o")):
+        if path is not None and str(path).lower().endswith(wrong):
+            raise InputError(f"{flag} {path}: {flag} writes {'a controller file' if flag == '-o' else 'ONNX'}; "
+                             f"for a {wrong} file use {right}")
     for name in ("output", "onnx"):
         if getattr(args, name) is not None:
             output_path(getattr(args, name), "-o" if name == "output" else "--onnx")

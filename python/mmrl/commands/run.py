@@ -19,8 +19,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..tasks import get_task, task_names
-from .common import (add_data_options, count, database_from_args, deprecated_alias, output_path, positive_float,
-                     positive_int)
+from .common import (add_data_options, bounded_int, count, database_from_args, deprecated_alias, output_path,
+                     positive_float, seed)
 
 #: Episodes of the joystick that ``mmrl eval`` runs at the policy's speed by default (the first
 #: ones of the same seed): enough for its sliding, a fifth of a 100-episode evaluation.
@@ -44,14 +44,14 @@ def add_shared_options(p: argparse.ArgumentParser, motion: bool) -> None:
     p.add_argument("--policy", choices=POLICIES, default=None,
                    help="trained: RUN's policy; joystick / joystick-run: a scripted stick held toward the target at "
                         "the data's walking / running speed (default: trained with RUN, else joystick)")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the episodes (default: 0)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed of the episodes (default: 0)")
     if motion:
-        p.add_argument("--length", type=positive_float, default=10.0, metavar="SECONDS",
-                       help="seconds of motion to write (default: 10)")
+        p.add_argument("--length", type=lambda t: positive_float(t, 3600), default=10.0, metavar="SECONDS",
+                       help="seconds of motion to write, at most 3600, in whole decisions of 0.2 s (default: 10)")
         deprecated_alias(p, "--seconds", "--length (--seconds is a training budget)", "length", type=positive_float)
         deprecated_alias(p, "--episodes", lambda v: "it never did anything here; drop it", "ignored_episodes")
     else:
-        p.add_argument("--episodes", type=positive_int, default=20, help="evaluation episodes (default: 20)")
+        p.add_argument("--episodes", type=bounded_int(100_000), default=20, help="evaluation episodes (default: 20)")
         deprecated_alias(p, "--seconds", lambda v: "it never did anything in eval; use --episodes", "ignored_seconds")
     p.add_argument("--no-ik", action="store_true", help="switch off foot locking and leg IK")
     p.add_argument("--no-inertialization", action="store_true", help="hard switches at transitions")
@@ -227,7 +227,8 @@ def print_evaluation(res, s: "Setup", episodes: int) -> None:
     print(f"  success             {100 * res['success_rate']:.1f}%")
     for k in (k for k in res if k.endswith("_rate") and k != "success_rate"):
         print(f"  {k.replace('_rate', ''):<19} {100 * res[k]:.1f}%")
-    print(f"  time to target      {_f(res.get('mean_time_to_target_s'))} s (mean over successes)")
+    t = res.get("mean_time_to_target_s")
+    print("  time to target      " + ("n/a (no episode succeeded)" if t is None else f"{t:.2f} s (mean over successes)"))
     print(f"  mean speed          {_f(res.get('mean_speed_m_per_s'))} m/s")
     print(f"  foot sliding        {_f(res.get('foot_sliding_cm_per_s'), 1)} cm/s with IK, "
           f"{_f(res.get('foot_sliding_ik_off_cm_per_s'), 1)} without")
@@ -358,7 +359,7 @@ def cmd_render(args: argparse.Namespace) -> int:
                      success_radius=float(getattr(s.config, "success_radius", 0.5)))
     dt = time.perf_counter() - t0
     print(f"wrote {out}: {n} frames ({n / s.db.fps:.1f} s) rendered in {dt:.2f} s ({n / dt:.0f} frames/s)")
-    names = {0: "running", 1: "success", 2: "/".join(o for o in s.task.outcomes if o != "truncated") or "ended",
+    names = {0: "still going when the video ends", 1: "success", 2: "/".join(o for o in s.task.outcomes if o != "truncated") or "ended",
              3: "safety cap"}
     where = f"stage {int(rec['stage'])}, " if s.stage is not None or s.task.stages else ""
     print(f"{where}episodes: " + ", ".join(names.get(int(o), "?") for o in rec["outcomes"]))
@@ -389,11 +390,26 @@ def _render_html(args: argparse.Namespace, s: "Setup", rec) -> int:
 EXPORT_KEYS = ("roots", "frames", "contacts", "episode", "outcomes")
 
 
+def _check_positions_file(npz: Path) -> None:
+    """export-bvh writes joint positions beside the BVH; it replaces an earlier export's file but
+    never another file of that name (a database, say)."""
+    if npz.exists():
+        try:
+            with np.load(npz, allow_pickle=False) as z:
+                ours = {"positions", "joint_names", "parents"} <= set(z.files) and "format" not in z.files
+        except Exception:
+            ours = False
+        if not ours:
+            raise InputError(f"-o: {npz} exists and is not an earlier export-bvh output (export-bvh writes the joint "
+                             f"positions there); choose another -o")
+
+
 def cmd_export(args: argparse.Namespace) -> int:
     from .. import _core
     from ..io import atomic_write_bytes, atomic_write_npz
 
     out = output_path(args.output, "-o", (".bvh",))
+    _check_positions_file(out.with_suffix(".npz"))
     s, rec = _follow(args)
     db = s.db
     motion = _core.motion_from_pose(db._db, np.ascontiguousarray(rec["local_translations"], np.float32),
@@ -403,5 +419,6 @@ def cmd_export(args: argparse.Namespace) -> int:
     atomic_write_npz(npz, positions=rec["positions"].astype(np.float32),
                      joint_names=np.array(db.joint_names, np.str_), parents=np.array(db.parents, np.int32),
                      fps=np.float32(db.fps), **{k: rec[k] for k in EXPORT_KEYS + tuple(rec["frame_keys"])})
-    print(f"wrote {out} ({motion.num_frames} frames at {db.fps:g} fps) and {npz} (global joint positions, meters)")
+    print(f"wrote {out} ({motion.num_frames} frames at {round(db.fps, 2):g} fps) and {npz} (global joint positions, "
+          f"meters)")
     return 0

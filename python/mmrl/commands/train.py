@@ -9,8 +9,9 @@ from typing import Any, Dict
 from ..errors import InputError
 from ..rl.quality_log import MatchQualityLog
 from ..tasks import Task, get_task, task_names
-from .common import (add_data_options, apply_values, count, deprecated_alias, positive_float, positive_int,
-                     report_training, resolve_run, split_overrides, task_flag_options)
+from .common import (add_data_options, apply_values, bounded_int, check_ppo_overrides, count, deprecated_alias,
+                     positive_float, positive_int, report_training, resolve_run, seed, split_overrides,
+                     task_flag_options)
 
 
 def register_cli(sub) -> None:
@@ -25,16 +26,17 @@ def register_cli(sub) -> None:
     add_data_options(t, mirror=True)
     budget = t.add_mutually_exclusive_group()
     budget.add_argument("--steps", type=positive_int, default=None,
-                        help="stop after this many env steps (default: 1,000,000 unless --seconds)")
+                        help="stop when the run has this many env steps in all (a total, also with --resume; "
+                             "default: 1,000,000 unless --seconds)")
     budget.add_argument("--seconds", type=positive_float, default=None,
                         help="stop after this many seconds of training (wall clock)")
-    t.add_argument("--seed", type=int, default=0, help="random seed of the networks, the envs and the episodes")
+    t.add_argument("--seed", type=seed, default=0, help="random seed of the networks, the envs and the episodes")
     t.add_argument("--out", default=None, help="run directory (default: runs/<task>-seed<SEED>)")
     t.add_argument("--resume", metavar="RUN", default=None,
                    help="continue the run in RUN with its own options (changed by any --set; config.json records "
                         "them)")
-    t.add_argument("--envs", type=positive_int, default=None, help="parallel environments (default: 64)")
-    t.add_argument("--threads", type=count, default=0, help="C++ env threads (0: all cores)")
+    t.add_argument("--envs", type=bounded_int(65536), default=None, help="parallel environments (default: 64)")
+    t.add_argument("--threads", type=count, default=0, help="C++ env threads, at most 1024 (default: 0, all cores)")
     t.add_argument("--device", default="auto", help="torch device: auto (CUDA when present), cpu, cuda")
     t.add_argument("--no-progress", action="store_true", help="no progress bar")
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
@@ -75,7 +77,7 @@ def register_cli(sub) -> None:
     p.add_argument("run", help="a run directory")
     p.add_argument("-o", "--output", default=None, help="output directory (default RUN/plots)")
     p.add_argument("--targets", type=positive_int, default=4, help="targets in the trajectory plot")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the targets")
+    p.add_argument("--seed", type=seed, default=0, help="random seed of the targets")
     p.set_defaults(func=cmd_plot)
 
 
@@ -109,6 +111,7 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
         sets.append(f"request_groups={args.request_groups}")
     options = task_flag_options(task, args, saved, sets)
     ppo_over, task_over = split_overrides(sets, cfg, task_cfg)
+    check_ppo_overrides(ppo_over)
     apply_values(cfg, ppo_over)
     apply_values(task_cfg, task_over)
     if not saved and getattr(task_cfg, "request_groups", ""):
@@ -140,6 +143,9 @@ def cmd_train(args: argparse.Namespace) -> int:
             raise InputError(f"--{name.replace('_', '-')} applies to --backend rllib only")
     if args.preset == "paper-rllib":
         raise InputError("--preset paper-rllib is RLlib's trainer: add --backend rllib")
+    if args.mirror and not args.data:
+        raise InputError("--mirror applies to --data (BVH); a database is mirrored when built: "
+                         "mmrl db build DATA --mirror -o DB.npz")
     saved, out, data = resolve_run(task, args, f"runs/{task.name}-seed{args.seed}")
     task_cfg, cfg, options = _configs(task, args, saved)
     if args.steps is not None:
@@ -170,9 +176,14 @@ def cmd_train(args: argparse.Namespace) -> int:
     resume = bool(args.resume) and (out / "latest.pt").exists()
     if args.resume and not resume:
         print(f"{out}: no checkpoint yet (the run stopped before its first save); training starts at step 0")
+    from ..rl.trained_policy import NonFiniteError
+
     try:
         result = ppo.train(envs, cfg, out, policy_factory=policy_factory, resume=resume,
                            callbacks=callbacks)
+    except NonFiniteError as e:
+        raise InputError(f"training diverged ({e}); {out}/latest.pt keeps the last good checkpoint, if any: "
+                         "lower learning_rate (--set learning_rate=...)") from None
     finally:
         envs.close()
     report_training(result.global_step, result.wall_s, result.stopped_by, result.last_stats, result.checkpoint,

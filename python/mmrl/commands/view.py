@@ -14,7 +14,7 @@ import threading
 import webbrowser
 
 from ..errors import InputError
-from .common import add_data_options, deprecated_alias, output_path, port, positive_float, positive_int, run_database
+from .common import add_data_options, deprecated_alias, output_path, port, positive_float, run_database, seed
 
 
 def _server_options(p: argparse.ArgumentParser) -> None:
@@ -32,7 +32,7 @@ def register_cli(sub) -> None:
     v.add_argument("--length", type=positive_float, default=20.0, metavar="SECONDS",
                    help="run: seconds of episodes to play (default: 20)")
     deprecated_alias(v, "--seconds", "--length (--seconds is a training budget)", "length", type=positive_float)
-    v.add_argument("--seed", type=int, default=0, help="run: random seed of the episodes (default: 0)")
+    v.add_argument("--seed", type=seed, default=0, help="run: random seed of the episodes (default: 0)")
     v.add_argument("--stage", type=int, default=None, metavar="K",
                    help="run: curriculum stage (default: the last)")
     v.set_defaults(func=cmd_view)
@@ -44,7 +44,7 @@ def register_cli(sub) -> None:
     p.add_argument("--policy", choices=("trained", "joystick", "joystick-run"), default="trained",
                    help="the policy to start with (switchable in the page; default: trained)")
     p.add_argument("--trace", metavar="FILE", help="append one JSON line per decision step to FILE")
-    p.add_argument("--seed", type=int, default=0, help="random seed of the start (and obstacles) (default: 0)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed of the start (and obstacles) (default: 0)")
     p.add_argument("--stage", type=int, default=None, metavar="K", help="curriculum stage (default: the last)")
     p.add_argument("--request", default="", metavar="TAGS",
                    help="the request to start with, e.g. \"style=elderly\" (switchable in the page; docs/styles.md)")

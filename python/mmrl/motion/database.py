@@ -60,6 +60,8 @@ def find_bvh_files(paths: Union[PathLike, Iterable[PathLike]]) -> List[Path]:
                 raise FileNotFoundError(f"{p}: no .bvh files in this directory")
             out.extend(found)
         elif p.is_file():
+            if is_database_file(p):
+                raise InputError(f"{p}: a database file, not BVH; pass it with --db {p}")
             out.append(p)
         else:
             raise FileNotFoundError(f"{p}: no such file or directory")
