@@ -191,7 +191,7 @@ def split_overrides(items, *dataclasses_) -> List[Dict[str, Any]]:
                 try:
                     o[k] = _coerce(v, getattr(d, k))
                 except ValueError as e:
-                    raise InputError(f"--set {k}={v}: {e}") from None
+                    raise InputError(f"--set {k}={v}: {e}, got {v!r}") from None
                 break
         else:
             names = sorted({f.name for d in dataclasses_ for f in fields(d)})
