@@ -22,7 +22,7 @@ import numpy as np
 
 from . import _core
 from .arrays import real_array
-from .motion.clip_costs import clip_cost_array  # noqa: F401 (mmrl.character.clip_cost_array: its old home)
+from .motion.clip_costs import clip_cost_array
 from .motion.database import POSE_DIM, TRAJECTORY_DIM, Database
 
 

@@ -64,7 +64,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _one_line_warning(message, category, filename, lineno, file=None, line=None):
-    print(f"mmrl: warning: {message}", file=file or sys.stderr, flush=True)
+    from .commands.common import warn
+
+    warn(str(message))
 
 
 def main(argv: Optional[List[str]] = None) -> int:

@@ -4,12 +4,11 @@ overrides, the task's switches, the run directory and the closing lines."""
 from __future__ import annotations
 
 import argparse
+import math
+import sys
 from dataclasses import fields
 from pathlib import Path
 from typing import Any, Dict, List
-
-import math
-import sys
 
 from ..errors import InputError
 from ..motion.sources import data_spec, database_from_spec
@@ -17,7 +16,7 @@ from ..tasks import Task, get_task, task_names
 
 
 # ---------------------------------------------------------------------- values checked where they are read
-def _number(text: str, kind, what: str):
+def read_number(text: str, kind, what: str):
     try:
         value = float(text)
     except ValueError:
@@ -33,7 +32,7 @@ def _number(text: str, kind, what: str):
 
 def positive_int(text: str, high: int = 10**12) -> int:
     """argparse type: a whole number 1..``high`` (``1e6`` reads as 1000000)."""
-    v = _number(text, int, "a whole number >= 1")
+    v = read_number(text, int, "a whole number >= 1")
     if not 1 <= v <= high:
         raise argparse.ArgumentTypeError(f"expected a whole number from 1 to {high:,}, got {text!r}")
     return v
@@ -46,7 +45,7 @@ def bounded_int(high: int):
 
 def seed(text: str) -> int:
     """argparse type: a random seed, 0 to 2**32 - 1."""
-    v = _number(text, int, "a seed, a whole number from 0 to 4294967295")
+    v = read_number(text, int, "a seed, a whole number from 0 to 4294967295")
     if not 0 <= v < 2**32:
         raise argparse.ArgumentTypeError(f"expected a seed from 0 to 4294967295, got {text!r}")
     return v
@@ -54,7 +53,7 @@ def seed(text: str) -> int:
 
 def count(text: str, high: int = 1024) -> int:
     """argparse type: a whole number 0..``high``."""
-    v = _number(text, int, "a whole number >= 0")
+    v = read_number(text, int, "a whole number >= 0")
     if not 0 <= v <= high:
         raise argparse.ArgumentTypeError(f"expected a whole number from 0 to {high}, got {text!r}")
     return v
@@ -62,7 +61,7 @@ def count(text: str, high: int = 1024) -> int:
 
 def positive_float(text: str, high: float = 1e7) -> float:
     """argparse type: a finite number in (0, ``high``] (seconds: 1e7 is four months)."""
-    v = _number(text, float, "a number > 0")
+    v = read_number(text, float, "a number > 0")
     if not 0 < v <= high:
         raise argparse.ArgumentTypeError(f"expected a number > 0 and at most {high:g}, got {text!r}")
     return v
@@ -70,7 +69,7 @@ def positive_float(text: str, high: float = 1e7) -> float:
 
 def port(text: str) -> int:
     """argparse type: a TCP port, 0 (any free one) to 65535."""
-    v = _number(text, int, "a port number 0-65535")
+    v = read_number(text, int, "a port number 0-65535")
     if not 0 <= v <= 65535:
         raise argparse.ArgumentTypeError(f"expected a port number 0-65535, got {text!r}")
     return v

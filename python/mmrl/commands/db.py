@@ -11,7 +11,7 @@ from .. import _core
 from ..motion.database import DEFAULT_FPS
 from ..errors import InputError
 from ..motion.sources import load_any
-from .common import deprecated_alias, output_path, positive_float, warn
+from .common import read_number, deprecated_alias, output_path, positive_float, warn
 
 
 def parse_roles(items):
@@ -70,8 +70,8 @@ def add_import_arguments(parser, when: str = "") -> None:
 
 def _fps(text: str) -> float:
     try:
-        v = float(text)
-    except ValueError:
+        v = read_number(text, float, "a frame rate")
+    except argparse.ArgumentTypeError:
         v = -1.0
     if not (v == 0 or 1 <= v <= 1000):
         raise argparse.ArgumentTypeError(f"expected a frame rate 1-1000 (or 0 to keep the files' rate), got {text!r}")
@@ -109,7 +109,8 @@ def cmd_build(args: argparse.Namespace) -> int:
     print(f"built {db.num_clips} clips ({int(db.clip_mirrored.sum())} mirrored), {db.num_frames:,} frames "
           f"({db.minutes:.1f} min at {fps_text(db.fps)} fps), {db.num_joints} joints, in {t1 - t0:.2f} s; saved "
           f"{out} in {time.perf_counter() - t1:.2f} s")
-    print(unit_line(db, args.scale))
+    print(unit_line(db, "as given by --scale" if args.scale else
+                    "inferred from the skeleton's height; --scale overrides it"))
     for line in tag_lines(db):
         print(line)
     print(f"next: mmrl db info {out}, or mmrl train plane --db {out} --seconds 60")
@@ -121,11 +122,10 @@ def fps_text(fps: float) -> str:
     return f"{round(fps, 2):g}"
 
 
-def unit_line(db, given=None) -> str:
-    """How the files' units became meters: the scale and the unit it stands for."""
-    from ..motion.database import unit_name
+def unit_line(db, how: str) -> str:
+    """How the files' units became meters: the scale, the unit it stands for, and ``how``."""
+    from ..motion.checks import unit_name
 
-    how = "as given by --scale" if given else "inferred from the skeleton's height; --scale overrides it"
     return f"unit         {unit_name(db.source_scale)} (scale {db.source_scale:g} m per file unit, {how})"
 
 
@@ -176,7 +176,8 @@ def cmd_info(args: argparse.Namespace) -> int:
           f"length {lengths.min():.1f}-{lengths.max():.1f} s (median {np.median(lengths):.1f} s)")
     print(f"frames       {db.num_frames} at {fps_text(db.fps)} fps = {db.minutes:.1f} min; "
           f"{int(db.valid_mask.sum())} valid matches")
-    print(unit_line(db, getattr(args, "scale", None)))
+    print(unit_line(db, "given by --scale or inferred from the skeleton's height at build time"
+                    if is_database_file(args.database) else "inferred from the skeleton's height"))
     for line in source_lines(db):
         print(line)
     for line in tag_lines(db):

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..tasks import get_task, task_names
+from .db import fps_text
 from .common import (add_data_options, bounded_int, count, database_from_args, deprecated_alias, output_path,
                      positive_float, seed)
 
@@ -419,6 +420,6 @@ def cmd_export(args: argparse.Namespace) -> int:
     atomic_write_npz(npz, positions=rec["positions"].astype(np.float32),
                      joint_names=np.array(db.joint_names, np.str_), parents=np.array(db.parents, np.int32),
                      fps=np.float32(db.fps), **{k: rec[k] for k in EXPORT_KEYS + tuple(rec["frame_keys"])})
-    print(f"wrote {out} ({motion.num_frames} frames at {round(db.fps, 2):g} fps) and {npz} (global joint positions, "
+    print(f"wrote {out} ({motion.num_frames} frames at {fps_text(db.fps)} fps) and {npz} (global joint positions, "
           f"meters)")
     return 0

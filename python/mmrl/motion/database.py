@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import _core
 from .bvh import _options as _bvh_options, check_motion, warn_if_implausible
-from .checks import check_usable as _check_usable, is_bvh_file as _is_bvh, is_database_file, unit_name  # noqa: F401
+from .checks import check_usable, is_bvh_file, is_database_file
 from ..errors import InputError
 from ..arrays import MAX_ENTRIES, index_array, real_array
 from ..io import atomic_write_npz
@@ -211,7 +211,7 @@ class Database:
             raise
         except ValueError as e:  # the data's: two skeletons, no clip, a bad weight
             raise InputError(str(e)) from None
-        _check_usable(core, motions)
+        check_usable(core, motions)
         if clip_tags is not None and len(clip_tags[0]):
             names, matrix = list(clip_tags[0]), np.asarray(clip_tags[1])
             if matrix.shape != (len(motions), len(names)):
@@ -360,7 +360,7 @@ class Database:
                                     f"--data {path}, or build a database first: mmrl db build {path} -o db.npz")
         if not path.is_file():
             raise FileNotFoundError(f"{path}: no such database file")
-        if _is_bvh(path):
+        if is_bvh_file(path):
             raise DatabaseFileError(f"{path}: a BVH file, not a database; pass it with --data {path}, or build a "
                                     f"database first: mmrl db build {path} -o db.npz")
         try:

@@ -13,7 +13,8 @@ import os
 from pathlib import Path
 from typing import Any, Dict, Optional, Sequence, Union
 
-from .database import Database, is_database_file
+from .checks import is_database_file
+from .database import Database
 
 PathLike = Union[str, os.PathLike]
 _DEFAULT_DB: Optional[Database] = None
