@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "mmrl/database_source.hpp"
 #include "mmrl/runtime.hpp"
 
 namespace {
@@ -45,8 +46,10 @@ double run_variant(const mmrl::RuntimeController& c, const Variant& v, int chars
   for (int64_t f = 0; f < db.num_frames; ++f)
     if (db.valid[f]) valid.push_back(f);
   std::vector<std::unique_ptr<mmrl::Character>> cs;
+  mmrl::DatabaseDecider decider(db, c.matcher(), c.task().config->action_limit_std, c.task().config->transition_cost,
+                                {});
   for (int i = 0; i < chars; ++i) {
-    cs.push_back(std::make_unique<mmrl::Character>(db, c.matcher(), o));
+    cs.push_back(std::make_unique<mmrl::Character>(db, o));
     cs.back()->reset(valid[(static_cast<size_t>(i) * 7919) % valid.size()], mmrl::RootState{float(i), 0.0f, 0.0f});
   }
   mmrl::PolicyScratch scratch = c.policy().make_scratch();
@@ -62,7 +65,9 @@ double run_variant(const mmrl::RuntimeController& c, const Variant& v, int chars
       obs[mmrl::kPoseDim] = g.x();
       obs[mmrl::kPoseDim + 1] = g.y();
       c.policy().act(obs.data(), action.data(), scratch);
-      if (!policy_only) ch.step(action.data());
+      if (policy_only) continue;
+      const mmrl::Decision decision = decider.decide(ch.frame(), action.data());
+      ch.play(decision.match, decision.cost);
     }
   return since(t0);
 }

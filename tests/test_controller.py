@@ -108,9 +108,9 @@ def test_bad_inputs_are_refused(synth_db):
     with pytest.raises(ValueError, match="NaN"):
         ctrl.step(np.full(12, np.nan, np.float32))
     with pytest.raises(TypeError, match="float32"):
-        ctrl._core.step(np.zeros(12, np.float64))
+        ctrl._decider.decide(ctrl.frame, np.zeros(12, np.float64))
     with pytest.raises(ValueError, match="NaN"):
-        ctrl._core.step(np.full(12, np.inf, np.float32))
+        ctrl._decider.decide(ctrl.frame, np.full(12, np.inf, np.float32))
     with pytest.raises(ValueError, match="out of range"):
         mmrl.Character(synth_db, start_frame=synth_db.num_frames)
     with pytest.raises(ValueError, match="frames_per_step"):
@@ -238,12 +238,13 @@ def test_a_lock_released_in_contact_locks_again_after_blending_out(synth_db):
 
     o = _core.CharacterOptions()
     o.frames_per_step, o.ik, o.foot_locking, o.lock_release_distance = 6, True, True, 0.02
-    ch = _core.Character(synth_db._db, synth_db.matcher, o)
+    ch = _core.Character(synth_db._db, o)
+    decider = _core.Decider(synth_db._db, synth_db.matcher)
     ch.reset(int(np.flatnonzero(synth_db.valid_mask)[0]), 0.0, 0.0, 0.0)
     rng = np.random.default_rng(0)
     c, w = [], []
     for _ in range(300):
-        ch.step((rng.normal(size=12) * 0.5).astype(np.float32))
+        ch.play(*decider.decide(ch.frame, (rng.normal(size=12) * 0.5).astype(np.float32)))
         c.append(np.array(ch.contacts).astype(bool))
         w.append(np.array(ch.lock_weights))
     c, w = np.concatenate(c), np.concatenate(w)

@@ -85,16 +85,16 @@ def test_env_core_outlives_database_matcher_and_python_env(task):
 def test_character_outlives_its_database_and_matcher():
     def make():
         db = mmrl.Database.from_bvh(mmrl.motion.synth.default_dataset_dir())
-        character = _core.Character(db._db, db.matcher, _core.CharacterOptions())
+        character = _core.Character(db._db, _core.CharacterOptions())
         character.reset(100, 0.0, 0.0, 0.0)
-        return character
+        return character, _core.Decider(db._db, db.matcher)
 
-    character, twin = make(), make()
+    (character, decider), (twin, twin_decider) = make(), make()
     junk = _reuse_freed_memory()
     query = np.linspace(-1, 1, 12).astype(np.float32)
     for _ in range(30):
-        character.step(query)
-        twin.step(query)
+        character.play(*decider.decide(character.frame, query))
+        twin.play(*twin_decider.decide(twin.frame, query))
         assert character.frame == twin.frame
         np.testing.assert_array_equal(character.current_pose()[0], twin.current_pose()[0])
     assert junk

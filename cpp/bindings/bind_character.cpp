@@ -1,5 +1,6 @@
 #include "bindings.hpp"
 #include "mmrl/character.hpp"
+#include "mmrl/database_source.hpp"
 #include "py_matcher.hpp"
 
 namespace mmrl {
@@ -37,16 +38,39 @@ void bind_character(py::module_& m) {
       .def_readwrite("foot_locking", &CharacterOptions::foot_locking)
       .def_readwrite("ik_margin", &CharacterOptions::ik_margin)
       .def_readwrite("lock_release_distance", &CharacterOptions::lock_release_distance)
-      .def_readwrite("lock_blend_time", &CharacterOptions::lock_blend_time)
-      .def_readwrite("action_limit_std", &CharacterOptions::action_limit_std)
-      .def_readwrite("transition_cost", &CharacterOptions::transition_cost)
-      .def_readwrite("clip_costs", &CharacterOptions::clip_costs);
+      .def_readwrite("lock_blend_time", &CharacterOptions::lock_blend_time);
 
-  py::class_<Character>(m, "Character", "A motion-matching character (C++ core of mmrl.Character).")
-      .def(py::init([](const Database& db, PyMatcher& matcher, const CharacterOptions& options) {
-             return new Character(db, matcher.matcher, options);
+  py::class_<DatabaseDecider>(m, "Decider",
+                              "One database character's decisions (decider.hpp's Decider over the database source, "
+                              "with a transition cost and clip costs): what mmrl.Character.step decides with.")
+      .def(py::init([](const Database& db, PyMatcher& matcher, float action_limit_std, float transition_cost,
+                       std::vector<float> clip_costs) {
+             return new DatabaseDecider(db, matcher.matcher, action_limit_std, transition_cost, std::move(clip_costs));
            }),
-           py::arg("db"), py::arg("matcher"), py::arg("options"), py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
+           py::arg("db"), py::arg("matcher"), py::arg("action_limit_std") = 3.0f, py::arg("transition_cost") = 0.0f,
+           py::arg("clip_costs") = std::vector<float>{}, py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
+      .def(
+          "decide",
+          [](DatabaseDecider& d, int64_t frame, const py::handle& trajectory) {
+            auto t = check_array<float>(trajectory, "trajectory_query", {kTrajectoryDim});
+            check_finite(t.data(), kTrajectoryDim, "trajectory_query");
+            Decision out;
+            {
+              py::gil_scoped_release release;
+              out = d.decide(frame, t.data());
+            }
+            return py::make_tuple(out.match, out.cost);
+          },
+          py::arg("frame"), py::arg("trajectory_query"),
+          "The decision of a character showing `frame` for a 12-d normalized trajectory: (match, cost).")
+      .def_property(
+          "transition_cost", &DatabaseDecider::transition_cost,
+          [](DatabaseDecider& d, float cost) { d.set_transition_cost(cost); },
+          "transition cost of the next decisions (finite, >= 0)");
+
+  py::class_<Character>(m, "Character", "A motion-matching character that plays decisions (C++ core of mmrl.Character).")
+      .def(py::init([](const Database& db, const CharacterOptions& options) { return new Character(db, options); }),
+           py::arg("db"), py::arg("options"), py::keep_alive<1, 2>())
       .def(
           "reset",
           [](Character& c, int64_t frame, float x, float z, float yaw) {
@@ -60,22 +84,13 @@ void bind_character(py::module_& m) {
           },
           py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"))
       .def(
-          "step",
-          [](Character& c, const py::handle& trajectory) {
-            auto t = check_array<float>(trajectory, "trajectory_query", {kTrajectoryDim});
-            check_finite(t.data(), kTrajectoryDim, "trajectory_query");
-            py::gil_scoped_release release;
-            c.step(t.data());
-          },
-          py::arg("trajectory_query"))
-      .def(
           "play",
           [](Character& c, int64_t match, float cost) {
             py::gil_scoped_release release;
             c.play(match, cost);
           },
           py::arg("match"), py::arg("cost"),
-          "Plays a decision made elsewhere (the env's last_step_match): frames match+1 .. match+F, as step does.")
+          "Plays a database decision (a Decider's, or the env's last_step_match): frames match+1 .. match+F.")
       .def(
           "reset_row",
           [](Character& c, const py::handle& row, float x, float z, float yaw) {
@@ -98,10 +113,6 @@ void bind_character(py::module_& m) {
           py::arg("rows"), py::arg("transition"), py::arg("cost"),
           "Plays a compressed controller's decision (the env's compressed_rows): rows 1.. are shown.")
       .def_property_readonly("num_joints", &Character::num_joints)
-      .def_property(
-          "transition_cost", [](const Character& c) { return c.options().transition_cost; },
-          [](Character& c, float cost) { c.set_transition_cost(cost); },
-          "transition cost of the next matches (finite, >= 0)")
       .def_property_readonly("frames_per_step", [](const Character& c) { return c.options().frames_per_step; })
       .def_property_readonly("root",
                              [](const Character& c) { return py::make_tuple(c.root().x, c.root().z, c.root().yaw); })

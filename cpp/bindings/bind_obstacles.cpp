@@ -83,18 +83,6 @@ void bind_obstacles(py::module_& m) {
         return py::make_tuple(py::make_tuple("maps", 2 * kMapCells), py::make_tuple("pose", kPoseDim),
                               py::make_tuple("goal", 2));
       })
-      .def_property_readonly("obs_layout", [](const PyObstacleVecEnv& s) {
-        py::list out;
-        out.append(py::make_tuple("maps", 2 * kMapCells));
-        out.append(py::make_tuple("pose", kPoseDim));
-        out.append(py::make_tuple("goal", 2));
-        if (s.env.config().observe_continuation) {
-          out.append(py::make_tuple("continuation", kTrajectoryDim));
-          out.append(py::make_tuple("continuation_hit", 2));
-        }
-        if (s.env.request_dim() > 0) out.append(py::make_tuple("request", s.env.request_dim()));
-        return py::tuple(out);
-      })
       .def(
           "set_stage",
           [](PyObstacleVecEnv& s, float max_speed, float target_half_extent) {

@@ -29,6 +29,14 @@ py::dict decision_dict(const RuntimeDecision& d) {
 
 // long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 void bind_runtime(py::module_& m) {
+  m.def(
+      "runtime_task_cores",
+      [] {
+        py::list out;
+        for (const RuntimeTaskType& t : runtime_task_types()) out.append(t.core);
+        return py::tuple(out);
+      },
+      "The task cores the engine runtime has registered (runtime_task.hpp), in registration order.");
   py::register_exception<ControllerFileError>(m, "ControllerFileError", PyExc_ValueError);
   // pybind11 holders cannot be pointers to const; the controller is never changed through it.
   using ControllerPtr = std::shared_ptr<RuntimeController>;
@@ -50,6 +58,16 @@ void bind_runtime(py::module_& m) {
       .def_property_readonly("fps", &RuntimeController::fps)
       .def_property_readonly("obs_dim", [](const RuntimeController& c) { return c.policy().obs_dim(); })
       .def_property_readonly("task_name", [](const RuntimeController& c) { return c.task().name; })
+      .def_property_readonly("task_core", [](const RuntimeController& c) { return c.task().core; },
+                             "The registered task core the file's task runs on (runtime_task.hpp).")
+      .def_property_readonly(
+          "obs_layout",
+          [](const RuntimeController& c) {
+            py::list out;
+            for (const ObsSegment& s : c.task().layout) out.append(py::make_tuple(s.name, s.size));
+            return py::tuple(out);
+          },
+          "The policy's observation, segment by segment: a tuple of (name, size).")
       .def_property_readonly("frames_per_step", [](const RuntimeController& c) { return c.task().frames_per_step; })
       .def_property_readonly("memory_bytes", &RuntimeController::memory_bytes)
       .def_property_readonly("compressed", [](const RuntimeController& c) { return c.compressed() != nullptr; },

@@ -32,6 +32,13 @@ const CompressedModel& compressed_of(const Wrapper& s, const char* method) {
   return *m;
 }
 
+// An observation layout as Python reads it: a tuple of (name, size).
+inline py::tuple layout_tuple(const ObsLayout& layout) {
+  py::list out;
+  for (const ObsSegment& s : layout) out.append(py::make_tuple(s.name, s.size));
+  return py::tuple(out);
+}
+
 // The state every target env keeps (world meters, radians), as a dict; tasks add their own keys.
 inline py::dict target_state_dict(const TargetEnvState& st) {
   py::dict d;
@@ -41,13 +48,13 @@ inline py::dict target_state_dict(const TargetEnvState& st) {
   d["frame"] = st.frame;
   d["target"] = py::make_tuple(st.target_x, st.target_z);
   d["steps"] = st.steps;
-  d["last_match"] = st.last_match;
-  d["last_transition"] = st.last_transition;
-  d["last_cost"] = st.last_cost;
-  d["last_pose_jump"] = st.last_pose_jump;
+  d["last_match"] = st.decision.match;
+  d["last_transition"] = st.decision.transition;
+  d["last_cost"] = st.decision.cost;
+  d["last_pose_jump"] = st.decision.pose_jump;
   d["last_step_frames"] = st.last_step_frames;
-  d["last_step_transition_cost"] = st.last_step_transition_cost;
-  d["last_step_match"] = st.last_step_match;
+  d["last_step_transition_cost"] = st.last_step.transition_cost;
+  d["last_step_match"] = st.last_step.match;
   return d;
 }
 
@@ -116,7 +123,12 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
        py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
       .def_property_readonly("num_envs", [](const Wrapper& s) { return s.env.num_envs(); })
       .def_property_readonly_static("core_name", [](py::object) { return std::string(Env::kCoreName); })
+      .def_property_readonly_static("plays_compressed", [](py::object) { return Env::kPlaysCompressed; })
       .def_property_readonly("obs_dim", [](const Wrapper& s) { return s.env.obs_dim(); })
+      .def_property_readonly(
+          "obs_layout", [](const Wrapper& s) { return layout_tuple(s.env.obs_layout()); },
+          "This env's observation, segment by segment: a tuple of (name, size) in order (the task's own, then "
+          "'request' with request_groups).")
       .def_property_readonly_static("action_dim", [](py::object) { return Env::kActionDim; })
       .def_property_readonly("action_low",
                              [](const Wrapper& s) { return py::array_t<float>(kTrajectoryDim, s.env.action_low()); })
@@ -174,7 +186,7 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
           "weighted feature space). Kept through the autoreset; 0 after reset.")
       .def(
           "last_step_transition_cost",
-          [](const Wrapper& s, int i) { return s.env.state(checked_env_index(s, i)).last_step_transition_cost; },
+          [](const Wrapper& s, int i) { return s.env.state(checked_env_index(s, i)).last_step.transition_cost; },
           py::arg("index"),
           "The transition cost env i's last step matched with (the config's transition_cost, or what the task "
           "made of it for that decision). Kept through the autoreset; 0 after reset.")
@@ -195,7 +207,7 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
           "last_step_decision",
           [](const Wrapper& s, int i) {
             const TargetEnvState& st = s.env.state(checked_env_index(s, i));
-            return py::make_tuple(st.last_step_match, st.last_step_cost);
+            return py::make_tuple(st.last_step.match, st.last_step.cost);
           },
           py::arg("index"),
           "(match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path "
@@ -234,28 +246,28 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
           [](const Wrapper& s, int i) {
             const CompressedModel& m = compressed_of(s, "compressed_rows");
             const py::ssize_t F = s.env.config().frames_per_step + 1, P = m.pose_dim();
-            return py::array_t<float>({F, P}, s.env.compressed_rows(checked_env_index(s, i)));
+            return py::array_t<float>({F, P}, s.env.motion(checked_env_index(s, i)).crows.data());
           },
           py::arg("index"), "Env i's last decision's pose rows (frames_per_step + 1, pose_dim): row 0 the chosen state.")
       .def(
           "compressed_state",
           [](const Wrapper& s, int i) {
             return py::array_t<float>(compressed_of(s, "compressed_state").state_dim(),
-                                      s.env.compressed_state(checked_env_index(s, i)));
+                                      s.env.motion(checked_env_index(s, i)).cstate.data());
           },
           py::arg("index"), "Env i's compressed state shown now (state_dim).")
       .def(
           "compressed_played",
           [](const Wrapper& s, int i) {
             return py::array_t<float>(compressed_of(s, "compressed_played").state_dim(),
-                                      s.env.compressed_played(checked_env_index(s, i)));
+                                      s.env.motion(checked_env_index(s, i)).cnext.data());
           },
           py::arg("index"), "The state at the end of env i's last playback (kept through the autoreset).")
       .def(
           "compressed_chosen",
           [](const Wrapper& s, int i) {
             return py::array_t<float>(compressed_of(s, "compressed_chosen").state_dim(),
-                                      s.env.compressed_chosen(checked_env_index(s, i)));
+                                      s.env.motion(checked_env_index(s, i)).cchosen.data());
           },
           py::arg("index"), "The state env i's last decision chose (the projection or the continuation; state_dim).")
       .def(

@@ -191,7 +191,7 @@ mmrl_status mmrl_controller_start_frame(const mmrl_controller* controller, int64
 mmrl_status mmrl_controller_max_obstacles(const mmrl_controller* controller, int32_t* out) {
   if (controller == nullptr) return null_error("controller");
   if (out == nullptr) return fail(&controller->error, MMRL_ERROR_NULL, "out is NULL");
-  *out = controller->c->task().obstacles ? controller->c->task().num_obstacles : 0;
+  *out = controller->c->task().num_obstacles;
   return MMRL_OK;
 }
 

@@ -66,7 +66,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   // obstacles around it for an obstacle task).
   mmrl::RuntimeCharacter ch(controller, 0.0f, 0.0f, 0.0f);
   ch.set_target(3.0f, 4.0f);
-  if (controller->task().obstacles && controller->task().num_obstacles > 0) {
+  if (controller->task().num_obstacles > 0) {
     const float centre[2] = {1.0f, 1.5f}, half[2] = {0.0f, 0.0f}, angle[1] = {0.3f};
     try {
       ch.set_obstacles(1, centre, half, angle);

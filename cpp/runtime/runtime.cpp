@@ -7,6 +7,8 @@
 
 #include "mmrl/database_io.hpp"
 #include "mmrl/tags.hpp"
+#include "mmrl/tasks/obstacles.hpp"  // the legacy core rule of read_task
+#include "mmrl/tasks/plane.hpp"
 
 namespace mmrl {
 
@@ -78,33 +80,7 @@ double number(const ControllerFile& f, const std::map<std::string, double>& m, c
   return it->second;
 }
 
-// The config of a task core from the file's task numbers (by Config::visit's field names;
-// a field the file lacks keeps its default) and its optional clip costs.
-template <class Config>
-Config task_config(const ControllerFile& f, const RuntimeTask& t, int64_t num_clips) {
-  Config c;
-  Config::visit([&](const char* name, auto member) {
-    using T = typename std::decay<decltype(c.*member)>::type;
-    if constexpr (std::is_same<T, std::vector<float>>::value) {
-      const std::string section = std::string("task.") + name;
-      if (f.has(section)) c.*member = f.floats(section, {num_clips});
-    } else if constexpr (std::is_same<T, std::vector<std::string>>::value) {
-      const std::string section = std::string("task.") + name;
-      if (f.has(section)) c.*member = f.texts(section);
-    } else {
-      const auto it = t.values.find(name);
-      if (it == t.values.end()) return;
-      if (std::is_integral<T>::value && !std::is_same<T, bool>::value &&
-          (it->second != std::floor(it->second) || std::abs(it->second) > 1e9))
-        f.fail(std::string("task.") + name + " must be a whole number");
-      c.*member = static_cast<T>(it->second);
-    }
-  });
-  return c;
-}
-
 RuntimeTask read_task(const ControllerFile& f, int obs_dim, const Database& db) {
-  const int64_t num_clips = db.num_clips();
   RuntimeTask t;
   const auto names = f.texts("task.name");
   if (names.size() != 1) f.fail("section 'task.name' must hold one name");
@@ -112,53 +88,41 @@ RuntimeTask read_task(const ControllerFile& f, int obs_dim, const Database& db) 
   t.values = numbers(f, "task");
   for (const char* key : {"frames_per_step", "action_limit_std", "transition_cost", "success_radius"})
     number(f, t.values, "task", key);  // required
-  // The core the task runs on: named by the file (task.core), else (older files) the task's
-  // own name when it is a core's, else told by the policy's observation size.
+  // The core the task runs on: named by the file (task.core), else (files written before
+  // task.core) the task's own name when it is a core's, else the core whose observation has
+  // the policy's size (those files had the plane and obstacles cores only).
   if (f.has("task.core")) {
     const auto core = f.texts("task.core");
     if (core.size() != 1) f.fail("section 'task.core' must hold one name");
     t.core = core[0];
-  } else if (t.name == PlaneVecEnv::kCoreName || t.name == ObstacleVecEnv::kCoreName) {
+  } else if (find_runtime_task(t.name) != nullptr) {
     t.core = t.name;
   } else {
     t.core = obs_dim == ObstacleVecEnv::kObsDim ? ObstacleVecEnv::kCoreName : PlaneVecEnv::kCoreName;
   }
-  const bool plane = t.core == PlaneVecEnv::kCoreName;
-  t.obstacles = t.core == ObstacleVecEnv::kCoreName;
-  if (!plane && !t.obstacles)
-    f.fail("task.core '" + t.core + "' is not a core this runtime has (plane, obstacles)");
-  t.plane = task_config<PlaneTaskConfig>(f, t, num_clips);
-  t.obstacle = task_config<ObstacleTaskConfig>(f, t, num_clips);
-  const bool continuation = t.obstacles && t.obstacle.observe_continuation;
-  const std::vector<std::string>& groups = plane ? t.plane.request_groups : t.obstacle.request_groups;
-  int request_dim = 0;
+  const RuntimeTaskType* type = find_runtime_task(t.core);
+  if (type == nullptr) {
+    std::string cores;
+    for (const RuntimeTaskType& k : runtime_task_types()) cores += (cores.empty() ? "" : ", ") + k.core;
+    f.fail("task.core '" + t.core + "' is not a core this runtime has (" + cores + ")");
+  }
+  type->read_config(f, t, db);
   try {
-    request_dim = RequestCode(db, groups).dim();
+    RequestCode(db, t.config->request_groups);
   } catch (const std::invalid_argument& e) {
     f.fail(std::string("task.request_groups: ") + e.what());
   }
-  const int want = (plane ? PlaneVecEnv::kObsDim
-                          : ObstacleVecEnv::kObsDim + (continuation ? ObstacleVecEnv::kContinuationDim : 0)) +
-                   request_dim;
-  if (obs_dim != want)
-    f.fail("the policy reads " + std::to_string(obs_dim) + " observations; the " + t.core + " task's are " +
-           std::to_string(want) +
-           (t.obstacles ? std::string(" (task.observe_continuation ") + (continuation ? "on" : "off") + ")" : "") +
-           (request_dim ? " with a request code of " + std::to_string(request_dim) : ""));
-  const TaskConfig& base = plane ? static_cast<const TaskConfig&>(t.plane) : t.obstacle;
-  t.frames_per_step = base.frames_per_step;
-  t.success_radius = base.success_radius;
-  if (t.obstacles && t.obstacle.path_filter) {  // the collision-aware search needs its numbers
-    for (const char* key : {"path_cost", "path_horizon", "path_margin", "path_candidates"})
-      if (t.values.find(key) == t.values.end())
-        f.fail(std::string("task.path_filter is on but the file lacks task.") + key + " (the path filter's data)");
-  }
-  if (t.obstacles) {
-    t.num_obstacles = t.obstacle.num_obstacles;
-    if (t.obstacle.num_obstacles < 0 || t.obstacle.num_obstacles > 100000)
-      f.fail("task.num_obstacles out of range");
-  }
+  t.frames_per_step = t.config->frames_per_step;
+  t.success_radius = t.config->success_radius;
   return t;
+}
+
+// "pose 15, goal 2, request 7": a layout in words.
+std::string layout_text(const ObsLayout& layout) {
+  std::string out;
+  for (const ObsSegment& s : layout)
+    out += (out.empty() ? "" : ", ") + s.name + " " + std::to_string(s.size) + (s.option.empty() ? "" : " (" + s.option + ")");
+  return out;
 }
 
 }  // namespace
@@ -189,13 +153,15 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   t0 = std::chrono::steady_clock::now();
   c->policy_ = PolicyNet::from_file(file);
   c->task_ = read_task(file, c->policy_.obs_dim(), c->db_);
-  if (options.require_path_filter && !(c->task_.obstacles && c->task_.obstacle.path_filter))
-    file.fail(c->task_.obstacles
-                  ? "the loader requires the collision-aware search, but this obstacles controller has none "
+  c->task_type_ = find_runtime_task(c->task_.core);
+  if (options.require_path_filter && !(c->task_type_->searches_paths && c->task_.path_filter))
+    file.fail(c->task_type_->searches_paths
+                  ? "the loader requires the collision-aware search, but this " + c->task_.core +
+                        " controller has none "
                     "(task.path_filter is off or missing: written before the filter, or trained without it; "
                     "train with --preset mmrl, or --set path_filter=true)"
-                  : "the loader requires the collision-aware search, which only obstacles controllers have "
-                    "(this file's task core is '" + c->task_.core + "')");
+                  : "the loader requires the collision-aware search, which this file's task core ('" +
+                        c->task_.core + "') does not have");
   if (c->policy_.act_dim() != kTrajectoryDim) file.fail("the policy must write 12 trajectory values");
   if (file.has("lmm.header")) c->read_compressed(file);
   const auto ch = numbers(file, "character");
@@ -213,19 +179,18 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
                                           c->db_.valid.data());
   c->times_.search_tree = seconds_since(t0);
   try {  // the task env's own checks of its config (and of the clip costs), once, at load
-    const auto check = [&](auto&& env) {
-      if (!c->compressed_) return;
-      env.set_compressed(c->compressed_.get(), c->frame_states_.data());
-      env.set_action_box(c->action_box_, c->action_box_ + kTrajectoryDim);
-    };
-    if (c->task_.obstacles)
-      check(ObstacleVecEnv(c->db_, *c->matcher_, 1, c->task_.obstacle, 1));
-    else
-      check(PlaneVecEnv(c->db_, *c->matcher_, 1, c->task_.plane, 1));
-    Character(c->db_, *c->matcher_, c->options_);
+    const std::unique_ptr<RuntimeTaskEnv> env = c->task_type_->make_env(c->db_, *c->matcher_, c->task_);
+    if (c->compressed_) env->set_compressed(*c->compressed_, c->frame_states_.data(), c->action_box_);
+    c->task_.layout = env->layout();
+    Character(c->db_, c->options_);
   } catch (const std::invalid_argument& e) {
     file.fail(std::string("the task's numbers are refused: ") + e.what());
   }
+  int want = 0;
+  for (const ObsSegment& s : c->task_.layout) want += s.size;
+  if (c->policy_.obs_dim() != want)
+    file.fail("the policy reads " + std::to_string(c->policy_.obs_dim()) + " observations; the " + c->task_.core +
+              " task's are " + std::to_string(want) + " (" + layout_text(c->task_.layout) + ")");
   return c;
 }
 
@@ -246,13 +211,12 @@ size_t RuntimeController::memory_bytes() const {
 RuntimeCharacter::RuntimeCharacter(std::shared_ptr<const RuntimeController> controller, float x, float z,
                                    float yaw, int64_t start_frame)
     : controller_(std::move(controller)),
-      character_(controller_->database(), controller_->matcher(), controller_->character_options()) {
+      character_(controller_->database(), controller_->character_options()) {
   const Database& db = controller_->database();
   if (start_frame < 0) start_frame = std::find(db.valid.begin(), db.valid.end(), 1) - db.valid.begin();
   if (start_frame >= db.num_frames) throw std::invalid_argument("start_frame is outside the database");
   if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw))
     throw std::invalid_argument("the start position and yaw must be finite");
-  if (!controller_->compressed()) character_.reset(start_frame, RootState{x, z, wrap_angle(yaw)});
   scratch_ = controller_->policy().make_scratch();
   obs_.assign(controller_->policy().obs_dim(), 0.0f);
   action_.assign(kTrajectoryDim, 0.0f);
@@ -260,44 +224,23 @@ RuntimeCharacter::RuntimeCharacter(std::shared_ptr<const RuntimeController> cont
   target_z_ = z;
   const RuntimeTask& task = controller_->task();
   k_ = task.frames_per_step;  // the first frame decides
-  if (task.obstacles) {
-    obstacles_ = std::make_unique<ObstacleVecEnv>(db, controller_->matcher(), 1, task.obstacle, 1);
-    const size_t cap = static_cast<size_t>(task.num_obstacles);
-    for (auto* v : {&world_centres_, &world_half_sizes_, &world_velocities_, &local_centres_, &local_half_sizes_,
-                    &local_velocities_})
-      v->assign(cap * 2, 0.0f);
-    world_angles_.assign(cap, 0.0f);
-    local_angles_.assign(cap, 0.0f);
-  } else {
-    plane_ = std::make_unique<PlaneVecEnv>(db, controller_->matcher(), 1, task.plane, 1);
-  }
-  if (const CompressedModel* m = controller_->compressed()) {
-    // The start frame's state, decoded: the env holds the state from now on.
-    const float* state = with_env([&](auto& env) {
-      env.set_compressed(m, controller_->frame_states());
-      env.set_action_box(controller_->action_box(), controller_->action_box() + kTrajectoryDim);
-      env.set_state(0, start_frame, 0.0f, 0.0f, wrap_angle(yaw));
-      return env.compressed_state(0);
-    });
-    cscratch_ = m->make_scratch();
-    row_.assign(static_cast<size_t>(m->pose_dim()), 0.0f);
-    m->decode(state, row_.data(), cscratch_);
-    character_.reset_row(row_.data(), RootState{x, z, wrap_angle(yaw)});
-  }
+  env_ = controller_->task_type().make_env(db, controller_->matcher(), task);
+  const size_t cap = static_cast<size_t>(task.num_obstacles);
+  for (auto* v : {&centres_, &half_sizes_, &velocities_}) v->assign(cap * 2, 0.0f);
+  angles_.assign(cap, 0.0f);
+  // The env's motion source holds the character's place in its motion from now on (a
+  // compressed controller's state, or the frame the character shows); the character shows it.
+  if (const CompressedModel* m = controller_->compressed())
+    env_->set_compressed(*m, controller_->frame_states(), controller_->action_box());
+  env_->start(start_frame, yaw);
+  env_->source().show(character_, env_->motion(), RootState{x, z, wrap_angle(yaw)});
   pose_.num_joints = controller_->num_joints();
   fill_pose(-1);
 }
 
-void RuntimeCharacter::set_request(const std::string& request) {
-  if (obstacles_)
-    obstacles_->set_request(0, request);
-  else
-    plane_->set_request(0, request);
-}
+void RuntimeCharacter::set_request(const std::string& request) { env_->set_request(request); }
 
-const std::string& RuntimeCharacter::request() const {
-  return obstacles_ ? obstacles_->request(0).request.text : plane_->request(0).request.text;
-}
+const std::string& RuntimeCharacter::request() const { return env_->request(); }
 
 void RuntimeCharacter::set_target(float x, float z) {
   if (!std::isfinite(x) || !std::isfinite(z)) throw std::invalid_argument("target must be finite");
@@ -337,68 +280,22 @@ void RuntimeCharacter::stick_action(float* out) const {
 
 void RuntimeCharacter::set_obstacles(int n, const float* centres, const float* half_sizes, const float* angles,
                                      const float* velocities) {
-  if (!obstacles_) throw std::invalid_argument("this controller's task has no obstacles");
-  const ObstacleTaskConfig& tc = controller_->task().obstacle;
-  if (n < 0 || n > tc.num_obstacles)
-    throw std::invalid_argument("obstacles: at most " + std::to_string(tc.num_obstacles) + " (the task's num_obstacles)");
-  for (int k = 0; k < n; ++k) {
-    const float hx = half_sizes[2 * k], hz = half_sizes[2 * k + 1];
-    if (!std::isfinite(centres[2 * k]) || !std::isfinite(centres[2 * k + 1]) || !std::isfinite(angles[k]) ||
-        !(hx >= 0 && hx <= tc.obstacle_max_side / 2) || !(hz >= 0 && hz <= tc.obstacle_max_side / 2))
-      throw std::invalid_argument("obstacles: obstacle " + std::to_string(k) +
-                                  " is not finite or has a half size outside [0, obstacle_max_side / 2]");
-    if (velocities && !(std::hypot(velocities[2 * k], velocities[2 * k + 1]) <= tc.speed_cap))
-      throw std::invalid_argument("obstacles: obstacle " + std::to_string(k) +
-                                  "'s velocity is not finite or faster than the task's speed_cap");
-  }
-  std::copy(centres, centres + 2 * n, world_centres_.begin());
-  std::copy(half_sizes, half_sizes + 2 * n, world_half_sizes_.begin());
-  std::copy(angles, angles + n, world_angles_.begin());
+  env_->check_obstacles(RuntimeObstacles{n, centres, half_sizes, angles, velocities});
+  std::copy(centres, centres + 2 * n, centres_.begin());
+  std::copy(half_sizes, half_sizes + 2 * n, half_sizes_.begin());
+  std::copy(angles, angles + n, angles_.begin());
   if (velocities)
-    std::copy(velocities, velocities + 2 * n, world_velocities_.begin());
+    std::copy(velocities, velocities + 2 * n, velocities_.begin());
   else
-    std::fill(world_velocities_.begin(), world_velocities_.begin() + 2 * n, 0.0f);
+    std::fill(velocities_.begin(), velocities_.begin() + 2 * n, 0.0f);
   num_obstacles_ = n;
 }
 
-void RuntimeCharacter::sync_env() {
-  const RootState& r = character_.root();
-  const float tx = target_x_ - r.x, tz = target_z_ - r.z;  // the env's character stands at its origin
-  if (plane_) {
-    plane_->set_state(0, character_.frame(), 0.0f, 0.0f, r.yaw);  // frame -1 (compressed): the env's state
-    plane_->set_target(0, tx, tz);
-    return;
-  }
-  // The obstacles relative to the character: the env's obstacle square is centred on it.
-  const float square_half = controller_->task().obstacle.obstacle_square_half;
-  int n = 0;
-  for (int k = 0; k < num_obstacles_; ++k) {
-    const float dx = world_centres_[2 * k] - r.x, dz = world_centres_[2 * k + 1] - r.z;
-    if (std::abs(dx) > square_half || std::abs(dz) > square_half) continue;  // beyond every sensor
-    local_centres_[2 * n] = dx;
-    local_centres_[2 * n + 1] = dz;
-    for (int a = 0; a < 2; ++a) {
-      local_half_sizes_[2 * n + a] = world_half_sizes_[2 * k + a];
-      local_velocities_[2 * n + a] = world_velocities_[2 * k + a];
-    }
-    local_angles_[n] = world_angles_[k];
-    ++n;
-  }
-  // One new sensor map per decision: observing again before it recomputes the map in place;
-  // the first decision's previous map is a copy of its current one, as at a training reset.
-  using Maps = ObstacleVecEnv::MapUpdate;
-  const Maps maps = decision_.count == 0 ? Maps::kReset : maps_decision_ == decision_.count ? Maps::kReplace : Maps::kPush;
-  maps_decision_ = decision_.count;
-  obstacles_->set_scene(0, character_.frame(), r.yaw, tx, tz, n, local_centres_.data(), local_half_sizes_.data(),
-                        local_angles_.data(), local_velocities_.data(), maps);
-}
-
 const float* RuntimeCharacter::observe() {
-  sync_env();
-  if (plane_)
-    plane_->observe(0, obs_.data());
-  else
-    obstacles_->observe(0, obs_.data());
+  env_->sync(character_.root(), character_.frame(), target_x_, target_z_,
+             RuntimeObstacles{num_obstacles_, centres_.data(), half_sizes_.data(), angles_.data(), velocities_.data()},
+             decision_.count);
+  env_->observe(obs_.data());
   return obs_.data();
 }
 
@@ -413,18 +310,11 @@ void RuntimeCharacter::decide() {
     stick_action(action_.data());
   else
     c.policy().act(obs_.data(), action_.data(), scratch_);
-  // The training env's own decision (transition cost, bias_yields, candidate filters); the
-  // character plays it.
-  const int64_t j = plane_ ? plane_->decide(0, action_.data()) : obstacles_->decide(0, action_.data());
-  const float cost = plane_ ? plane_->state(0).last_cost : obstacles_->state(0).last_cost;
-  if (controller_->compressed()) {
-    with_env([&](auto& env) {
-      character_.play_rows(env.compressed_rows(0), env.state(0).last_transition, cost);
-      env.end_compressed_playback(0);
-    });
-  } else {
-    character_.play(j, cost);
-  }
+  // The training env's own decision (transition cost, bias_yields, candidate filters); its
+  // motion source plays it on the character.
+  env_->decide(action_.data());
+  env_->source().play(character_, env_->motion(), env_->decision());
+  env_->end_playback();
   decision_.count += 1;
   decision_.match = character_.last_match();
   decision_.transition = character_.last_transition();

@@ -15,8 +15,7 @@ void RuntimeController::read_compressed(const ControllerFile& file) {
   if (header[0] != kVersion)
     file.fail("compressed sections of version " + std::to_string(header[0]) + "; this runtime reads version " +
               std::to_string(kVersion));
-  const auto& groups = task_.obstacles ? task_.obstacle.request_groups : task_.plane.request_groups;
-  if (!groups.empty()) file.fail("a compressed controller keeps to no tags (task.request_groups)");
+  if (!task_.config->request_groups.empty()) file.fail("a compressed controller keeps to no tags (task.request_groups)");
   auto model = std::make_unique<CompressedModel>();
   model->num_joints = header[1];
   model->latent = header[2];

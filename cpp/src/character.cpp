@@ -61,25 +61,16 @@ void database_pose_global(const Database& db, int64_t frame, float* positions, f
                           rotations_scratch);
 }
 
-Character::Character(const Database& db, const Matcher& matcher, const CharacterOptions& options)
-    : db_(db), matcher_(matcher), options_(options), J_(db.num_joints) {
+Character::Character(const Database& db, const CharacterOptions& options)
+    : db_(db), options_(options), J_(db.num_joints) {
   check_frames_per_step(options.frames_per_step);
   if (!std::isfinite(options.inertialization_halflife))
     throw std::invalid_argument("inertialization_halflife must be finite (<= 0 turns it off)");
   if (!(options.ik_margin >= 0) || !(options.lock_release_distance > 0) || !(options.lock_blend_time >= 0))
     throw std::invalid_argument("ik_margin must be >= 0, lock_release_distance > 0 and lock_blend_time >= 0");
-  set_transition_cost(options.transition_cost);
-  clip_filter_ = ClipCostFilter(db, options_.clip_costs);
-  if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("matcher was not built over this database");
   if (db.contacts.size() != static_cast<size_t>(db.num_frames) * 2)
     throw std::invalid_argument("database has no foot contacts (rebuild it)");
   dt_ = 1.0f / db.fps;
-  if (options.action_limit_std > 0) {
-    trajectory_action_box(db, options.action_limit_std, low_, high_);
-  } else {
-    std::fill(low_, low_ + kTrajectoryDim, -INFINITY);
-    std::fill(high_, high_ + kTrajectoryDim, INFINITY);
-  }
   above_hips_.assign(J_, false);
   for (int a = db.roles.hips; a >= 0; a = db.skeleton.parents[a]) hips_chain_.insert(hips_chain_.begin(), a);
   for (int a : hips_chain_)
@@ -112,11 +103,6 @@ Character::Character(const Database& db, const Matcher& matcher, const Character
     anim_feet_.assign(F * 2 * 3, 0);
   }
   reset(0, RootState{});
-}
-
-void Character::set_transition_cost(float cost) {
-  if (!(cost >= 0.0f) || !std::isfinite(cost)) throw std::invalid_argument("transition_cost must be finite and >= 0");
-  options_.transition_cost = cost;
 }
 
 void Character::clear(int64_t frame, const RootState& root) {
@@ -315,17 +301,6 @@ void Character::lock_feet(const FramePose& fp, bool decay) {
       solve_leg(side, target);
     }
   }
-}
-
-int64_t Character::decide(const float* trajectory, float* cost) const {
-  return decision_for_action(db_, matcher_, frame_, trajectory, low_, high_, cost, options_.transition_cost,
-                           clip_filter_.get());
-}
-
-void Character::step(const float* trajectory) {
-  float cost = 0;
-  const int64_t j = decide(trajectory, &cost);
-  play(j, cost);
 }
 
 void Character::play(int64_t j, float cost) {

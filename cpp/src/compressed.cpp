@@ -438,12 +438,12 @@ bool compressed_decision(const CompressedModel& model, const float* current, con
   model.projector.forward(queries, states, scratch.a.data(), n);
   constexpr float kInf = std::numeric_limits<float>::infinity();
   for (const CandidateFilter* f = filter;; f = f->fallback()) {
-    const float stay = filtered_state_cost(feature_distance(queries, current), f, current);
+    const float stay = filtered_cost(feature_distance(queries, current), f, Candidate{-1, current});
     float best = kInf;
     int arg = 0;
     for (int r = 0; r < n; ++r) {
       const float* p = states + static_cast<size_t>(r) * S;
-      const float c = filtered_state_cost(feature_distance(queries, p), f, p);
+      const float c = filtered_cost(feature_distance(queries, p), f, Candidate{-1, p});
       if (c < best) best = c, arg = r;
     }
     if (stay < kInf || best < kInf || f == nullptr) {

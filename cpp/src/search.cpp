@@ -42,7 +42,7 @@ MMRL_MULTIVERSION int brute_force_knn(const float* points, int64_t num_points, i
     if (i % kLanes == 0)
       rows_sqdist(query, points + i * dim, static_cast<int>(std::min<int64_t>(kLanes, num_points - i)), dim, dist);
     if (!is_allowed(i, filter)) continue;
-    const float d = filtered_cost(dist[i % kLanes], filter.candidates, i);
+    const float d = filtered_cost(dist[i % kLanes], filter.candidates, i, points, dim);
     if (d == std::numeric_limits<float>::infinity()) continue;  // refused by the candidate filter
     // Scanning in index order, a tie never displaces an earlier (lower) index.
     if (found == k && !(d < out_sqdist[k - 1])) continue;
@@ -70,7 +70,7 @@ class RunningMatch {
                const CandidateFilter* candidates)
       : bound_(bound_index) {
     if (bound_index < 0) return;
-    bound_cost_ = filtered_cost(sqdist_row(query, points + bound_index * dim, dim), candidates, bound_index);
+    bound_cost_ = filtered_cost(sqdist_row(query, points + bound_index * dim, dim), candidates, bound_index, points, dim);
     if (bound_cost_ < kInf) {
       best_ = bound_index;
       best_cost_ = bound_cost_ - transition_cost;
@@ -111,7 +111,7 @@ MMRL_MULTIVERSION int64_t brute_force_match(const float* points, int64_t num_poi
     if (i % kLanes == 0)
       rows_sqdist(query, points + i * dim, static_cast<int>(std::min<int64_t>(kLanes, num_points - i)), dim, dist);
     if ((valid && !valid[i]) || (i >= exclude_lo && i < exclude_hi)) continue;
-    match.offer(i, filtered_cost(dist[i % kLanes], candidates, i));
+    match.offer(i, filtered_cost(dist[i % kLanes], candidates, i, points, dim));
   }
   return match.finish(out_cost);
 }
@@ -159,7 +159,7 @@ int64_t rerank_shortlist(const float* points, int dim, const float* query, const
     // Rows come by plain distance and extra costs are >= 0: once a row's distance reaches the
     // best filtered cost, no later row can beat it (a replacement must be strictly lower).
     if (sqdist[r] >= match.best_cost()) break;
-    if (rows[r] != bound_index) match.offer(rows[r], filtered_cost(sqdist[r], candidates, rows[r]));
+    if (rows[r] != bound_index) match.offer(rows[r], filtered_cost(sqdist[r], candidates, rows[r], points, dim));
   }
   return match.finish(out_cost);
 }

@@ -219,9 +219,8 @@ TEST(Compressed, DecisionKeepsTheContinuationUnlessTheProjectionIsCloserByTheCos
 class StateLimit final : public CandidateFilter {
  public:
   StateLimit(float limit, float extra) : limit_(limit), extra_(extra) {}
-  float extra_cost(int64_t) const override { return 0.0f; }
-  float state_extra_cost(const float* f) const override {
-    return f[0] > limit_ ? std::numeric_limits<float>::infinity() : extra_;
+  float extra_cost(const Candidate& c) const override {
+    return c.features[0] > limit_ ? std::numeric_limits<float>::infinity() : extra_;
   }
 
  private:
@@ -316,10 +315,10 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
   std::vector<float> obs(env.obs_dim());
   env.reset(7, obs.data());
   CharacterOptions o;
-  Character ch(db, matcher(), o);
+  Character ch(db, o);
   std::vector<float> row(m.pose_dim());
   CompressedScratch s = m.make_scratch();
-  m.decode(env.compressed_state(0), row.data(), s);
+  m.decode(env.motion(0).cstate.data(), row.data(), s);
   ch.reset_row(row.data(), RootState{});
   float action[kTrajectoryDim];
   std::mt19937 rng(9);
@@ -336,9 +335,9 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
     for (float& a : action) a = n(rng);
     env.set_state(0, -1, ch.root().x, ch.root().z, ch.root().yaw);
     env.decide(0, action);
-    ch.play_rows(env.compressed_rows(0), env.state(0).last_transition, env.state(0).last_cost);
-    env.end_compressed_playback(0);
-    transitions += env.state(0).last_transition;
+    ch.play_rows(env.motion(0).crows.data(), env.state(0).decision.transition, env.state(0).decision.cost);
+    env.end_playback(0);
+    transitions += env.state(0).decision.transition;
   }
   g_counting = false;
   EXPECT_EQ(g_allocations.load(), 0);

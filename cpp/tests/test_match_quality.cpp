@@ -1,7 +1,7 @@
 // What the motion-quality metrics read from the C++ core:
 //   - the envs' last_step_matches (the fast-path transition flag and matched cost logged during
-//     training) against a Character stepped in lockstep with the same actions and a hand
-//     computation of the cost, through autoresets, for both tasks;
+//     training) against decision.hpp's rule (decision_for_action) in lockstep with the same
+//     actions and a hand computation of the cost, through autoresets, for both tasks;
 //   - Character::animated_feet (the ankles before foot locking and IK) against a second
 //     Character with IK off: one run measures foot sliding with IK on and off.
 #include <gtest/gtest.h>
@@ -12,6 +12,7 @@
 
 #include "env_test_database.hpp"
 #include "mmrl/character.hpp"
+#include "mmrl/database_source.hpp"
 #include "mmrl/tasks/obstacles.hpp"
 #include "mmrl/tasks/plane.hpp"
 
@@ -55,16 +56,11 @@ struct Lockstep {
   int steps = 0, transitions = 0, ended = 0, ended_with_transition = 0;
 };
 
-// Steps `env` (through `step`) and one fast-path Character per env reset to the env's state
-// before each step; the env's last_step_matches must equal the Character's decision bit for bit.
+// Steps `env` (through `step`) and decides for each env's state before the step by the rule;
+// the env's last_step_matches must equal that decision bit for bit.
 template <class Env, class StepFn>
-Lockstep run_lockstep(Env& env, int frames_per_step, float action_limit_std, int steps, StepFn&& step) {
+Lockstep run_lockstep(Env& env, int steps, StepFn&& step) {
   const int n = env.num_envs();
-  CharacterOptions opt;
-  opt.frames_per_step = frames_per_step;
-  opt.poses = false;
-  opt.action_limit_std = action_limit_std;
-  Character ch(database(), matcher(), opt);
   std::mt19937 gen(11);
   std::vector<uint8_t> transitions(n, 7), ended(n);
   std::vector<float> costs(n, -1.0f);
@@ -76,12 +72,13 @@ Lockstep run_lockstep(Env& env, int frames_per_step, float action_limit_std, int
     step(act, ended);
     env.last_step_matches(transitions.data(), costs.data());
     for (int i = 0; i < n; ++i) {
-      ch.reset(before[i].frame, before[i].root);
-      ch.step(&act[i * kTrajectoryDim]);
-      EXPECT_EQ(transitions[i], ch.last_transition() ? 1 : 0) << "step " << t << " env " << i;
-      EXPECT_EQ(costs[i], ch.last_cost()) << "step " << t << " env " << i;
-      EXPECT_EQ(transitions[i] != 0, ch.last_match() != before[i].frame);
-      const double c = hand_cost(before[i].frame, ch.last_match(), &act[i * kTrajectoryDim], env.action_low(),
+      float rule_cost = 0;
+      const int64_t match = decision_for_action(database(), matcher(), before[i].frame, &act[i * kTrajectoryDim],
+                                                env.action_low(), env.action_high(), &rule_cost);
+      EXPECT_EQ(transitions[i], match != before[i].frame ? 1 : 0) << "step " << t << " env " << i;
+      EXPECT_EQ(costs[i], rule_cost) << "step " << t << " env " << i;
+      EXPECT_EQ(env.state(i).last_step.match, match);
+      const double c = hand_cost(before[i].frame, match, &act[i * kTrajectoryDim], env.action_low(),
                                  env.action_high());
       EXPECT_NEAR(costs[i], c, 1e-4 * (1.0 + c));
       out.steps += 1;
@@ -103,8 +100,7 @@ TEST(PlaneVecEnv, LastStepMatchesEqualACharacterInLockstepThroughAutoresets) {
   std::vector<uint8_t> te(n), tr(n), su(n);
   std::vector<int32_t> len(n);
   env.reset(3, obs.data());
-  const Lockstep r = run_lockstep(env, cfg.frames_per_step, cfg.action_limit_std, 30,
-                                  [&](const std::vector<float>& act, std::vector<uint8_t>& ended) {
+  const Lockstep r = run_lockstep(env, 30, [&](const std::vector<float>& act, std::vector<uint8_t>& ended) {
                                     env.step(act.data(), obs.data(), rew.data(), te.data(), tr.data(), su.data(),
                                              fo.data(), ret.data(), len.data());
                                     for (int i = 0; i < n; ++i) ended[i] = te[i] || tr[i];
@@ -135,8 +131,7 @@ TEST(ObstacleVecEnv, LastStepMatchesEqualACharacterInLockstepThroughAutoresets) 
   std::vector<uint8_t> te(n), tr(n), su(n), co(n);
   std::vector<int32_t> hits(n), len(n);
   env.reset(5, obs.data());
-  const Lockstep r = run_lockstep(env, cfg.frames_per_step, cfg.action_limit_std, 30,
-                                  [&](const std::vector<float>& act, std::vector<uint8_t>& ended) {
+  const Lockstep r = run_lockstep(env, 30, [&](const std::vector<float>& act, std::vector<uint8_t>& ended) {
                                     env.step(act.data(), obs.data(), rew.data(), te.data(), tr.data(), su.data(),
                                              co.data(), hits.data(), fo.data(), ret.data(), len.data());
                                     for (int i = 0; i < n; ++i) ended[i] = te[i] || tr[i];
@@ -154,7 +149,8 @@ TEST(Character, AnimatedFeetAreTheAnklesOfTheSameRunWithIkOff) {
   CharacterOptions on, off;
   off.ik = false;
   off.foot_locking = false;
-  Character a(db, matcher(), on), b(db, matcher(), off);
+  Character a(db, on), b(db, off);
+  DatabaseDecider decider(db, matcher(), 3.0f, 0.0f, {});
   const int64_t start = db.clip_ranges[2 * 3] + 4;
   a.reset(start, RootState{1.0f, -2.0f, 0.4f});
   b.reset(start, RootState{1.0f, -2.0f, 0.4f});
@@ -163,8 +159,9 @@ TEST(Character, AnimatedFeetAreTheAnklesOfTheSameRunWithIkOff) {
   double moved_by_ik = 0;
   for (int t = 0; t < 40; ++t) {
     const std::vector<float> act = random_actions(gen, 1);
-    a.step(act.data());
-    b.step(act.data());
+    const Decision d = decider.decide(a.frame(), act.data());
+    a.play(d.match, d.cost);
+    b.play(d.match, d.cost);
     ASSERT_EQ(a.last_match(), b.last_match());
     for (int k = 0; k < F; ++k)
       for (int side = 0; side < 2; ++side) {

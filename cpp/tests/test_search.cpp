@@ -164,7 +164,8 @@ TEST(Matcher, BoundMarginEqualsBruteForceAndHandComputedCases) {
 class RowCosts final : public mmrl::CandidateFilter {
  public:
   explicit RowCosts(std::vector<float> costs) : costs_(std::move(costs)) {}
-  float extra_cost(int64_t row) const override { return costs_[static_cast<size_t>(row)]; }
+  float extra_cost(const mmrl::Candidate& c) const override { return costs_[static_cast<size_t>(c.row)]; }
+  float extra_cost(int64_t row) const { return costs_[static_cast<size_t>(row)]; }
 
  private:
   std::vector<float> costs_;

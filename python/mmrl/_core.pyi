@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'CompressedModel', 'ControllerFileError', 'Database', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'mlp_kernel', 'motion_from_pose', 'parse_request', 'select_request', 'tags_available', 'trajectory_path']
+__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'CompressedModel', 'ControllerFileError', 'Database', 'Decider', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'mlp_kernel', 'motion_from_pose', 'parse_request', 'runtime_task_cores', 'select_request', 'tags_available', 'trajectory_path']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -371,6 +371,7 @@ class PlaneVecEnv:
     """
     action_dim: typing.ClassVar[int] = 12
     core_name: typing.ClassVar[str] = 'plane'
+    plays_compressed: typing.ClassVar[bool] = True
     def __init__(self, db: Database, matcher: Matcher, num_envs: typing.SupportsInt | typing.SupportsIndex, config: PlaneTaskConfig, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
     def compressed_chosen(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
@@ -482,6 +483,11 @@ class PlaneVecEnv:
     def obs_dim(self) -> int:
         ...
     @property
+    def obs_layout(self) -> tuple:
+        """
+        This env's observation, segment by segment: a tuple of (name, size) in order (the task's own, then 'request' with request_groups).
+        """
+    @property
     def request_dim(self) -> int:
         """
         Floats of the request code at the end of each observation (0 without request_groups).
@@ -497,18 +503,6 @@ class CharacterOptions:
     ik: bool
     poses: bool
     def __init__(self) -> None:
-        ...
-    @property
-    def action_limit_std(self) -> float:
-        ...
-    @action_limit_std.setter
-    def action_limit_std(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
-    @property
-    def clip_costs(self) -> list[float]:
-        ...
-    @clip_costs.setter
-    def clip_costs(self, arg0: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> None:
         ...
     @property
     def frames_per_step(self) -> int:
@@ -540,17 +534,29 @@ class CharacterOptions:
     @lock_release_distance.setter
     def lock_release_distance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
+class Decider:
+    """
+    One database character's decisions (decider.hpp's Decider over the database source, with a transition cost and clip costs): what mmrl.Character.step decides with.
+    """
+    def __init__(self, db: Database, matcher: Matcher, action_limit_std: typing.SupportsFloat | typing.SupportsIndex = 3.0, transition_cost: typing.SupportsFloat | typing.SupportsIndex = 0.0, clip_costs: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex] = []) -> None:
+        ...
+    def decide(self, frame: typing.SupportsInt | typing.SupportsIndex, trajectory_query: typing.Any) -> tuple[int, float]:
+        """
+        The decision of a character showing `frame` for a 12-d normalized trajectory: (match, cost).
+        """
     @property
     def transition_cost(self) -> float:
-        ...
+        """
+        transition cost of the next decisions (finite, >= 0)
+        """
     @transition_cost.setter
-    def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+    def transition_cost(self, arg1: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
 class Character:
     """
-    A motion-matching character (C++ core of mmrl.Character).
+    A motion-matching character that plays decisions (C++ core of mmrl.Character).
     """
-    def __init__(self, db: Database, matcher: Matcher, options: CharacterOptions) -> None:
+    def __init__(self, db: Database, options: CharacterOptions) -> None:
         ...
     def animated_feet(self) -> numpy.ndarray:
         """
@@ -570,7 +576,7 @@ class Character:
         """
     def play(self, match: typing.SupportsInt | typing.SupportsIndex, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
         """
-        Plays a decision made elsewhere (the env's last_step_match): frames match+1 .. match+F, as step does.
+        Plays a database decision (a Decider's, or the env's last_step_match): frames match+1 .. match+F.
         """
     def play_rows(self, rows: typing.Any, transition: bool, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
         """
@@ -586,8 +592,6 @@ class Character:
         """
         A compressed controller's start: shows a pose row (9 J + 5) at the world root.
         """
-    def step(self, trajectory_query: typing.Any) -> None:
-        ...
     @property
     def contacts(self) -> numpy.ndarray:
         ...
@@ -620,14 +624,6 @@ class Character:
         ...
     @property
     def roots(self) -> numpy.ndarray:
-        ...
-    @property
-    def transition_cost(self) -> float:
-        """
-        transition cost of the next matches (finite, >= 0)
-        """
-    @transition_cost.setter
-    def transition_cost(self, arg1: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
 class ObstacleTaskConfig:
     """
@@ -867,6 +863,7 @@ class ObstacleVecEnv:
     action_dim: typing.ClassVar[int] = 12
     core_name: typing.ClassVar[str] = 'obstacles'
     layout: typing.ClassVar[tuple] = (('maps', 512), ('pose', 15), ('goal', 2))
+    plays_compressed: typing.ClassVar[bool] = True
     def __init__(self, db: Database, matcher: Matcher, num_envs: typing.SupportsInt | typing.SupportsIndex, config: ObstacleTaskConfig, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
         ...
     def action_hits(self, index: typing.SupportsInt | typing.SupportsIndex, action: typing.Any) -> tuple[int, numpy.typing.NDArray[numpy.float32], tuple[bool, bool, bool]]:
@@ -1025,7 +1022,9 @@ class ObstacleVecEnv:
         ...
     @property
     def obs_layout(self) -> tuple:
-        ...
+        """
+        This env's observation, segment by segment: a tuple of (name, size) in order (the task's own, then 'request' with request_groups).
+        """
     @property
     def request_dim(self) -> int:
         """
@@ -1075,6 +1074,16 @@ class RuntimeController:
     @property
     def obs_dim(self) -> int:
         ...
+    @property
+    def obs_layout(self) -> tuple:
+        """
+        The policy's observation, segment by segment: a tuple of (name, size).
+        """
+    @property
+    def task_core(self) -> str:
+        """
+        The registered task core the file's task runs on (runtime_task.hpp).
+        """
     @property
     def task_name(self) -> str:
         ...
@@ -1162,6 +1171,10 @@ def motion_from_pose(db: Database, local_translations: typing.Any, local_rotatio
 def parse_request(db: Database, request: str) -> str:
     """
     The canonical text of a tag request (ValueError naming what is unknown).
+    """
+def runtime_task_cores() -> tuple:
+    """
+    The task cores the engine runtime has registered (runtime_task.hpp), in registration order.
     """
 def select_request(db: Database, request: str) -> tuple[str, numpy.typing.NDArray[numpy.uint8], numpy.typing.NDArray[numpy.int64]]:
     """

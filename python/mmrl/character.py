@@ -1,8 +1,10 @@
 """The motion-matching character (C++ ``Character``, see cpp/include/mmrl/character.hpp).
 
 Each :meth:`Character.step` takes the 12-d trajectory half of a query (the same normalized
-units as the plane task's action), forms the full query from the current frame's pose
-features, matches and plays ``frames_per_step`` frames:
+units as the plane task's action) and decides with the one decision engine every path uses
+(C++ ``Decider`` over the database, cpp/include/mmrl/decider.hpp): the full query is the
+current frame's pose features and the trajectory, matched under the transition cost and clip
+costs; the C++ ``Character`` then plays ``frames_per_step`` frames of the decision:
 
 - decision rule: the current frame is the starting best, so playback simply continues
   unless another valid frame is strictly closer (a *transition*);
@@ -99,16 +101,14 @@ class Character:
         opt.inertialization_halflife = halflife
         opt.ik = bool(ik)
         opt.foot_locking = bool(foot_locking)
-        opt.action_limit_std = limit
         if not np.isfinite(float(transition_cost)) or float(transition_cost) < 0:
             raise ValueError(f"transition_cost must be finite and >= 0, got {transition_cost!r}")
-        opt.transition_cost = float(transition_cost)
-        if clip_costs:
-            opt.clip_costs = clip_cost_array(clip_costs, db).tolist()
+        costs = clip_cost_array(clip_costs, db).tolist() if clip_costs else []
         self.db = db
         self.fast = bool(fast)
         self.frames_per_step = int(frames_per_step)
-        self._core = _core.Character(db._db, db.matcher, opt)
+        self._decider = _core.Decider(db._db, db.matcher, limit, float(transition_cost), costs)
+        self._core = _core.Character(db._db, opt)
         self._record = bool(record)
         self._rec: Dict[str, List[np.ndarray]] = {}
         self.reset(start_frame, position, yaw)
@@ -117,7 +117,7 @@ class Character:
     def transition_cost(self) -> float:
         """The transition cost of the next matches; settable between steps (a task may vary
         it per decision, as the obstacles task's ``bias_yields`` does)."""
-        return float(self._core.transition_cost)
+        return float(self._decider.transition_cost)
 
     @transition_cost.setter
     def transition_cost(self, cost: float) -> None:
@@ -127,7 +127,7 @@ class Character:
             value = float("nan")
         if not np.isfinite(value) or value < 0:
             raise ValueError(f"transition_cost must be finite and >= 0, got {cost!r}")
-        self._core.transition_cost = value
+        self._decider.transition_cost = value
 
     # ------------------------------------------------------------------ state
     def reset(self, start_frame: Optional[int] = None, position: Sequence[float] = (0.0, 0.0),
@@ -208,7 +208,10 @@ class Character:
         q = np.ascontiguousarray(q, dtype=np.float32)
         if not np.isfinite(q).all():
             raise ValueError("trajectory_query: contains NaN or inf")
-        self._core.step(q)
+        if self.frame < 0:
+            raise ValueError("step: this character plays a compressed controller's rows (play_rows), not the database")
+        match, cost = self._decider.decide(self.frame, q)
+        self._core.play(int(match), float(cost))
         return self._played(q)
 
     def play(self, match: int, cost: float, trajectory_query: Optional[np.ndarray] = None) -> StepResult:

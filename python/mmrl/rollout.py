@@ -30,8 +30,8 @@ import numpy as np
 from . import _core, metrics
 from .character import Character
 from .motion.database import POSE_DIM, TRAJECTORY_DIM, Database
-from .rl.policies import goal_offset
 from .tasks import Task
+from .tasks.layout import obs_segment
 
 #: Per-shown-frame keys of a controller recording (trimmed together).
 FRAME_KEYS = ("frames", "roots", "positions", "rotations", "local_translations", "local_rotations", "contacts",
@@ -40,9 +40,13 @@ FRAME_KEYS = ("frames", "roots", "positions", "rotations", "local_translations",
 STEP_KEYS = ("transitions", "queries", "costs")
 
 
-def policy_actions(policy, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
+def policy_actions(policy, obs: np.ndarray, deterministic: bool = True, layout=None) -> np.ndarray:
     """``policy.act(obs, deterministic=...)`` (or ``policy.act(obs)`` for policies without the
-    flag). The signature decides, not a caught TypeError, so a bug inside ``act`` is never retried."""
+    flag). The signature decides, not a caught TypeError, so a bug inside ``act`` is never retried.
+    ``layout``: the env's ``observation_layout``, handed to a policy that reads segments by name
+    (a scripted joystick's ``bind_layout``) before it acts."""
+    if layout is not None and hasattr(policy, "bind_layout"):
+        policy.bind_layout(layout)
     try:
         takes_flag = "deterministic" in inspect.signature(policy.act).parameters
     except (TypeError, ValueError):  # builtins without a signature
@@ -71,7 +75,7 @@ def first_episodes(env, policy, seed: int, deterministic: bool = True) -> Dict[s
     out: Dict[str, np.ndarray] = {"success": np.zeros(n, bool), "truncated": np.zeros(n, bool),
                                   "length": np.zeros(n, np.int64), "frames": np.zeros(n, np.int64)}
     while not done.all():
-        obs, _, term, trunc, info = env.step(policy_actions(policy, obs, deterministic))
+        obs, _, term, trunc, info = env.step(policy_actions(policy, obs, deterministic, env.observation_layout))
         ended = (term | trunc) & ~done
         if not ended.any():
             continue
@@ -271,8 +275,8 @@ class FullPath:
                 if not key.startswith("_") and key != "final_obs":
                     out[key] = value[0].item()
             # The env's last goal vector, read at the ending frame, against the controller's root there.
-            g = goal_offset(info["final_obs"].shape[1])
-            out["goal_error"] = self._goal_error(info["final_obs"][0, g:g + 2], res.roots[shown - 1])
+            g = obs_segment(self.env.observation_layout, "goal")
+            out["goal_error"] = self._goal_error(info["final_obs"][0, g], res.roots[shown - 1])
             self.obs = obs[0]
             if not self.continuous:
                 if self.character._record:
@@ -395,7 +399,7 @@ def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, 
             run.set_target(*(start + float(target_distance) * np.array([np.sin(angle), np.cos(angle)])))
         distance = float(np.hypot(*(run.target - start)))
         while True:
-            out = run.step(policy_actions(policy, run.obs[None]).reshape(-1))
+            out = run.step(policy_actions(policy, run.obs[None], layout=run.env.observation_layout).reshape(-1))
             if out["done"]:
                 break
         frames = int(out["episode_frames"])
@@ -439,7 +443,7 @@ def follow(task: Task, db: Database, policy, *, seconds: float = 10.0, seed: int
     total = max(2, int(round(seconds * db.fps)))
     log = FollowLog(run)
     while log.frames_so_far() < total:
-        action = policy_actions(policy, run.obs[None]).reshape(-1)
+        action = policy_actions(policy, run.obs[None], layout=run.env.observation_layout).reshape(-1)
         points, directions = _world_query(db, np.clip(action, low, high), run.character.root)
         out = run.step(action)
         log.add_step(out, points, directions)

@@ -1,9 +1,9 @@
-// A motion-matching character: the decision rule and root playback of decision.hpp, plus
-// (on the full path) world-space poses with inertialization, foot locking and leg IK.
-//
-// Decisions and root motion are exactly those of decision.hpp (decision_query,
-// decision_match, root_advance), so the fast path (poses = false, used for training) and
-// the full path produce the same matches and the same root trajectory for the same queries.
+// A motion-matching character: plays decisions (decider.hpp's Decider makes them; a motion
+// source hands them over: play for a database match, play_rows for a compressed controller's
+// playback) as root motion and, on the full path, world-space poses with inertialization, foot
+// locking and leg IK. It never decides: the root motion is exactly decision.hpp's playback
+// (root_advance over the played frames' deltas), so the fast path and the full path follow
+// the same root trajectory for the same decisions.
 //
 // Poses. The database frame f is stored in the database's world, where its character frame
 // is C_f = (root_positions[f], root_yaws[f]); the character is at the world root
@@ -51,9 +51,6 @@ struct CharacterOptions {
   float ik_margin = 0.0f;                // meters short of a straight leg
   float lock_release_distance = 0.5f;    // meters between locked and animated ankle
   float lock_blend_time = 0.2f;          // seconds to blend a lock out (locking is immediate)
-  float action_limit_std = 3.0f;         // trajectory clipped like PlaneVecEnv; <= 0: not clipped
-  float transition_cost = 0.0f;          // transition cost (decision.hpp); 0: the paper's rule
-  std::vector<float> clip_costs;         // per clip, added to its frames' match cost (decision.hpp's ClipCostFilter)
 };
 
 // One frame's pose in its own character frame C_f: what playback shows.
@@ -79,26 +76,18 @@ void database_pose_global(const Database& db, int64_t frame, float* positions, f
 
 class Character {
  public:
-  // db and matcher are borrowed and must outlive the character.
-  Character(const Database& db, const Matcher& matcher, const CharacterOptions& options);
+  // db is borrowed and must outlive the character.
+  Character(const Database& db, const CharacterOptions& options);
 
   const CharacterOptions& options() const { return options_; }
   // The pose rows of a compressed controller this character plays (9 J + 5 floats each).
   int pose_row_dim() const { return 9 * J_ + 5; }
-  // Changes the transition cost of the next matches (finite, >= 0; else std::invalid_argument):
-  // a task may vary it per decision (the obstacles task's bias_yields).
-  void set_transition_cost(float cost);
   int num_joints() const { return J_; }
 
   // Puts the character on database frame `frame` (any frame) at the world root; clears
   // offsets and locks, and computes the shown pose.
   void reset(int64_t frame, const RootState& root);
 
-  // One step with a 12-d normalized trajectory (finite; checked by the caller): decide, then play.
-  void step(const float* trajectory);
-  // The decision alone (decision.hpp's decision_for_action with this character's options):
-  // the frame to play from, and its cost. Changes nothing.
-  int64_t decide(const float* trajectory, float* cost = nullptr) const;
   // A compressed controller's start: shows the pose row `row` at the world root (frame() is -1
   // from now on: no database frame is shown); clears offsets and locks.
   void reset_row(const float* row, const RootState& root);
@@ -108,9 +97,10 @@ class Character {
   // state played so far (inertialized from the pose shown now, with its velocity from the two
   // frames shown last, to row 0 with its velocity from rows 0 and 1). played_frames() are -1.
   void play_rows(const float* rows, bool transition, float cost);
-  // Plays a decision made elsewhere (the batched env's, so the full path never decides again):
-  // frames j+1 .. j+F with the transition, root motion and poses of step. j must be a valid
-  // match frame (std::invalid_argument otherwise); cost is what last_cost reports.
+  // Plays a database decision (a Decider's: the batched env's, so the full path never decides
+  // again): frames j+1 .. j+F, inertialized from the frame shown when j is not its
+  // continuation, with root motion and poses. j must be a valid match frame
+  // (std::invalid_argument otherwise); cost is what last_cost reports.
   void play(int64_t j, float cost);
 
   const RootState& root() const { return root_; }
@@ -160,12 +150,9 @@ class Character {
   void solve_leg(int side, const Vec3& target);
 
   const Database& db_;
-  const Matcher& matcher_;
   CharacterOptions options_;
   int J_ = 0;
   float dt_ = 1.0f / 30.0f;
-  float low_[kTrajectoryDim], high_[kTrajectoryDim];
-  ClipCostFilter clip_filter_;
   std::vector<int> hips_chain_;   // root .. hips
   std::vector<bool> above_hips_;  // ancestors of the hips
 

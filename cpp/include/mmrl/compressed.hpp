@@ -121,8 +121,8 @@ inline float feature_distance(const float* query, const float* state) {
 // (state_dim floats) and returns true when it replaces `current`; cost: the chosen state's.
 bool compressed_decision(const CompressedModel& model, const float* current, const float* query,
                          float transition_cost, float* projected, float* cost, CompressedScratch& scratch);
-// The same rule with a candidate filter (kdtree.hpp's CandidateFilter, priced through
-// state_extra_cost: the obstacles task's collision-aware search) over several projections:
+// The same rule with a candidate filter (kdtree.hpp's CandidateFilter, each candidate a state
+// without a row: the obstacles task's collision-aware search prices it) over several projections:
 // queries holds n rows (1..kMlpMaxRows, projected together), the first the query itself and
 // the others its turned copies (decision.hpp's shortlist_queries). Every candidate (the
 // continuation and each projection) costs its squared distance to the first query plus the

@@ -125,7 +125,8 @@ inline int64_t decision_for_action(const Database& db, const Matcher& matcher, i
 // The clip-cost rule, a candidate filter that every decision path (the batched envs, the
 // full path, the engine runtime) builds from one option: costs[c] is added to the match cost
 // of every frame of clip c (squared normalized feature distance; +inf: clip c never plays,
-// unless the filter refuses every frame). No costs: the filter is off (active() is false).
+// unless the filter refuses every frame). No costs: the filter is off (active() is false). A
+// candidate without a row (a compressed controller's state) has no clip and costs nothing more.
 class ClipCostFilter final : public CandidateFilter {
  public:
   ClipCostFilter() = default;
@@ -135,7 +136,9 @@ class ClipCostFilter final : public CandidateFilter {
   bool active() const { return !costs_.empty(); }
   // The filter to hand to decision_for_action: this one, or null when off.
   const CandidateFilter* get() const { return active() ? this : nullptr; }
-  float extra_cost(int64_t row) const override { return costs_[static_cast<size_t>(frame_clip_[row])]; }
+  float extra_cost(const Candidate& c) const override {
+    return c.row < 0 ? 0.0f : costs_[static_cast<size_t>(frame_clip_[c.row])];
+  }
 
  private:
   const int32_t* frame_clip_ = nullptr;

@@ -89,41 +89,46 @@ inline float sqdist_row(const float* a, const float* b, int dim) {
   return out;
 }
 
-// The extension point of a match: a rule that refuses candidate rows or makes them dearer
-// (a clip the user banned, obstacles on a clip's path, a style to keep). A search returns
-// the row of least filtered cost, squared distance + extra_cost(row), exactly as a
-// brute-force scan with the same filter does.
+// A candidate of a match: a database row (its index, and its features in the matched rows),
+// or a compressed controller's state (compressed.hpp), which has no row (row -1) and carries
+// its own features. kFeatureDim normalized floats either way.
+struct Candidate {
+  int64_t row = -1;
+  const float* features = nullptr;
+};
+
+// The extension point of a match: a rule that refuses candidates or makes them dearer (a clip
+// the user banned, obstacles on a candidate's path, a style to keep). A search returns the
+// candidate of least filtered cost, squared distance + extra_cost(candidate), exactly as a
+// brute-force scan with the same filter does. Both motion sources (the database's rows and a
+// compressed controller's states) are priced through this one method: a rule that keeps to
+// clips returns 0 for a candidate without a row.
 class CandidateFilter {
  public:
   virtual ~CandidateFilter() = default;
-  // Extra cost of returning row `row` (an original row index), in squared normalized feature
-  // distance: 0 leaves the row as it is, +inf (or NaN) refuses it; a negative value counts as
-  // 0 (a filter can only make rows dearer, which keeps the tree's pruning exact). Called only
-  // for rows whose distance alone could still win, so a costly rule runs on few rows.
-  virtual float extra_cost(int64_t row) const = 0;
+  // Extra cost of returning `candidate`, in squared normalized feature distance: 0 leaves it
+  // as it is, +inf (or NaN) refuses it; a negative value counts as 0 (a filter can only make
+  // candidates dearer, which keeps the tree's pruning exact). Called only for candidates whose
+  // distance alone could still win, so a costly rule runs on few of them.
+  virtual float extra_cost(const Candidate& candidate) const = 0;
   // The filter a decision retries with when this one refuses every candidate (decision.hpp's
   // decision_match): a filter built over another returns it; null falls back to no filter.
   virtual const CandidateFilter* fallback() const { return nullptr; }
-  // Extra cost of a candidate known only by its features (kFeatureDim normalized floats): a
-  // compressed controller's state (compressed.hpp), which has no database row. Same meaning as
-  // extra_cost; 0 (the default): the rule does not apply to such a candidate (a clip's rule).
-  virtual float state_extra_cost(const float* /*features*/) const { return 0.0f; }
 };
 
-// Squared distance d of row i plus the filter's extra cost (+inf when refused). Tree and
-// brute force both go through this, so filtered costs are bit-identical too.
-inline float filtered_cost(float d, const CandidateFilter* filter, int64_t i) {
+// Squared distance d of a candidate plus the filter's extra cost (+inf when refused). Tree,
+// brute force and the compressed decision all go through this, so filtered costs agree bit
+// for bit.
+inline float filtered_cost(float d, const CandidateFilter* filter, const Candidate& candidate) {
   if (filter == nullptr) return d;
-  const float extra = filter->extra_cost(i);
+  const float extra = filter->extra_cost(candidate);
   if (!(extra < std::numeric_limits<float>::infinity())) return std::numeric_limits<float>::infinity();
   return extra > 0.0f ? d + extra : d;
 }
-// The same for a candidate known by its features (CandidateFilter::state_extra_cost).
-inline float filtered_state_cost(float d, const CandidateFilter* filter, const float* features) {
+// The same for row i of points (dim floats a row).
+inline float filtered_cost(float d, const CandidateFilter* filter, int64_t i, const float* points, int dim) {
   if (filter == nullptr) return d;
-  const float extra = filter->state_extra_cost(features);
-  if (!(extra < std::numeric_limits<float>::infinity())) return std::numeric_limits<float>::infinity();
-  return extra > 0.0f ? d + extra : d;
+  return filtered_cost(d, filter, Candidate{i, points + i * dim});
 }
 
 // What a query may return. Default: every row of the tree.
@@ -223,7 +228,8 @@ class KDTree {
     if (bound_index >= 0) {
       // The bound is a candidate like any other: a filter may make it dearer or refuse it
       // (then the search starts without one).
-      bound_cost = filtered_cost(sqdist_row(query, points_ + bound_index * dim_, dim_), filter.candidates, bound_index);
+      bound_cost = filtered_cost(sqdist_row(query, points_ + bound_index * dim_, dim_), filter.candidates, bound_index,
+                                  points_, dim_);
       if (bound_cost < std::numeric_limits<float>::infinity()) {
         idx = bound_index;
         cost = bound_cost - transition_cost;
@@ -437,7 +443,7 @@ class KDTree {
         if (i >= filter.exclude_lo && i < filter.exclude_hi) continue;
         if (filter.allowed && !filter.allowed[i]) continue;
         if (filter.candidates) {
-          d = filtered_cost(d, filter.candidates, i);
+          d = filtered_cost(d, filter.candidates, i, points_, dim_);
           if (d == std::numeric_limits<float>::infinity() || d > w) continue;  // refused, or dearer now
         }
         // Tie with the k-th entry: a lower index wins, but nothing beats the bound on a tie.

@@ -31,25 +31,9 @@
 #include "mmrl/compressed.hpp"
 #include "mmrl/policy_net.hpp"
 #include "mmrl/runtime_file.hpp"
-#include "mmrl/tasks/obstacles.hpp"
-#include "mmrl/tasks/plane.hpp"
+#include "mmrl/runtime_task.hpp"
 
 namespace mmrl {
-
-// The controller file's task. The decision itself (observation, transition cost, candidate
-// filters, match) is the training env's own: each character runs a one-env env of the task's
-// core (tasks/plane.hpp or tasks/obstacles.hpp) with this config, fed the character's state.
-struct RuntimeTask {
-  std::string name;                     // the task's name ("plane", "obstacles", a plug-in's)
-  std::string core;                     // the env core it runs on: "plane" or "obstacles"
-  std::map<std::string, double> values; // every task.keys / task.values pair of the file
-  int frames_per_step = 6;
-  float success_radius = 0.5f;
-  bool obstacles = false;               // core == "obstacles"
-  int num_obstacles = 0;                // obstacle tasks: at most this many (set_obstacles)
-  PlaneTaskConfig plane;                // the config of a plane core (with its clip costs)
-  ObstacleTaskConfig obstacle;          // the config of an obstacles core
-};
 
 // Seconds spent in each part of loading (bench_runtime reports them).
 struct RuntimeLoadTimes {
@@ -77,7 +61,11 @@ class RuntimeController {
   const Database& database() const { return db_; }
   const Matcher& matcher() const { return *matcher_; }
   const PolicyNet& policy() const { return policy_; }
+  // The file's task (runtime_task.hpp): its registered core, numbers and observation layout.
+  // The decision itself (observation, transition cost, candidate filters, match) is the
+  // training env's own: each character runs a one-env env of the core with this config.
   const RuntimeTask& task() const { return task_; }
+  const RuntimeTaskType& task_type() const { return *task_type_; }
   const CharacterOptions& character_options() const { return options_; }
   int num_joints() const { return db_.num_joints; }
   float fps() const { return db_.fps; }
@@ -105,6 +93,7 @@ class RuntimeController {
   std::unique_ptr<Matcher> matcher_;  // borrows db_.normalized
   PolicyNet policy_;
   RuntimeTask task_;
+  const RuntimeTaskType* task_type_ = nullptr;
   CharacterOptions options_;
   RuntimeLoadTimes times_;
 };
@@ -193,20 +182,11 @@ class RuntimeCharacter {
  private:
   void decide();
   void fill_pose(int k);
-  // Feeds the task's one-env env the character's frame, root and target (and the obstacles
-  // around it) for the next decision.
-  void sync_env();
-  // f(env) on the task's one-env env, whichever it is.
-  template <class F>
-  auto with_env(F&& f) {
-    return plane_ ? f(*plane_) : f(*obstacles_);
-  }
 
   std::shared_ptr<const RuntimeController> controller_;
   Character character_;
   PolicyScratch scratch_;
-  CompressedScratch cscratch_;  // compressed controllers: the start pose's decoding
-  std::vector<float> obs_, action_, row_;
+  std::vector<float> obs_, action_;
   float target_x_ = 0, target_z_ = 0;
   bool stick_ = false;
   float stick_x_ = 0, stick_z_ = 0, stick_speed_ = 0;  // unit world direction, m/s
@@ -215,14 +195,11 @@ class RuntimeCharacter {
   int64_t frames_shown_ = 0;
   RuntimePose pose_;
   RuntimeDecision decision_;
-  // The task's one-env env (one of the two), whose observe and decide are training's own.
-  std::unique_ptr<PlaneVecEnv> plane_;
-  std::unique_ptr<ObstacleVecEnv> obstacles_;
-  // Obstacle tasks: the engine's obstacles (world) and their copy relative to the character.
-  std::vector<float> world_centres_, world_half_sizes_, world_angles_, world_velocities_, local_centres_,
-      local_half_sizes_, local_angles_, local_velocities_;
+  // The task's one-env env (runtime_task.hpp), whose observe and decide are training's own.
+  std::unique_ptr<RuntimeTaskEnv> env_;
+  // Tasks with obstacles: the engine's obstacles (world meters), what sync hands the env.
+  std::vector<float> centres_, half_sizes_, angles_, velocities_;
   int num_obstacles_ = 0;
-  int64_t maps_decision_ = -1;  // the decision the newest sensor map was made for
 };
 
 }  // namespace mmrl

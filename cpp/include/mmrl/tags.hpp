@@ -65,7 +65,8 @@ RequestSelection select_request(const Database& db, const TagRequest& request);
 RequestSelection select_request(const Database& db, const std::string& text);
 
 // The request rule as a candidate filter: a row whose clip the request does not allow is
-// refused, the others cost what the base filter says (the clip costs), or nothing.
+// refused, the others cost what the base filter says (the clip costs), or nothing. A candidate
+// without a row (a compressed controller's state) has no clip: the rule does not price it.
 class RequestFilter final : public CandidateFilter {
  public:
   // mask: C entries (borrowed; null: every clip); base: optional, borrowed.
@@ -74,9 +75,10 @@ class RequestFilter final : public CandidateFilter {
     mask_ = mask;
     base_ = base;
   }
-  float extra_cost(int64_t row) const override {
-    if (mask_ != nullptr && mask_[frame_clip_[row]] == 0) return std::numeric_limits<float>::infinity();
-    return base_ != nullptr ? base_->extra_cost(row) : 0.0f;
+  float extra_cost(const Candidate& c) const override {
+    if (c.row < 0) return 0.0f;
+    if (mask_ != nullptr && mask_[frame_clip_[c.row]] == 0) return std::numeric_limits<float>::infinity();
+    return base_ != nullptr ? base_->extra_cost(c) : 0.0f;
   }
   const CandidateFilter* fallback() const override { return base_; }
 

@@ -9,8 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "mmrl/compressed.hpp"
-#include "mmrl/decision.hpp"
+#include "mmrl/decider.hpp"
 #include "mmrl/rng.hpp"
 #include "mmrl/tags.hpp"
 #include "mmrl/tasks/task_config.hpp"
@@ -25,33 +24,21 @@ struct MatchStats {
   double cost_sum = 0;
 };
 
-// Per-environment state every target task keeps (world meters, radians).
-struct TargetEnvState {
+// Per-environment state every target task keeps (world meters, radians). Its motion (the
+// database frame shown, or a compressed state) is the MotionState it derives from.
+struct TargetEnvState : MotionState {
   RootState root;
-  int64_t frame = 0;  // current database frame
   float target_x = 0, target_z = 0;
   int steps = 0;
   double episode_return = 0;
-  int64_t last_match = -1;  // frame chosen by the last match
-  bool last_transition = false;
-  float last_cost = 0;  // squared distance of the last match (normalized, weighted feature space)
-  float last_transition_cost = 0;  // the transition cost the last match used
-  // Squared normalized, weighted distance between the pose features (kPoseDim) of the
-  // continuation and of the last match's frame; 0 without a transition.
-  float last_pose_jump = 0;
+  Decision decision;  // the last decision (cleared by a reset)
+  // The last step's decision, kept through the autoreset (so it describes the step just
+  // returned); cleared by reset(seed) and by a NEXT_STEP reset step.
+  Decision last_step;
   // Frames the last step played before its episode ended: the index of the frame of the
   // ending event + 1, or frames_per_step when the step did not end the episode (truncation
-  // included). Kept through the autoreset, so it describes the step just returned; 0 after
-  // reset(seed).
+  // included). Kept like last_step; 0 after reset(seed).
   int last_step_frames = 0;
-  // The last step's decision (a transition; the matched cost), kept through the autoreset
-  // like last_step_frames (last_transition and last_cost are cleared by it); 0 after reset(seed).
-  bool last_step_transition = false;
-  float last_step_cost = 0;
-  int64_t last_step_match = -1;  // the frame the last step's match chose, kept like last_step_frames
-  // The transition cost the last step's match used (the config's transition_cost, or what
-  // the task's decision_transition_cost made of it); kept like last_step_frames.
-  float last_step_transition_cost = 0;
   // NEXT_STEP autoreset: the episode ended on the last step and the next step resets it.
   bool autoreset_pending = false;
   int64_t episode_frames = 0;  // frames played in this episode (the last step up to its ending frame)
@@ -64,12 +51,27 @@ struct TargetEnvState {
   RequestSelection pinned_request;
   std::vector<float> pinned_code;
   RequestFilter request_filter;  // set for each decision (TargetVecEnv::request_filter)
-  // A compressed controller's playback (TargetVecEnv::set_compressed): the state shown now
-  // [X, Zn], the state the last decision chose, the state after its playback, and that
-  // playback's pose rows ((frames_per_step + 1) x pose_dim; compressed.hpp).
-  std::vector<float> cstate, cchosen, cnext, crows;
-  CompressedScratch cscratch;
 };
+
+// A task's observation, segment by segment in order (name, floats): what a policy, a network
+// or a scripted joystick reads where ("pose", "goal", "maps", "request", ...), never guessed
+// from the observation's length.
+struct ObsSegment {
+  std::string name;
+  int size = 0;
+  std::string option;  // the setting that adds this segment ("" when every controller has it)
+};
+using ObsLayout = std::vector<ObsSegment>;
+
+// The offset of segment `name` in a layout, or -1.
+inline int obs_segment_offset(const ObsLayout& layout, const std::string& name) {
+  int offset = 0;
+  for (const ObsSegment& s : layout) {
+    if (s.name == name) return offset;
+    offset += s.size;
+  }
+  return -1;
+}
 
 // One task step's outcome (before truncation, which the template decides).
 struct TaskStep {

@@ -21,15 +21,17 @@
 // A task is a class Task deriving from TargetVecEnv<Task, Config, State> (CRTP) that defines
 //   static constexpr int kObsDim, kActionDim;  (kObsDim: the base observation's size)
 //   int obs_dim() const;                       (this env's, >= kObsDim with optional segments)
+//   ObsLayout task_obs_layout() const;         (its segments before the request code)
 //   void observe(int i, float* obs_row) const;        // env i's observation now
 //   void begin_episode(int i);                         // draws env i's episode (its RNG only)
 //   TaskStep advance(int i, const float* action);     // one RL step of env i, no autoreset
 // and nothing else of the loop. Config derives from TaskConfig (tasks/task_config.hpp);
 // State derives from TargetEnvState (target_env.hpp, with the step records and start rules).
 //
-// size: one class template of two halves, the database decision and the compressed one
-// (set_compressed .. decide_compressed), kept together because each mirrors the other's
-// hooks; what both share outside the class is in target_env.hpp and decision.hpp.
+// The motion: each env decides through one Decider (decider.hpp) over the env's motion source,
+// the database (database_source.hpp) or a compressed controller (compressed_source.hpp, after
+// set_compressed); a task reads what it needs of the motion through source() and the decision
+// record, never asking which source it has.
 #pragma once
 
 #include <algorithm>
@@ -38,6 +40,10 @@
 #include <stdexcept>
 #include <vector>
 
+#include <memory>
+
+#include "mmrl/compressed_source.hpp"
+#include "mmrl/database_source.hpp"
 #include "mmrl/target_env.hpp"
 #include "mmrl/threadpool.hpp"
 
@@ -50,8 +56,10 @@ class TargetVecEnv {
   int num_envs() const { return static_cast<int>(envs_.size()); }
   const Config& config() const { return config_; }
   const Database& database() const { return db_; }
-  const float* action_low() const { return low_; }
-  const float* action_high() const { return high_; }
+  const float* action_low() const { return decider_.action_low(); }
+  const float* action_high() const { return decider_.action_high(); }
+  // The motion source every env plays now (the database, or a compressed controller).
+  const MotionSource& source() const { return *source_; }
   State& state(int i) { return envs_[i]; }
   const State& state(int i) const { return envs_[i]; }
   // Autoreset mode (see the header comment): false = SAME_STEP, true = NEXT_STEP. Switching
@@ -64,10 +72,7 @@ class TargetVecEnv {
     for (int i = 0; i < num_envs(); ++i) {
       envs_[i].rng = Rng(seed, static_cast<uint64_t>(i));
       envs_[i].last_step_frames = 0;
-      envs_[i].last_step_transition = false;
-      envs_[i].last_step_cost = 0;
-      envs_[i].last_step_match = -1;
-      envs_[i].last_step_transition_cost = 0;
+      envs_[i].last_step = Decision{};
     }
     pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
       for (int64_t i = b; i < e; ++i) reset_env(static_cast<int>(i), obs ? obs + i * task().obs_dim() : nullptr);
@@ -80,16 +85,12 @@ class TargetVecEnv {
     if (!s.request_pinned && !request_mix_.empty())  // the episode's request, before its start is drawn
       s.request_index = static_cast<int>(request_mix_.pick(s.rng.uniform()));
     task().begin_episode(i);
-    start_compressed(s);
+    source_->start(s, s.frame);
     s.autoreset_pending = false;
     s.episode_frames = 0;
     s.steps = 0;
     s.episode_return = 0;
-    s.last_match = -1;
-    s.last_transition = false;
-    s.last_cost = 0;
-    s.last_transition_cost = 0;
-    s.last_pose_jump = 0;
+    s.decision = Decision{};
     if (obs_row) task().observe(i, obs_row);
   }
 
@@ -103,6 +104,14 @@ class TargetVecEnv {
     draw_target_offset(s.rng, half_extent, config_.min_target_distance, &dx, &dz);
     s.target_x = s.root.x + dx;
     s.target_z = s.root.z + dz;
+  }
+
+  // The observation's segments (target_env.hpp's ObsLayout): the task's own (obs_layout_of),
+  // then the request code when the config has request_groups.
+  ObsLayout obs_layout() const {
+    ObsLayout layout = task().task_obs_layout();
+    if (request_dim() > 0) layout.push_back({"request", request_dim(), "task.request_groups give a request code of " + std::to_string(request_dim())});
+    return layout;
   }
 
   // Requests (tags.hpp). The observation ends with request_dim() floats: the code of env i's
@@ -140,74 +149,43 @@ class TargetVecEnv {
   }
   bool request_pinned(int i) const { return envs_[i].request_pinned; }
 
-  // Compressed controllers (compressed.hpp). With a model, every env plays it instead of the
-  // database: the observation's pose features are those of the env's state, a decision
-  // projects the query (compressed_decision: the continuation rule with the task's transition
-  // cost) and playback steps and decodes the networks (compressed_playback). Episode starts
-  // still draw a database frame and start from its state: frame_states holds one row of
-  // state_dim floats per database frame (both borrowed, alive while set). Requests and clip
-  // costs do not apply to a projection; a task filter that prices states does
-  // (CandidateFilter::state_extra_cost: the obstacles task's collision-aware search, over the
-  // projections of its compressed_shortlist's queries). nullptr: back to the database.
-  // Throws std::invalid_argument for a model of another skeleton, or a task that cannot play
-  // one (Task::kPlaysCompressed).
+  // Compressed controllers (compressed_source.hpp). With a model, every env plays it instead
+  // of the database: decisions project the query and playback steps and decodes the networks.
+  // Episode starts still draw a database frame and start from its state: frame_states holds
+  // one row of state_dim floats per database frame (both borrowed, alive while set). Requests
+  // and clip costs do not price a projection; a task filter that prices states does (the
+  // obstacles task's collision-aware search, over the projections of its rules' projections
+  // fan). nullptr: back to the database. Throws std::invalid_argument for a model of another
+  // skeleton, or a task that cannot play one (Task::kPlaysCompressed).
   void set_compressed(const CompressedModel* model, const float* frame_states) {
     if (model == nullptr) {
-      compressed_ = nullptr;
-      compressed_states_ = nullptr;
-      task().on_compressed_set();
+      compressed_source_.reset();
+      use_source(database_source_);
       return;
     }
     if (!Task::kPlaysCompressed)
       throw std::invalid_argument("this task does not play compressed controllers (the plane and obstacles tasks do)");
-    model->check();
-    if (!model->prepared()) throw std::invalid_argument("set_compressed: the model is not prepared (prepare())");
-    if (model->num_joints != db_.num_joints)
-      throw std::invalid_argument("the compressed model has " + std::to_string(model->num_joints) +
-                                  " joints, the database " + std::to_string(db_.num_joints));
-    if (frame_states == nullptr) throw std::invalid_argument("set_compressed: frame_states is null");
-    const size_t S = static_cast<size_t>(model->state_dim());
-    for (State& s : envs_) {
-      s.cstate.assign(S, 0.0f);
-      s.cchosen.assign(S, 0.0f);
-      s.cnext.assign(S, 0.0f);
-      s.crows.assign(static_cast<size_t>(config_.frames_per_step + 1) * model->pose_dim(), 0.0f);
-      s.cscratch = model->make_scratch();
-    }
-    compressed_ = model;
-    compressed_states_ = frame_states;
-    for (int i = 0; i < num_envs(); ++i) start_compressed(envs_[i]);
-    task().on_compressed_set();
+    auto source = std::make_unique<CompressedSource>(db_, *model, frame_states);
+    compressed_source_ = std::move(source);
+    use_source(*compressed_source_);
   }
-  const CompressedModel* compressed() const { return compressed_; }
-  // Moves env i's compressed state to the end of its last decision's playback: what a step does
-  // after deciding, for a caller that only decides (the engine runtime, whose character plays).
-  void end_compressed_playback(int i) {
-    if (compressed_ != nullptr) std::copy(envs_[i].cnext.begin(), envs_[i].cnext.end(), envs_[i].cstate.begin());
-  }
-  // The state at the end of env i's last playback (kept through the autoreset, so a caller
-  // can go on from where the episode ended: set_compressed_state, then set_state with frame -1).
-  const float* compressed_played(int i) const { return envs_[i].cnext.data(); }
+  const CompressedModel* compressed() const { return compressed_source_ ? &compressed_source_->model() : nullptr; }
+  // Env i's compressed state buffers (compressed_source.hpp's names), for the bindings of a
+  // compressed controller.
+  const MotionState& motion(int i) const { return envs_[i]; }
+  // Moves env i to the end of its last decision's playback: what a step does after deciding,
+  // for a caller that only decides (the engine runtime, whose character plays).
+  void end_playback(int i) { source_->end_playback(envs_[i], envs_[i].decision, config_.frames_per_step); }
   // Sets env i's compressed state (state_dim floats, finite; std::invalid_argument otherwise).
   void set_compressed_state(int i, const float* state) {
-    if (compressed_ == nullptr) throw std::invalid_argument("set_compressed_state: no compressed controller is set");
+    if (compressed_source_ == nullptr) throw std::invalid_argument("set_compressed_state: no compressed controller is set");
     for (size_t k = 0; k < envs_[i].cstate.size(); ++k)
       if (!std::isfinite(state[k])) throw std::invalid_argument("set_compressed_state: the state is not finite");
     std::copy(state, state + envs_[i].cstate.size(), envs_[i].cstate.begin());
   }
   // Replaces the action box (12 + 12 normalized floats, low <= high): a controller file whose
   // database holds only its start frames carries the training database's box.
-  void set_action_box(const float* low, const float* high) {
-    for (int k = 0; k < kTrajectoryDim; ++k)
-      if (!(low[k] <= high[k])) throw std::invalid_argument("action box: low must be <= high in every dimension");
-    std::copy(low, low + kTrajectoryDim, low_);
-    std::copy(high, high + kTrajectoryDim, high_);
-  }
-  // Env i's compressed playback: the last decision's pose rows and the state shown now.
-  const float* compressed_rows(int i) const { return envs_[i].crows.data(); }
-  const float* compressed_state(int i) const { return envs_[i].cstate.data(); }
-  // The state env i's last decision chose (the projection, or the continuation).
-  const float* compressed_chosen(int i) const { return envs_[i].cchosen.data(); }
+  void set_action_box(const float* low, const float* high) { decider_.set_action_box(low, high); }
 
   // Moves env i's target (world meters; finite, else std::invalid_argument).
   void set_target(int i, float x, float z) {
@@ -223,67 +201,35 @@ class TargetVecEnv {
   // With a compressed controller, frame -1 keeps env i's compressed state (a database frame
   // starts from that frame's state).
   void set_state(int i, int64_t frame, float x, float z, float yaw) {
-    const bool keep = compressed_ != nullptr && frame == -1;
-    if (!keep && (frame < 0 || frame >= db_.num_frames)) throw std::invalid_argument("frame is outside the database");
+    if (!source_->starts_at(frame)) throw std::invalid_argument("frame is outside the database");
     if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw))
       throw std::invalid_argument("root must be finite");
     State& s = envs_[i];
-    if (!keep) {
-      s.frame = frame;
-      start_compressed(s);
-    }
+    source_->start(s, frame);
     s.root.x = x;
     s.root.z = z;
     s.root.yaw = wrap_angle(yaw);
     task().on_state_set(i);
   }
 
-  // The decision of env i now for `action` (12 normalized floats, finite): the task's
-  // transition cost and candidate filter (decision_transition_cost, candidate_filter),
-  // decision_for_action, and the frame to play from. Records last_match, last_transition,
-  // last_cost, last_transition_cost and last_pose_jump; changes nothing else. A step calls it
-  // first; the engine runtime calls it on a one-env env to decide as training did.
+  // The decision of env i now for `action` (12 normalized floats, finite): the Decider with
+  // the task's rules (decision_rules: its transition cost, candidate filters and shortlists).
+  // Records it as env i's decision (with the playback a compressed source prepares); changes
+  // nothing else. A step calls it first; the engine runtime calls it on a one-env env to decide
+  // as training did. Returns the database frame to play from (-1 for a compressed state).
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
-    s.last_transition_cost = task().decision_transition_cost(i);
-    if (compressed_ != nullptr) return decide_compressed(i, action);
-    const CandidateFilter* filter = task().candidate_filter(i);
-    const int64_t j = decision_for_action(db_, matcher_, s.frame, action, low_, high_, &s.last_cost, s.last_transition_cost,
-                                        filter, task().candidate_shortlist());
-    s.last_transition = (j != s.frame);
-    s.last_match = j;
-    s.last_pose_jump = 0;
-    if (s.last_transition) {
-      const float* a = &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
-      const float* b = &db_.normalized[static_cast<size_t>(j) * kFeatureDim];
-      for (int k = 0; k < kPoseDim; ++k) s.last_pose_jump += (a[k] - b[k]) * (a[k] - b[k]);
-    }
-    return j;
+    s.decision = decider_.decide(*source_, s, action, decision_rules(i));
+    return s.decision.match;
   }
-
-  // The compressed decision of decide(): the query of the state shown now, its projection or
-  // the continuation, and the chosen state's playback (s.crows, s.cnext; end_playback moves
-  // on). Returns -1: no database frame.
-  int64_t decide_compressed(int i, const float* action) {
-    State& s = envs_[i];
-    float query[kFeatureDim];
-    for (int k = 0; k < kPoseDim; ++k) query[k] = s.cstate[k];
-    for (int k = 0; k < kTrajectoryDim; ++k) query[kPoseDim + k] = std::min(high_[k], std::max(low_[k], action[k]));
-    // The task's filter prices the projections (state_extra_cost: the collision-aware search);
-    // with its compressed_shortlist fan, the query's turned copies are projected too.
-    float queries[kMaxShortlistQueries * kFeatureDim];  // shortlist_queries' bound (compressed_decision takes <= 8)
-    const int n = shortlist_queries(db_, query, task().compressed_shortlist(), queries);
-    s.last_transition = compressed_decision(*compressed_, s.cstate.data(), queries, n, s.last_transition_cost,
-                                            task().candidate_filter(i),
-                                            s.cchosen.data(), &s.last_cost, s.cscratch);
-    if (!s.last_transition) std::copy(s.cstate.begin(), s.cstate.end(), s.cchosen.begin());
-    s.last_pose_jump = 0;
-    if (s.last_transition)
-      for (int k = 0; k < kPoseDim; ++k) s.last_pose_jump += (s.cstate[k] - s.cchosen[k]) * (s.cstate[k] - s.cchosen[k]);
-    compressed_playback(*compressed_, s.cchosen.data(), config_.frames_per_step, s.crows.data(), s.cnext.data(),
-                        s.cscratch);
-    s.last_match = -1;
-    return -1;
+  // Env i's rules for its next decision (what decide uses).
+  DecisionRules decision_rules(int i) {
+    DecisionRules rules;
+    rules.transition_cost = task().decision_transition_cost(i);
+    rules.filter = task().candidate_filter(i);
+    rules.shortlist = task().candidate_shortlist();
+    rules.projections = task().compressed_shortlist();
+    return rules;
   }
 
   // Every env's MatchStats since the last call, summed; zeroes them.
@@ -307,14 +253,14 @@ class TargetVecEnv {
   void last_step_frames(int32_t* out) const {
     for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].last_step_frames;
   }
-  // Each environment's last step's decision (N each; see TargetEnvState::last_step_transition):
+  // Each environment's last step's decision (N each; see TargetEnvState::last_step):
   // transitions[i] = 1 where the match was not the continuation of the current clip, costs[i]
   // the match's squared distance to the query (normalized, weighted feature space). Training
   // reads this after every step for its cheap motion-quality log.
   void last_step_matches(uint8_t* transitions, float* costs) const {
     for (int i = 0; i < num_envs(); ++i) {
-      transitions[i] = envs_[i].last_step_transition;
-      costs[i] = envs_[i].last_step_cost;
+      transitions[i] = envs_[i].last_step.transition;
+      costs[i] = envs_[i].last_step.cost;
     }
   }
 
@@ -327,7 +273,9 @@ class TargetVecEnv {
         envs_(static_cast<size_t>(num_envs)),
         pool_(num_threads) {
     target_env_check(db, matcher, num_envs, config);
-    trajectory_action_box(db, config.action_limit_std, low_, high_);
+    database_source_ = DatabaseSource(db, matcher);
+    source_ = &database_source_;
+    decider_ = Decider(db, config.action_limit_std);
     clip_filter_ = ClipCostFilter(db, config.clip_costs);
     request_code_ = RequestCode(db, config.request_groups);
     request_mix_ = mmrl::request_mix(db, request_code_, config.request_any);
@@ -348,10 +296,7 @@ class TargetVecEnv {
         if (s.autoreset_pending) {  // NEXT_STEP: this step is the reset; the action is ignored
           reset_env(env, row);
           s.last_step_frames = 0;
-          s.last_step_transition = false;
-          s.last_step_cost = 0;
-          s.last_step_match = -1;
-          s.last_step_transition_cost = 0;
+          s.last_step = Decision{};
           out.rewards[i] = 0;
           out.terminated[i] = out.truncated[i] = out.success[i] = 0;
           write_decision(s, out, i);
@@ -359,19 +304,16 @@ class TargetVecEnv {
           continue;
         }
         TaskStep r = task().advance(env, actions + i * Task::kActionDim);
-        r.reward -= config_.transition_pose_weight * s.last_pose_jump;
-        if (s.last_transition) r.reward -= config_.transition_penalty;
+        r.reward -= config_.transition_pose_weight * s.decision.pose_jump;
+        if (s.decision.transition) r.reward -= config_.transition_penalty;
         s.steps += 1;
         s.episode_return += r.reward;
         s.last_step_frames = r.frames_played;
-        s.last_step_transition = s.last_transition;
-        s.last_step_cost = s.last_cost;
-        s.last_step_match = s.last_match;
-        s.last_step_transition_cost = s.last_transition_cost;
+        s.last_step = s.decision;
         s.episode_frames += r.frames_played;
         s.stats.decisions += 1;
-        s.stats.transitions += s.last_transition;
-        s.stats.cost_sum += s.last_cost;
+        s.stats.transitions += s.decision.transition;
+        s.stats.cost_sum += s.decision.cost;
         s.stats.frames += r.frames_played;
         const bool truncated = !r.terminated && s.steps >= config_.max_steps;
         out.rewards[i] = r.reward;
@@ -402,8 +344,8 @@ class TargetVecEnv {
   // The optional per-step rows of TargetStepBuffers.
   static void write_decision(const State& s, const TargetStepBuffers& out, int64_t i) {
     if (out.step_frames) out.step_frames[i] = s.last_step_frames;
-    if (out.transitions) out.transitions[i] = s.last_step_transition;
-    if (out.costs) out.costs[i] = s.last_step_cost;
+    if (out.transitions) out.transitions[i] = s.last_step.transition;
+    if (out.costs) out.costs[i] = s.last_step.cost;
   }
 
   // Draws env i's episode start (frame, root, target in the square of half_extent meters).
@@ -416,8 +358,8 @@ class TargetVecEnv {
 
   // Hook of set_state for tasks whose state depends on the root (a task hides it).
   void on_state_set(int) {}
-  // Hook of set_compressed (a task hides it): after a model is set or cleared.
-  void on_compressed_set() {}
+  // Hook of set_compressed (a task hides it): after the source changed.
+  void on_source_set() {}
 
   // The transition cost of env i's next match (a task hides it to make the bias depend on
   // its state): the config's transition_cost.
@@ -462,48 +404,40 @@ class TargetVecEnv {
     out[1] = g.y();
   }
 
-  // c_t: the normalized pose features of env i's current frame (kPoseDim floats), or of its
-  // compressed state.
+  // c_t: the normalized pose features of what env i shows now (kPoseDim floats).
   void observe_pose(const State& s, float* out) const {
-    const float* pose = compressed_ ? s.cstate.data() : &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim];
+    const float* pose = source_->current(s).features;
     for (int k = 0; k < kPoseDim; ++k) out[k] = pose[k];
   }
 
-  // Playback of decision j (decide's frame): the root delta of its k-th frame, and the end of
-  // the step's playback (the current frame becomes j + frames_per_step, or the compressed
-  // state moves to the played one).
-  const float* played_delta(const State& s, int64_t j, int k) const {
-    if (compressed_) return &s.crows[static_cast<size_t>(k) * compressed_->pose_dim() + 9 * compressed_->num_joints];
-    return &db_.root_deltas[static_cast<size_t>(j + k) * 3];
-  }
-  void end_playback(State& s, int64_t j) {
-    if (compressed_) {
-      std::copy(s.cnext.begin(), s.cnext.end(), s.cstate.begin());  // end_compressed_playback's rule
-      return;
-    }
-    s.frame = j + config_.frames_per_step;
-  }
-  // A task that plays compressed controllers says so (and reads played_delta, end_playback).
+  // Playback of env s's decision: the root delta of its k-th frame, and the end of the step's
+  // playback (the source moves on).
+  const float* played_delta(const State& s, int k) const { return source_->played_delta(s, s.decision, k); }
+  void end_playback(State& s) { source_->end_playback(s, s.decision, config_.frames_per_step); }
+  // A task that plays compressed controllers says so.
   static constexpr bool kPlaysCompressed = false;
-  // Starts env s's compressed state from its database frame (nothing without a model).
-  void start_compressed(State& s) {
-    if (compressed_ == nullptr) return;
-    const size_t S = static_cast<size_t>(compressed_->state_dim());
-    const float* row = compressed_states_ + static_cast<size_t>(s.frame) * S;
-    std::copy(row, row + S, s.cstate.begin());
+  // Switches every env to `source` (prepared, and started on its frame) and tells the task.
+  void use_source(const MotionSource& source) {
+    source_ = &source;
+    for (State& s : envs_) {
+      source.prepare(s, config_.frames_per_step);
+      source.start(s, s.frame);
+    }
+    task().on_source_set();
   }
 
   const Database& db_;
   const Matcher& matcher_;
   Config config_;
   std::vector<State> envs_;
-  float low_[kTrajectoryDim], high_[kTrajectoryDim];
+  DatabaseSource database_source_;
+  std::unique_ptr<CompressedSource> compressed_source_;
+  const MotionSource* source_ = nullptr;
+  Decider decider_;
   ClipCostFilter clip_filter_;
   RequestCode request_code_;
   RequestMix request_mix_;
   RequestSelection every_clip_;  // the request of an env without one: every clip
-  const CompressedModel* compressed_ = nullptr;
-  const float* compressed_states_ = nullptr;  // N x state_dim, per database frame
   bool next_step_autoreset_ = false;
   ThreadPool pool_;
 

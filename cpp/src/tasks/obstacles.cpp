@@ -107,7 +107,7 @@ void ObstacleVecEnv::path_hits(int i, const int64_t* rows, int n, int32_t* first
 }
 
 void ObstacleVecEnv::state_path_hits(int i, const float* features, int n, int32_t* first_hit_frames) {
-  if (compressed_ == nullptr) throw std::invalid_argument("state_path_hits: no compressed controller is set");
+  if (compressed() == nullptr) throw std::invalid_argument("state_path_hits: no compressed controller is set");
   for (int64_t k = 0; k < static_cast<int64_t>(n) * kFeatureDim; ++k)
     if (!std::isfinite(features[k])) throw std::invalid_argument("features must be finite");
   const ObstacleEnvState& s = envs_[i];
@@ -160,10 +160,9 @@ void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
     f.prepare(field_, i, st.root, st.max_speed > 0, frame_dt_);
     // A frame too close to its clip's end to be matched has no continuation: the next decision
     // must jump, which the observation tells as a hit right away.
-    // A compressed state's path is its own trajectory's (path_filter.hpp's trajectory_path).
     st.continuation_hit = 0;
-    if (compressed_ || db_.valid[st.frame]) {
-      const int hit = compressed_ ? f.first_hit_state(st.cstate.data()) : f.first_hit(st.frame);
+    if (source_->can_continue(st)) {
+      const int hit = f.first_hit(source_->current(st));
       st.continuation_hit = hit < 0 ? -1 : kPathSampleFrames[hit];
     }
   }
@@ -179,8 +178,7 @@ void ObstacleVecEnv::observe(int i, float* obs) const {
   observe_goal(s, obs + kGoalOffset);
   if (config_.observe_continuation) {
     float* c = obs + kContinuationOffset;
-    const float* trajectory = compressed_ ? s.cstate.data() + kPoseDim
-                                          : &db_.normalized[static_cast<size_t>(s.frame) * kFeatureDim + kPoseDim];
+    const float* trajectory = source_->current(s).features + kPoseDim;
     std::copy(trajectory, trajectory + kTrajectoryDim, c);
     const bool hits = s.continuation_hit >= 0;
     c[kTrajectoryDim] = hits ? 1.0f : 0.0f;
@@ -207,17 +205,15 @@ void ObstacleVecEnv::begin_episode(int i) {
 float ObstacleVecEnv::decision_transition_cost(int i) const {
   if (!config_.bias_yields || config_.transition_cost == 0.0f) return config_.transition_cost;
   float raw[kTrajectoryDim];
-  const float* continuation = &db_.features[static_cast<size_t>(envs_[i].frame) * kFeatureDim + kPoseDim];
-  if (compressed_) {  // the compressed state's own trajectory, in the features' raw units
-    trajectory_denormalize(db_, envs_[i].cstate.data() + kPoseDim, raw);
-    continuation = raw;
-  }
+  const float* continuation = candidate_raw_trajectory(db_, source_->current(envs_[i]), raw);
   return trajectory_hits(i, continuation) > 0 ? 0.0f : config_.transition_cost;
 }
 
 int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8_t* inside) const {
   float clipped[kTrajectoryDim], raw[kTrajectoryDim];
-  for (int k = 0; k < kTrajectoryDim; ++k) clipped[k] = std::min(high_[k], std::max(low_[k], action[k]));
+  const float* low = action_low();
+  const float* high = action_high();
+  for (int k = 0; k < kTrajectoryDim; ++k) clipped[k] = std::min(high[k], std::max(low[k], action[k]));
   trajectory_denormalize(db_, clipped, raw);
   return trajectory_hits(i, raw, points, inside);
 }
@@ -243,14 +239,10 @@ int ObstacleVecEnv::trajectory_hits(int i, const float* raw, float* points, uint
 
 TaskStep ObstacleVecEnv::advance(int i, const float* action) {
   ObstacleEnvState& s = envs_[i];
-  const int64_t j = decide(i, action);
+  decide(i, action);
   // Both tests use the root and the obstacles at the step's start, before anything moves.
   float played[kTrajectoryDim];
-  const float* path = &db_.features[static_cast<size_t>(std::max<int64_t>(j, 0)) * kFeatureDim + kPoseDim];
-  if (compressed_) {  // the chosen state's trajectory
-    trajectory_denormalize(db_, s.cchosen.data() + kPoseDim, played);
-    path = played;
-  }
+  const float* path = candidate_raw_trajectory(db_, source_->chosen(s, s.decision), played);
   s.last_hits = config_.hit_played ? trajectory_hits(i, path, s.hit_points, s.hit_inside)
                                    : action_hits(i, action, s.hit_points, s.hit_inside);
   const float r2 = config_.success_radius * config_.success_radius;
@@ -259,12 +251,12 @@ TaskStep ObstacleVecEnv::advance(int i, const float* action) {
   int k = 0;
   for (; k < config_.frames_per_step && !success && !collision; ++k) {
     if (moving) field_.move(i, frame_dt_);
-    root_advance(s.root, played_delta(s, j, k));
+    root_advance(s.root, played_delta(s, k));
     collision = field_.disc_overlaps_any(i, s.root.x, s.root.z, config_.body_radius);
     const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
     success = !collision && dx * dx + dz * dz <= r2;
   }
-  end_playback(s, j);
+  end_playback(s);
   s.collided = collision;
   TaskStep out;
   out.frames_played = k;
@@ -357,16 +349,13 @@ void ObstacleVecEnv::set_obstacles(int i, int n, const float* centres, const flo
 void ObstacleVecEnv::set_scene(int i, int64_t frame, float yaw, float target_x, float target_z, int n,
                                const float* centres, const float* half_sizes, const float* angles,
                                const float* velocities, MapUpdate maps) {
-  const bool keep = compressed_ != nullptr && frame == -1;  // set_state's rule: the compressed state stays
-  if (!keep && (frame < 0 || frame >= db_.num_frames)) throw std::invalid_argument("frame is outside the database");
+  // set_state's rule: frame -1 keeps a compressed state.
+  if (!source_->starts_at(frame)) throw std::invalid_argument("frame is outside the database");
   if (!std::isfinite(yaw)) throw std::invalid_argument("yaw must be finite");
   set_target(i, target_x, target_z);
   const float fastest = put_obstacles(i, n, centres, half_sizes, angles, velocities);
   ObstacleEnvState& s = envs_[i];
-  if (!keep) {
-    s.frame = frame;
-    start_compressed(s);
-  }
+  source_->start(s, frame);
   s.root = RootState{0.0f, 0.0f, wrap_angle(yaw)};
   s.max_speed = fastest;
   refresh(i, maps, true);

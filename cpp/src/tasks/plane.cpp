@@ -21,19 +21,19 @@ void PlaneVecEnv::begin_episode(int i) { draw_start(i, config_.target_half_exten
 
 TaskStep PlaneVecEnv::advance(int i, const float* action) {
   TargetEnvState& s = envs_[i];
-  const int64_t j = decide(i, action);
+  decide(i, action);
   const float r2 = config_.success_radius * config_.success_radius;
   TaskStep out;
   out.frames_played = config_.frames_per_step;
   for (int k = 0; k < config_.frames_per_step; ++k) {
-    root_advance(s.root, played_delta(s, j, k));
+    root_advance(s.root, played_delta(s, k));
     const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
     if (dx * dx + dz * dz <= r2 && !out.success) {  // tested on every played frame
       out.success = true;
       out.frames_played = k + 1;
     }
   }
-  end_playback(s, j);
+  end_playback(s);
   out.reward = std::exp(-target_distance(s)) + (out.success ? config_.success_bonus : 0.0f);
   out.terminated = out.success;
   return out;

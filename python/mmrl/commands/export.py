@@ -44,7 +44,7 @@ def sample_observations(task, db, config, policy, count: int, seed: int = 0) -> 
     obs, _ = env.reset(seed=seed)
     rows = [obs]
     while sum(len(r) for r in rows) < count:
-        obs, *_ = env.step(policy_actions(policy, obs))
+        obs, *_ = env.step(policy_actions(policy, obs, layout=env.observation_layout))
         rows.append(obs)
     env.close()
     return np.concatenate(rows)[:count].astype(np.float32)

@@ -54,9 +54,8 @@ def compressed_sections(db: Database, policy, task, task_config, compressed, sta
     from ..compress.model import linear_layers
     from ..motion.tags import request_group_list
 
-    core = getattr(task.vector_env.core_type, "core_name", task.name)
-    if core not in ("plane", "obstacles"):
-        raise ValueError(f"a compressed controller runs the plane and obstacles tasks only (this run's task is "
+    if not getattr(task.vector_env.core_type, "plays_compressed", False):
+        raise ValueError(f"a compressed controller runs on a task core that plays one (this run's task is "
                          f"{task.name!r})")
     if request_group_list(getattr(task_config, "request_groups", "")):
         raise ValueError("a compressed controller keeps to no tags; this policy observes requests (--request-groups)")

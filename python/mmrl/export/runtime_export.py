@@ -15,6 +15,7 @@ from typing import Dict, List, Optional, Tuple
 
 import numpy as np
 
+from .. import _core
 from ..errors import InputError
 from .runtime_file import ControllerFileError, Section, read_sections, write_sections
 
@@ -122,9 +123,13 @@ def _task_core(task_name: str) -> str:
     from ..tasks import get_task
 
     try:
-        return str(get_task(task_name).vector_env.core_type.core_name)
+        core = str(get_task(task_name).vector_env.core_type.core_name)
     except (KeyError, ValueError):
         raise ValueError(f"task {task_name!r} is not registered: the runtime needs to know its core") from None
+    if core not in _core.runtime_task_cores():
+        raise ValueError(f"task {task_name!r} runs on the core {core!r}, which the engine runtime has not registered "
+                         f"(it has {', '.join(_core.runtime_task_cores())})")
+    return core
 
 
 def controller_sections(db, policy, task_name: str, task_config,

@@ -22,9 +22,10 @@ OBSERVATION_DIMS = (POSE_DIM + 2, _OBSTACLE_GOAL + 2, _OBSTACLE_GOAL + 2 + TRAJE
 
 
 def goal_offset(obs_dim: int) -> int:
-    """Where g_t starts in a task's observation of ``obs_dim`` floats: after the pose features on
-    the plane task, after the maps and the pose on the moving-obstacles task, whatever optional
-    segments (``observe_continuation``, a request code) follow it."""
+    """Where g_t starts in an observation of ``obs_dim`` floats of one of the two built-in tasks,
+    told by its length: what a joystick reads before it is bound to an env's layout
+    (:meth:`JoystickPolicy.bind_layout`; the episode loops bind it). Any other task's observation
+    must come with its layout."""
     return _OBSTACLE_GOAL if int(obs_dim) >= _OBSTACLE_GOAL + 2 else POSE_DIM
 #: Frames ahead of the three trajectory samples (+10, +20, +30), from the C++ feature layout.
 TRAJECTORY_FRAMES = tuple(_core.TRAJECTORY_OFFSETS)
@@ -80,6 +81,19 @@ class JoystickPolicy:
         self._mean = np.asarray(db.feature_mean[POSE_DIM:], np.float32)
         self._scale = np.asarray(db.feature_scale[POSE_DIM:], np.float32)
         self._times = np.array(TRAJECTORY_FRAMES, np.float32) / db.fps
+        self._goal: Optional[int] = None  # where g_t starts, from bind_layout
+
+    def bind_layout(self, layout) -> "JoystickPolicy":
+        """Read g_t where the env's ``observation_layout`` ((name, size), ...) puts the "goal"
+        segment (the episode loops call it through ``policy_actions``). Returns self."""
+        start = 0
+        for name, size in layout:
+            if name == "goal":
+                self._goal = start
+                return self
+            start += int(size)
+        raise ValueError(f"layout: the joystick reads the 'goal' segment, which this observation lacks "
+                         f"({', '.join(n for n, _ in layout)})")
 
     @classmethod
     def preset(cls, db: Database, name: str) -> "JoystickPolicy":
@@ -93,7 +107,7 @@ class JoystickPolicy:
 
     def raw_trajectory(self, obs: np.ndarray) -> np.ndarray:
         """(N, 12) trajectory in meters / unit directions, character frame."""
-        start = goal_offset(obs.shape[1])
+        start = goal_offset(obs.shape[1]) if self._goal is None else self._goal
         g = obs[:, start:start + 2].astype(np.float64)
         dist = np.linalg.norm(g, axis=1, keepdims=True)
         d = np.where(dist > 1e-6, g / np.maximum(dist, 1e-6), np.array([[0.0, 1.0]]))

@@ -13,14 +13,13 @@ derived from (s, i); ``step`` returns ``(obs, rewards, terminated, truncated, in
 where episodes ended, ``infos`` holds ``final_obs``, ``success``, ``episode_return``,
 ``episode_length`` and ``episode_frames`` (frames played in the episode, the last step
 counted up to the frame that ended it), each with its ``_key`` mask, plus the task's own
-keys (``Task.episode_infos``).
+keys (``Task.episode_infos``). ``observation_layout`` names the observation's segments.
 
 Autoreset: SAME_STEP by default (the ending step returns the next episode's first
 observation; the last one is ``infos["final_obs"]``). ``autoreset_mode=AutoresetMode.NEXT_STEP``
 (what RLlib expects) returns the last observation itself, and the env's next step ignores its
 action and returns the first observation of the next episode, with reward 0 and both flags
-False. Each env draws its episodes from its own stream, so both modes play the same episodes
-(tests/test_autoreset.py).
+False. Each env draws its episodes from its own stream: both modes play the same episodes.
 """
 from __future__ import annotations
 
@@ -200,6 +199,7 @@ class TargetVectorEnv(RequestMethods, VectorEnv):
         self.metadata = {**type(self).metadata, "autoreset_mode": autoreset_mode}
         self._core.autoreset_next_step = autoreset_mode == AutoresetMode.NEXT_STEP
         self.obs_dim, self.act_dim = int(self._core.obs_dim), int(self.core_type.action_dim)
+        self.observation_layout = tuple((str(n), int(k)) for n, k in self._core.obs_layout)  # tasks/layout.py
         self.single_observation_space = self._observation_space()
         self.single_action_space = gym.spaces.Box(self._core.action_low, self._core.action_high, (self.act_dim,),
                                                   np.float32)

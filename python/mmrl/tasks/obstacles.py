@@ -215,7 +215,7 @@ class ObstaclesVectorEnv(TargetVectorEnv):
         if render_mode is not None:
             raise ValueError(f"render_mode: this env renders through mmrl render, got {render_mode!r}")
         super().__init__(num_envs, **kwargs)
-        self.layout = tuple((str(name), int(size)) for name, size in self._core.obs_layout)
+        self.layout = self.observation_layout
         n = self.num_envs
         self._collision = np.zeros(n, np.uint8)
         self._hits = np.zeros(n, np.int32)

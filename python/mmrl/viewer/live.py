@@ -166,7 +166,7 @@ class LiveSession:
         self._apply_pending()
         run = self.run
         t0 = time.perf_counter()
-        action = policy_actions(self.policies[self.policy_name], run.obs[None]).reshape(-1)
+        action = policy_actions(self.policies[self.policy_name], run.obs[None], layout=run.env.observation_layout).reshape(-1)
         t1 = time.perf_counter()
         low, high = run.env.single_action_space.low, run.env.single_action_space.high
         clipped = np.clip(action, low, high)

@@ -177,6 +177,14 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   // Where the request code (vecenv.hpp's request_dim floats) starts: after the optional segments.
   int request_offset() const { return kObsDim + (config_.observe_continuation ? kContinuationDim : 0); }
   int obs_dim() const { return request_offset() + request_dim(); }
+  ObsLayout task_obs_layout() const {
+    ObsLayout layout{{"maps", 2 * kMapCells}, {"pose", kPoseDim}, {"goal", 2}};
+    if (config_.observe_continuation) {
+      layout.push_back({"continuation", kTrajectoryDim, "task.observe_continuation on"});
+      layout.push_back({"continuation_hit", 2, "task.observe_continuation on"});
+    }
+    return layout;
+  }
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
   // Plays compressed controllers (TargetVecEnv::set_compressed) without the collision-aware
@@ -271,10 +279,10 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   friend class TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState>;
   // After set_state: rebuild the grid and both sensor maps around the new root.
   void on_state_set(int i) { refresh(i, false, true); }
-  // After set_compressed: the path filters price compressed states, and the maps and the
-  // continuation test follow the new state.
-  void on_compressed_set() {
-    for (ObstaclePathFilter& f : path_filters_) f.set_prices_states(compressed_ != nullptr);
+  // After the motion source changed (set_compressed): the path filters are ready for its
+  // candidates, and the maps and the continuation test follow the new state.
+  void on_source_set() {
+    for (ObstaclePathFilter& f : path_filters_) f.set_prices_states(source().rowless_candidates());
     for (int i = 0; i < num_envs(); ++i) refresh(i, false, true);
   }
   // transition_cost, or 0 when bias_yields and env i's continuation hits an obstacle.

@@ -19,8 +19,8 @@
 //     task's clip costs), if any.
 // The continuation is a candidate like any other: it keeps its transition-cost advantage while
 // its path is clear, and loses it (plus the hit's cost) when it is not. A compressed
-// controller's candidate (a state, no database row) is priced the same way through
-// state_extra_cost, its path drawn from its own trajectory features (trajectory_path). The filter only adds
+// controller's candidate (a state, no database row) is priced by the same method, its path
+// drawn from its own trajectory features (trajectory_path). The filter only adds
 // costs, so the KD-tree search stays exact under it (tested against brute force).
 //
 // Cost: prepare() runs once per decision (the obstacles near enough to reach a path point,
@@ -80,24 +80,21 @@ class ObstaclePathFilter final : public CandidateFilter {
   void set_base(const CandidateFilter* base) { base_ = base; }
   const CandidateFilter* fallback() const override { return base_; }
 
-  float extra_cost(int64_t row) const override {
-    const float base = base_ ? base_->extra_cost(row) : 0.0f;
+  float extra_cost(const Candidate& c) const override {
+    const float base = base_ ? base_->extra_cost(c) : 0.0f;
     if (!(base < std::numeric_limits<float>::infinity())) return base;  // refused below: no path test
-    const int s = first_hit(row);
+    const int s = first_hit(c);
     if (s < 0) return base;
     return base + hit_cost_[s];
   }
-  // A compressed controller's candidate (a state's kFeatureDim normalized features): its path
-  // is trajectory_path of its own trajectory features, tested as a row's path is. The base
-  // filter does not price it (a state has no clip).
-  float state_extra_cost(const float* features) const override {
-    const int s = first_hit_state(features);
-    return s < 0 ? 0.0f : hit_cost_[s];
-  }
-  // The first sample index s at which row's path hits (kPathSampleFrames[s] frames ahead), or -1.
+  // The first sample index s at which a candidate's path hits (kPathSampleFrames[s] frames
+  // ahead), or -1. A database row's path is its path samples; a candidate without a row (a
+  // compressed controller's state) has trajectory_path of its own trajectory features, tested
+  // the same way (set_prices_states(true) first).
+  int first_hit(const Candidate& c) const { return c.row >= 0 ? first_hit(c.row) : first_hit_state(c.features); }
   int first_hit(int64_t row) const { return first_hit_path(paths_ + static_cast<size_t>(row) * kPathSamples * 2); }
-  // The same for a state's features (trajectory_path; set_prices_states(true) first), and for
-  // a path (kPathSamples x (x, z), meters in the character frame, within prepare()'s reach).
+  // The same for a state's features, and for a path (kPathSamples x (x, z), meters in the
+  // character frame, within prepare()'s reach).
   int first_hit_state(const float* features) const;
   int first_hit_path(const float* path) const;
   // Sample count within the horizon, and the cost of a first hit at sample s.

@@ -1,0 +1,63 @@
+// The database as a motion source (decider.hpp): candidates are the database's valid rows,
+// matched exactly by the KD-tree (decision.hpp's decision_match, with the continuation rule,
+// the exclusion window and the filters' fallback), and playback shows the rows that follow the
+// match with their stored root deltas.
+#pragma once
+
+#include "mmrl/decider.hpp"
+
+namespace mmrl {
+
+class DatabaseSource final : public MotionSource {
+ public:
+  DatabaseSource() = default;
+  // db and matcher are borrowed and must outlive the source.
+  DatabaseSource(const Database& db, const Matcher& matcher) : db_(&db), matcher_(&matcher) {}
+
+  void prepare(MotionState&, int) const override {}
+  bool rowless_candidates() const override { return false; }
+  bool starts_at(int64_t frame) const override { return frame >= 0 && frame < db_->num_frames; }
+  void start(MotionState& s, int64_t frame) const override { s.frame = frame; }
+  Candidate current(const MotionState& s) const override { return row(s.frame); }
+  bool can_continue(const MotionState& s) const override { return db_->valid[s.frame] != 0; }
+  Decision decide(MotionState& s, const float* query, const DecisionRules& rules) const override;
+  Candidate chosen(const MotionState&, const Decision& d) const override { return row(d.match); }
+  const float* played_delta(const MotionState&, const Decision& d, int k) const override {
+    return &db_->root_deltas[static_cast<size_t>(d.match + k) * 3];
+  }
+  void end_playback(MotionState& s, const Decision& d, int frames_per_step) const override {
+    s.frame = d.match + frames_per_step;
+  }
+  void play(Character& character, const MotionState& s, const Decision& d) const override;
+  void show(Character& character, MotionState& s, const RootState& root) const override;
+
+ private:
+  Candidate row(int64_t f) const { return Candidate{f, &db_->normalized[static_cast<size_t>(f) * kFeatureDim]}; }
+  const Database* db_ = nullptr;
+  const Matcher* matcher_ = nullptr;
+};
+
+// One database character's decisions outside an env (mmrl.Character.step): a Decider over the
+// database source with the plain rules every task starts from, a transition cost and clip
+// costs (decision.hpp's ClipCostFilter). db and matcher are borrowed.
+class DatabaseDecider {
+ public:
+  // Throws std::invalid_argument for a negative or non-finite transition cost or bad clip costs.
+  DatabaseDecider(const Database& db, const Matcher& matcher, float action_limit_std, float transition_cost,
+                  std::vector<float> clip_costs);
+  // The decision of a character showing database frame `frame` (0..num_frames-1) for a
+  // trajectory action (12 normalized floats, finite).
+  Decision decide(int64_t frame, const float* action);
+  float transition_cost() const { return transition_cost_; }
+  void set_transition_cost(float cost);  // finite, >= 0 (std::invalid_argument otherwise)
+  const Decider& decider() const { return decider_; }
+
+ private:
+  DatabaseSource source_;
+  Decider decider_;
+  ClipCostFilter clip_filter_;
+  float transition_cost_ = 0;
+  MotionState state_;
+};
+
+}  // namespace mmrl

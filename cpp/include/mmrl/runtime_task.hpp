@@ -1,0 +1,159 @@
+// Tasks in the engine runtime, by name. A controller file names its task's core (task.core:
+// "plane", "obstacles"); the runtime looks the core up here, reads the core's config from the
+// file's task numbers (its field table: task_config.hpp's visit), checks it by building the
+// core's env, and gives each character a RuntimeTaskEnv: a one-env instance of the task's env
+// behind one interface, so the runtime, the C interface and every binding drive any
+// registered task the same way (the observation, the rules and the decision stay the
+// training env's own).
+//
+// Adding a task to the runtime: a file under cpp/runtime/tasks/ with its RuntimeTaskType (most
+// of it from RuntimeTaskEnvOf<Env>), and one line in runtime_task.cpp's builtin list.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "mmrl/character.hpp"
+#include "mmrl/decider.hpp"
+#include "mmrl/runtime_file.hpp"
+#include "mmrl/target_env.hpp"
+
+namespace mmrl {
+
+// A task's numbers as the runtime reads them from a controller file.
+struct RuntimeTask {
+  std::string name;                     // the task's name ("plane", "obstacles", a plug-in's)
+  std::string core;                     // the registered core it runs on
+  std::map<std::string, double> values; // every task.keys / task.values pair of the file
+  int frames_per_step = 6;
+  float success_radius = 0.5f;
+  int num_obstacles = 0;                // tasks with obstacles: at most this many (set_obstacles); else 0
+  bool path_filter = false;             // the collision-aware search is on (tasks that have it)
+  ObsLayout layout;                     // the observation the policy reads, segment by segment
+  std::shared_ptr<const TaskConfig> config;  // the core's own config (its type is the core's)
+};
+
+// The world around one character at a decision: its obstacles (world meters, radians, m/s;
+// grid.hpp's layout), for tasks that have them.
+struct RuntimeObstacles {
+  int n = 0;
+  const float* centres = nullptr;     // n x 2
+  const float* half_sizes = nullptr;  // n x 2
+  const float* angles = nullptr;      // n
+  const float* velocities = nullptr;  // n x 2
+};
+
+// One character's decision context: a one-env env of the task's core. The character stands at
+// the env's origin, facing its yaw; everything the engine gives is made relative to it.
+class RuntimeTaskEnv {
+ public:
+  virtual ~RuntimeTaskEnv() = default;
+  virtual const MotionSource& source() const = 0;
+  virtual MotionState& motion() = 0;
+  virtual const Decision& decision() const = 0;
+  // A compressed controller instead of the database (frame_states: a row per database frame;
+  // box: the training database's action box, 12 + 12).
+  virtual void set_compressed(const CompressedModel& model, const float* frame_states, const float* box) = 0;
+  // Puts the env's character on database frame `frame` (-1 keeps a compressed state) facing yaw.
+  virtual void start(int64_t frame, float yaw) = 0;
+  virtual void set_request(const std::string& request) = 0;
+  virtual const std::string& request() const = 0;
+  // Checks obstacles the engine hands in (std::invalid_argument naming what is wrong); a task
+  // without obstacles refuses any.
+  virtual void check_obstacles(const RuntimeObstacles& obstacles) const = 0;
+  // Feeds the decision's inputs: the character's root (world), its target (world meters) and
+  // obstacles; `decision` counts the character's decisions (0: its first; the same count
+  // again: observing again before the same decision).
+  virtual void sync(const RootState& root, int64_t frame, float target_x, float target_z,
+                    const RuntimeObstacles& obstacles, int64_t decision) = 0;
+  virtual void observe(float* obs) = 0;
+  virtual void decide(const float* action) = 0;
+  virtual void end_playback() = 0;
+  virtual ObsLayout layout() const = 0;
+};
+
+// A registered task core.
+struct RuntimeTaskType {
+  std::string core;
+  bool searches_paths = false;  // the core has the collision-aware search (task.path_filter)
+  // Reads the core's config from the file's task numbers and optional sections into t.config,
+  // and what the runtime reports of it (t.num_obstacles, t.path_filter); ControllerFile::fail
+  // on bad numbers. The shared fields (frames_per_step, success_radius, layout) are filled by
+  // the loader.
+  void (*read_config)(const ControllerFile& file, RuntimeTask& t, const Database& db);
+  // A one-env env of this core over db (borrowed) with t's config; throws std::invalid_argument
+  // when the env refuses the config.
+  std::unique_ptr<RuntimeTaskEnv> (*make_env)(const Database& db, const Matcher& matcher, const RuntimeTask& t);
+};
+
+// The registered cores (plane, obstacles), in registration order; null for an unknown name.
+const std::vector<RuntimeTaskType>& runtime_task_types();
+const RuntimeTaskType* find_runtime_task(const std::string& core);
+
+// The config of a task core from the file's task numbers (by Config::visit's field names; a
+// field the file lacks keeps its default) and its optional per-clip and text sections.
+template <class Config>
+Config runtime_task_config(const ControllerFile& f, const RuntimeTask& t, int64_t num_clips) {
+  Config c;
+  Config::visit([&](const char* name, auto member) {
+    using T = typename std::decay<decltype(c.*member)>::type;
+    if constexpr (std::is_same<T, std::vector<float>>::value) {
+      const std::string section = std::string("task.") + name;
+      if (f.has(section)) c.*member = f.floats(section, {num_clips});
+    } else if constexpr (std::is_same<T, std::vector<std::string>>::value) {
+      const std::string section = std::string("task.") + name;
+      if (f.has(section)) c.*member = f.texts(section);
+    } else {
+      const auto it = t.values.find(name);
+      if (it == t.values.end()) return;
+      if (std::is_integral<T>::value && !std::is_same<T, bool>::value &&
+          (it->second != std::floor(it->second) || std::abs(it->second) > 1e9))
+        f.fail(std::string("task.") + name + " must be a whole number");
+      c.*member = static_cast<T>(it->second);
+    }
+  });
+  return c;
+}
+
+// What every core's RuntimeTaskEnv does with its env (Env: a TargetVecEnv task with N = 1); a
+// core adds its scene (sync, check_obstacles) in a subclass.
+template <class Env>
+class RuntimeTaskEnvOf : public RuntimeTaskEnv {
+ public:
+  using Config = typename std::decay<decltype(std::declval<const Env&>().config())>::type;
+  RuntimeTaskEnvOf(const Database& db, const Matcher& matcher, const RuntimeTask& t)
+      : env_(db, matcher, 1, static_cast<const Config&>(*t.config), 1) {}
+  const MotionSource& source() const override { return env_.source(); }
+  MotionState& motion() override { return env_.state(0); }
+  const Decision& decision() const override { return env_.state(0).decision; }
+  void set_compressed(const CompressedModel& model, const float* frame_states, const float* box) override {
+    env_.set_compressed(&model, frame_states);
+    env_.set_action_box(box, box + kTrajectoryDim);
+  }
+  void start(int64_t frame, float yaw) override { env_.set_state(0, frame, 0.0f, 0.0f, wrap_angle(yaw)); }
+  void set_request(const std::string& request) override { env_.set_request(0, request); }
+  const std::string& request() const override { return env_.request(0).request.text; }
+  void check_obstacles(const RuntimeObstacles&) const override {
+    throw std::invalid_argument("this controller's task has no obstacles");
+  }
+  void sync(const RootState& root, int64_t frame, float target_x, float target_z, const RuntimeObstacles&,
+            int64_t) override {
+    env_.set_state(0, frame, 0.0f, 0.0f, root.yaw);  // frame -1 (compressed): the env's state
+    env_.set_target(0, target_x - root.x, target_z - root.z);
+  }
+  void observe(float* obs) override { env_.observe(0, obs); }
+  void decide(const float* action) override { env_.decide(0, action); }
+  void end_playback() override { env_.end_playback(0); }
+  ObsLayout layout() const override { return env_.obs_layout(); }
+
+ protected:
+  Env env_;
+};
+
+}  // namespace mmrl

@@ -1,0 +1,96 @@
+// The moving-obstacles task in the engine runtime (runtime_task.hpp): the engine's obstacles,
+// made relative to the character (the env's obstacle square is centred on it), feed the env's
+// own sensor maps, rules and decision.
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "mmrl/runtime_task.hpp"
+#include "mmrl/tasks/obstacles.hpp"
+
+namespace mmrl {
+
+namespace {
+
+class ObstaclesRuntimeEnv final : public RuntimeTaskEnvOf<ObstacleVecEnv> {
+ public:
+  ObstaclesRuntimeEnv(const Database& db, const Matcher& matcher, const RuntimeTask& t)
+      : RuntimeTaskEnvOf(db, matcher, t) {
+    const size_t cap = static_cast<size_t>(env_.config().num_obstacles);
+    for (auto* v : {&centres_, &half_sizes_, &velocities_}) v->assign(cap * 2, 0.0f);
+    angles_.assign(cap, 0.0f);
+  }
+
+  void check_obstacles(const RuntimeObstacles& o) const override {
+    const ObstacleTaskConfig& tc = env_.config();
+    if (o.n < 0 || o.n > tc.num_obstacles)
+      throw std::invalid_argument("obstacles: at most " + std::to_string(tc.num_obstacles) + " (the task's num_obstacles)");
+    for (int k = 0; k < o.n; ++k) {
+      const float hx = o.half_sizes[2 * k], hz = o.half_sizes[2 * k + 1];
+      if (!std::isfinite(o.centres[2 * k]) || !std::isfinite(o.centres[2 * k + 1]) || !std::isfinite(o.angles[k]) ||
+          !(hx >= 0 && hx <= tc.obstacle_max_side / 2) || !(hz >= 0 && hz <= tc.obstacle_max_side / 2))
+        throw std::invalid_argument("obstacles: obstacle " + std::to_string(k) +
+                                    " is not finite or has a half size outside [0, obstacle_max_side / 2]");
+      if (o.velocities && !(std::hypot(o.velocities[2 * k], o.velocities[2 * k + 1]) <= tc.speed_cap))
+        throw std::invalid_argument("obstacles: obstacle " + std::to_string(k) +
+                                    "'s velocity is not finite or faster than the task's speed_cap");
+    }
+  }
+
+  void sync(const RootState& r, int64_t frame, float target_x, float target_z, const RuntimeObstacles& o,
+            int64_t decision) override {
+    const float square_half = env_.config().obstacle_square_half;
+    int n = 0;
+    for (int k = 0; k < o.n; ++k) {
+      const float dx = o.centres[2 * k] - r.x, dz = o.centres[2 * k + 1] - r.z;
+      if (std::abs(dx) > square_half || std::abs(dz) > square_half) continue;  // beyond every sensor
+      centres_[2 * n] = dx;
+      centres_[2 * n + 1] = dz;
+      for (int a = 0; a < 2; ++a) {
+        half_sizes_[2 * n + a] = o.half_sizes[2 * k + a];
+        velocities_[2 * n + a] = o.velocities ? o.velocities[2 * k + a] : 0.0f;
+      }
+      angles_[n] = o.angles[k];
+      ++n;
+    }
+    // One new sensor map per decision: observing again before it recomputes the map in place;
+    // the first decision's previous map is a copy of its current one, as at a training reset.
+    using Maps = ObstacleVecEnv::MapUpdate;
+    const Maps maps = decision == 0 ? Maps::kReset : maps_decision_ == decision ? Maps::kReplace : Maps::kPush;
+    maps_decision_ = decision;
+    env_.set_scene(0, frame, r.yaw, target_x - r.x, target_z - r.z, n, centres_.data(), half_sizes_.data(),
+                   angles_.data(), velocities_.data(), maps);
+  }
+
+ private:
+  // The obstacles relative to the character (the env's square is centred on it).
+  std::vector<float> centres_, half_sizes_, angles_, velocities_;
+  int64_t maps_decision_ = -1;  // the decision the newest sensor map was made for
+};
+
+}  // namespace
+
+RuntimeTaskType obstacles_runtime_task() {
+  RuntimeTaskType t;
+  t.core = ObstacleVecEnv::kCoreName;
+  t.searches_paths = true;
+  t.read_config = [](const ControllerFile& f, RuntimeTask& task, const Database& db) {
+    auto config = std::make_shared<ObstacleTaskConfig>(runtime_task_config<ObstacleTaskConfig>(f, task, db.num_clips()));
+    if (config->path_filter) {  // the collision-aware search needs its numbers
+      for (const char* key : {"path_cost", "path_horizon", "path_margin", "path_candidates"})
+        if (task.values.find(key) == task.values.end())
+          f.fail(std::string("task.path_filter is on but the file lacks task.") + key + " (the path filter's data)");
+    }
+    if (config->num_obstacles < 0 || config->num_obstacles > 100000) f.fail("task.num_obstacles out of range");
+    task.num_obstacles = config->num_obstacles;
+    task.path_filter = config->path_filter;
+    task.config = std::move(config);
+  };
+  t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
+    return std::make_unique<ObstaclesRuntimeEnv>(db, matcher, task);
+  };
+  return t;
+}
+
+}  // namespace mmrl

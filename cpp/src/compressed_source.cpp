@@ -1,0 +1,61 @@
+#include "mmrl/compressed_source.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+#include "mmrl/character.hpp"
+
+namespace mmrl {
+
+CompressedSource::CompressedSource(const Database& db, const CompressedModel& model, const float* frame_states)
+    : db_(&db), model_(&model), frame_states_(frame_states) {
+  model.check();
+  if (!model.prepared()) throw std::invalid_argument("set_compressed: the model is not prepared (prepare())");
+  if (model.num_joints != db.num_joints)
+    throw std::invalid_argument("the compressed model has " + std::to_string(model.num_joints) +
+                                " joints, the database " + std::to_string(db.num_joints));
+  if (frame_states == nullptr) throw std::invalid_argument("set_compressed: frame_states is null");
+}
+
+void CompressedSource::prepare(MotionState& s, int frames_per_step) const {
+  const size_t S = static_cast<size_t>(model_->state_dim());
+  s.cstate.assign(S, 0.0f);
+  s.cchosen.assign(S, 0.0f);
+  s.cnext.assign(S, 0.0f);
+  s.crows.assign(static_cast<size_t>(frames_per_step + 1) * model_->pose_dim(), 0.0f);
+  s.cscratch = model_->make_scratch();
+}
+
+void CompressedSource::start(MotionState& s, int64_t frame) const {
+  if (frame == -1) return;  // keep the state
+  s.frame = frame;
+  const size_t S = static_cast<size_t>(model_->state_dim());
+  const float* row = frame_states_ + static_cast<size_t>(frame) * S;
+  std::copy(row, row + S, s.cstate.begin());
+}
+
+Decision CompressedSource::decide(MotionState& s, const float* query, const DecisionRules& rules) const {
+  // The filter prices the projections; with a projections fan the query's turned copies are
+  // projected too.
+  float queries[kMaxShortlistQueries * kFeatureDim];  // shortlist_queries' bound (compressed_decision takes <= 8)
+  const int n = shortlist_queries(*db_, query, rules.projections, queries);
+  Decision d;
+  d.transition = compressed_decision(*model_, s.cstate.data(), queries, n, rules.transition_cost, rules.filter,
+                                     s.cchosen.data(), &d.cost, s.cscratch);
+  if (!d.transition) std::copy(s.cstate.begin(), s.cstate.end(), s.cchosen.begin());
+  const int frames = static_cast<int>(s.crows.size() / static_cast<size_t>(model_->pose_dim())) - 1;
+  compressed_playback(*model_, s.cchosen.data(), frames, s.crows.data(), s.cnext.data(), s.cscratch);
+  return d;
+}
+
+void CompressedSource::play(Character& character, const MotionState& s, const Decision& d) const {
+  character.play_rows(s.crows.data(), d.transition, d.cost);
+}
+
+void CompressedSource::show(Character& character, MotionState& s, const RootState& root) const {
+  model_->decode(s.cstate.data(), s.crows.data(), s.cscratch);
+  character.reset_row(s.crows.data(), root);
+}
+
+}  // namespace mmrl
