@@ -197,7 +197,7 @@ def test_the_runtime_plays_a_compressed_obstacles_controller_as_python_does(db, 
     from test_runtime import random_obstacle_policy
 
     task = mmrl.get_task("obstacles")
-    cfg = config(num_obstacles=40, observe_continuation=True, max_steps=60)
+    cfg = config(num_obstacles=40, max_steps=60)
     layout = task.make_vector_env(1, db=db, config=cfg, num_threads=1).layout
     path = tmp_path / "cobst.mmrl"
     write_compressed_controller(path, db, random_obstacle_policy(5, layout), task, cfg, controller, starts=4)

@@ -274,41 +274,6 @@ def test_hit_lookahead_bounces_like_the_field(db):
     assert env._core.action_hits(0, action)[2] == (False, False, False)
 
 
-def test_hit_played_tests_the_matched_frames_own_trajectory(db):
-    """With hit_played the step's hits are those of the frame it matched (its future root
-    trajectory from the database, placed through the root at the step's start), not the
-    action's: a square on the played +30 point is one hit, and none for the action's test."""
-    frame = int(np.flatnonzero(db.valid_mask)[200])
-    action = _action_of_frame(db, frame)
-    action[8:10] += 2.5  # push the action's +30 position away from anything the data plays
-
-    def start(**kw):
-        env = make(db, n=1, obstacle_max_speed=0.0, **kw)
-        env.reset(seed=5)
-        env._core.set_root(0, 0.0, 0.0, 0.3)
-        env.set_target(0, 40.0, 40.0)
-        set_scene(env, 0, np.zeros((0, 2)), np.zeros((0, 2)))
-        return env
-
-    probe = start()  # the same episode, stepped in an empty scene: which frame the step matches
-    action_pts = probe._core.action_hits(0, action)[1]
-    probe.step(action[None])
-    matched = probe.env_state(0)["frame"] - probe.config.frames_per_step
-    raw = db.features[matched, 15:27].astype(np.float64)
-    c, s = math.cos(0.3), math.sin(0.3)
-    played_pts = np.array([[c * raw[4 * k] + s * raw[4 * k + 1], -s * raw[4 * k] + c * raw[4 * k + 1]]
-                           for k in range(3)])
-    assert np.hypot(*(played_pts[2] - action_pts[2])) > 0.5
-    assert np.hypot(*played_pts[2]) > 0.8  # the root cannot reach it within one step
-    for played in (False, True):
-        env = start(hit_played=played)
-        set_scene(env, 0, [played_pts[2]], [[0.05, 0.05]])
-        _, _, term, _, _ = env.step(action[None])
-        assert not term[0]
-        assert env.last_hits[0] == (1 if played else 0)
-        np.testing.assert_allclose(env.env_state(0)["hit_points"], played_pts if played else action_pts, atol=1e-4)
-
-
 @pytest.mark.parametrize("options, hit_term", [
     ({}, math.exp(-1)),                                            # the paper's exp(-hits)
     ({"hit_reward": False}, 0.0),                                  # the --no-hit-reward ablation

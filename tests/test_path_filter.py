@@ -129,43 +129,6 @@ def test_path_test_equals_a_numpy_reference(db):
     assert checked >= 20000 and 0.05 * checked < hits < 0.95 * checked, (checked, hits)
 
 
-def test_the_continuation_observation_is_the_clip_s_own_future_and_its_path_test(db):
-    """observe_continuation appends the current frame's normalized trajectory and the path test of
-    it (hit flag, seconds to the first hit) to the paper's observation, which stays unchanged."""
-    cfg = config(path_filter=False, path_horizon=25)
-    task = mmrl.get_task("obstacles")
-    seen = task.make_vector_env(4, db=db, config=cfg.replace(observe_continuation=True), num_threads=1)
-    plain = task.make_vector_env(4, db=db, config=cfg, num_threads=1)
-    for env in (seen, plain):
-        apply_stage(task, env, None)
-    assert seen.obs_dim == plain.obs_dim + 14 and [n for n, _ in seen.layout][-2:] == ["continuation",
-                                                                                          "continuation_hit"]
-    plain_obs, _ = plain.reset(seed=9)
-    hits = clear = ended = 0
-    for obs, actions in stepped(seen, 40, 9):
-        np.testing.assert_array_equal(obs[:, :plain.obs_dim], plain_obs)
-        plain_obs, *_ = plain.step(actions)
-        for i in range(seen.num_envs):
-            state = seen.env_state(i)
-            frame = int(state["frame"])
-            np.testing.assert_array_equal(obs[i, 529:541], db.normalized_features[frame, 15:27])
-            if not db.valid_mask[frame]:  # the clip ends: no continuation, told as a hit right away
-                np.testing.assert_array_equal(obs[i, 541:], [1.0, 0.0])
-                ended += 1
-                continue
-            dist = reference_path_distances(db, state, seen.obstacles(i), [frame], cfg, state["max_speed"] > 0)
-            want, near = reference_first_hits(dist, cfg.body_radius + cfg.path_margin, cfg.path_horizon)
-            if near[0]:
-                continue
-            flag, seconds = obs[i, 541:]
-            assert flag == float(want[0] > 0)
-            expect = (want[0] if want[0] > 0 else cfg.path_horizon) / db.fps
-            assert seconds == pytest.approx(expect, rel=1e-6)
-            hits += want[0] > 0
-            clear += want[0] == 0
-    assert hits >= 10 and clear >= 10, (hits, clear)
-
-
 def test_a_shorter_horizon_tests_fewer_samples(synthetic_db):
     db = synthetic_db
     for horizon in (2, 10, 17):
@@ -360,8 +323,8 @@ def test_the_cheap_networks_train_export_and_run_in_the_runtime(tmp_path, networ
 def test_train_path_filter_off_trains_without_the_search_and_keeps_it_for_everything_after(tmp_path,
                                                                                             monkeypatch):
     """train_path_filter=false: the training envs run without the collision-aware search, while
-    config.json, evaluation and the exported controller keep path_filter (and the continuation
-    observation trains, exports and runs in the runtime as torch does)."""
+    config.json, evaluation and the exported controller keep path_filter (and the exported policy
+    runs in the runtime as torch does)."""
     from mmrl.cli import main
     from mmrl.runs import RunDir
     from mmrl.tasks.obstacles import ObstaclesVectorEnv
@@ -372,17 +335,16 @@ def test_train_path_filter_off_trains_without_the_search_and_keeps_it_for_everyt
 
     def recording(self, *args, **kwargs):
         original(self, *args, **kwargs)
-        built.append((self.num_envs, self.config.path_filter, self.config.observe_continuation))
+        built.append((self.num_envs, self.config.path_filter))
 
     monkeypatch.setattr(ObstaclesVectorEnv, "__init__", recording)
     run = tmp_path / "run"
     assert main(["train", "obstacles", "--steps", "1024", "--envs", "8", "--out", str(run), "--no-progress",
-                 "--set", "network=small-cnn", "--set", "train_path_filter=false",
-                 "--set", "observe_continuation=true"]) == 0
-    assert built[0] == (8, False, True), built  # the training envs: no search
+                 "--set", "network=small-cnn", "--set", "train_path_filter=false"]) == 0
+    assert built[0] == (8, False), built  # the training envs: no search
     r = RunDir(run)
     cfg = r.task_config(r.task)
-    assert cfg.path_filter and not cfg.train_path_filter and cfg.observe_continuation
+    assert cfg.path_filter and not cfg.train_path_filter
     assert r.task.train_config(cfg).path_filter is False and r.task.train_config(cfg.replace(
         train_path_filter=True)).path_filter is True
     assert not hasattr(cfg.to_core(_core.ObstacleTaskConfig), "train_path_filter")  # the trainer's, not the core's
@@ -390,7 +352,7 @@ def test_train_path_filter_off_trains_without_the_search_and_keeps_it_for_everyt
     c = _core.RuntimeController.load(str(tmp_path / "c.mmrl"), require_path_filter=True)
     policy = r.policy()
     obs = sample_observations(r.task, r.database(), cfg, policy, 100, seed=4)
-    assert obs.shape[1] == 543
+    assert obs.shape[1] == 529
     ours = np.stack([c.act(o) for o in obs])
     ref = policy.act(obs)
     assert np.max(np.abs(ours - ref) / np.maximum(1.0, np.abs(ref))) <= 1e-5
@@ -398,12 +360,56 @@ def test_train_path_filter_off_trains_without_the_search_and_keeps_it_for_everyt
 
 def test_a_runtime_file_whose_policy_does_not_read_its_observation_is_refused(tmp_path, synthetic_db):
     from mmrl.export.runtime_export import write_controller
+    from mmrl.export.runtime_file import read_sections, write_sections
     from test_runtime import random_obstacle_policy
 
     path = tmp_path / "c.mmrl"
-    write_controller(path, synthetic_db, random_obstacle_policy(2), "obstacles", config(observe_continuation=True))
-    with pytest.raises(_core.ControllerFileError, match="reads 529 observations.*543.*observe_continuation on"):
+    write_controller(path, synthetic_db, random_obstacle_policy(2), "obstacles", config())
+    sections = read_sections(path)
+    sections["task.core"] = ["plane"]  # the plane core reads 17 floats; this policy 529
+    write_sections(path, sections)
+    with pytest.raises(_core.ControllerFileError, match=r"reads 529 observations; the plane task's are 17 \(pose 15, goal 2\)"):
         _core.RuntimeController.load(str(path))
+
+
+@pytest.mark.parametrize("name", ["hit_played", "bias_yields", "observe_continuation"])
+def test_a_retired_option_is_refused_everywhere_with_one_line(name, tmp_path, capsys, synthetic_db):
+    """An experiment's option that was removed (docs/obstacles.md, "Retired options"): --set gives
+    one line and exit 2; a config.json that ran it on is refused naming it, one that has the value
+    the code now always has still loads; a controller file with it on is refused by the runtime."""
+    import json
+
+    from mmrl.cli import main
+    from mmrl.errors import InputError
+    from mmrl.export.runtime_export import write_controller
+    from mmrl.export.runtime_file import read_sections, write_sections
+    from mmrl.runs import RunDir
+    from test_runtime import random_obstacle_policy
+
+    assert main(["train", "obstacles", "--steps", "512", "--out", str(tmp_path / "x"), "--no-progress",
+                 "--set", f"{name}=true"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{name!r} was an experiment's and is retired" in err[0], err
+    task = mmrl.get_task("obstacles")
+    with pytest.raises(ValueError, match="retired"):
+        task.default_config().replace(**{name: True})
+    assert task.config_from_dict({name: False, "num_obstacles": 7}).num_obstacles == 7  # old runs' saved default
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.json").write_text(json.dumps({"task": "obstacles", "task_config": {name: True}}))
+    with pytest.raises(InputError, match=f"config.json: .*{name}"):
+        RunDir(run).task_config()
+    path = tmp_path / "c.mmrl"
+    write_controller(path, synthetic_db, random_obstacle_policy(2), "obstacles", config())
+    sections = read_sections(path)
+    sections["task.keys"] = list(sections["task.keys"]) + [name]
+    sections["task.values"] = np.append(sections["task.values"], 1.0)
+    write_sections(path, sections)
+    if name == "hit_played":  # a training option: the runtime never read it
+        _core.RuntimeController.load(str(path))
+    else:
+        with pytest.raises(_core.ControllerFileError, match=f"task.{name} is on: an experiment's option"):
+            _core.RuntimeController.load(str(path))
 
 
 def test_an_unknown_network_is_refused(tmp_path, capsys):

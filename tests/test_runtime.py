@@ -127,7 +127,7 @@ def test_runtime_on_another_skeleton(tmp_path):
 
 def random_obstacle_policy(seed: int, layout=None) -> Policy:
     """A CNN policy with random weights for the obstacles task's observation (``layout``: an
-    env's, e.g. with observe_continuation; default the paper's 529 floats)."""
+    env's, e.g. with a request code; default the paper's 529 floats)."""
     from mmrl.rl.networks import OBSTACLE_DEFAULT_LAYOUT, ObstacleActorCritic
 
     torch.manual_seed(seed)

@@ -161,31 +161,6 @@ def test_transition_pose_weight_is_checked(db):
         PlaneVectorEnv(2, db=db, transition_pose_weight=-1.0)
 
 
-def test_the_obstacles_bias_yields_when_the_continuation_hits(db):
-    """bias_yields: a decision matches without the bias exactly when the current frame's own
-    future trajectory (its normalized trajectory features, tested as an action is) hits an
-    obstacle; otherwise with the config's transition_cost."""
-    task = get_task("obstacles")
-    env = task.make_vector_env(8, db=db, num_threads=1, transition_cost=5.0, bias_yields=True, hit_radius=0.25,
-                               hit_lookahead=True)
-    env.reset(seed=2)
-    rows = np.asarray(db.normalized_features, np.float32)
-    low, high = env.single_action_space.low, env.single_action_space.high
-    rng = np.random.default_rng(3)
-    seen = {0.0: 0, 5.0: 0}
-    for _ in range(40):
-        expected = {}
-        for i in range(8):
-            cont = rows[env.env_state(i)["frame"], 15:]
-            if np.all((cont >= low) & (cont <= high)):  # the action test clips to the box
-                expected[i] = 0.0 if env.action_hits(i, cont)[0] > 0 else 5.0
-        env.step((rng.normal(size=(8, 12)) * 0.7).astype(np.float32))
-        for i, cost in expected.items():
-            assert env.env_state(i)["last_step_transition_cost"] == cost
-            seen[cost] += 1
-    assert seen[0.0] > 20 and seen[5.0] > 20, seen
-
-
 def test_controller_transition_cost_is_settable_and_checked(db):
     ctrl = Character(db, transition_cost=2.0)
     ctrl.transition_cost = 7.5

@@ -310,7 +310,7 @@ void RuntimeCharacter::decide() {
     stick_action(action_.data());
   else
     c.policy().act(obs_.data(), action_.data(), scratch_);
-  // The training env's own decision (transition cost, bias_yields, candidate filters); its
+  // The training env's own decision (transition cost, candidate filters); its
   // motion source plays it on the character.
   env_->decide(action_.data());
   env_->source().play(character_, env_->motion(), env_->decision());

@@ -629,13 +629,10 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'hit_played', 'bias_yields', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'observe_continuation', 'grid_cell_size')
-    bias_yields: bool
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
     hit_lookahead: bool
     hit_penalty: bool
-    hit_played: bool
     hit_reward: bool
-    observe_continuation: bool
     path_filter: bool
     random_heading: bool
     def __init__(self) -> None:

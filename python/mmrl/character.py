@@ -116,7 +116,7 @@ class Character:
     @property
     def transition_cost(self) -> float:
         """The transition cost of the next matches; settable between steps (a task may vary
-        it per decision, as the obstacles task's ``bias_yields`` does)."""
+        it per decision)."""
         return float(self._decider.transition_cost)
 
     @transition_cost.setter

@@ -112,7 +112,10 @@ class RunDir:
             raise InputError(f"{self.path}: no {CONFIG_NAME}, so no task")
         if self.task_name not in (None, task.name):
             return task.default_config()
-        return task.config_from_dict(self.config.get("task_config") or {})
+        try:
+            return task.config_from_dict(self.config.get("task_config") or {})
+        except ValueError as e:
+            raise InputError(f"{self.path}/{CONFIG_NAME}: {e}") from None
 
     @property
     def data_spec(self) -> Dict[str, Any]:

@@ -154,8 +154,7 @@ class RuntimeCharacter {
   const std::string& request() const;  // canonical text, "" for every clip
   // Obstacle tasks: the obstacles now, world meters and radians (see grid.hpp: centres and
   // half sizes n x 2, angles n), and optionally their velocities (n x 2, m/s; null: standing
-  // still), which the task's look-ahead tests use (hit_lookahead, the continuation test of
-  // bias_yields). Read at the next decision (the sensor maps); the engine moves them. Throws
+  // still), which the collision-aware search's look-ahead uses. Read at the next decision (the sensor maps); the engine moves them. Throws
   // std::invalid_argument for more obstacles than the task's num_obstacles, a half size over
   // obstacle_max_side / 2 or a speed over speed_cap. Obstacles over the task's square half
   // (10 m) from the character cannot reach its sensors and are ignored.

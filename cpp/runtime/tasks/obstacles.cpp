@@ -82,6 +82,14 @@ RuntimeTaskType obstacles_runtime_task() {
         if (task.values.find(key) == task.values.end())
           f.fail(std::string("task.path_filter is on but the file lacks task.") + key + " (the path filter's data)");
     }
+    // Options of experiments that lost (docs/obstacles.md, "Retired options"): a file written
+    // with one on runs a rule this runtime no longer has.
+    for (const char* key : {"bias_yields", "observe_continuation"}) {
+      const auto it = task.values.find(key);
+      if (it != task.values.end() && it->second != 0)
+        f.fail(std::string("task.") + key + " is on: an experiment's option this runtime no longer has " +
+               "(docs/obstacles.md, \"Retired options\")");
+    }
     if (config->num_obstacles < 0 || config->num_obstacles > 100000) f.fail("task.num_obstacles out of range");
     task.num_obstacles = config->num_obstacles;
     task.path_filter = config->path_filter;

@@ -155,17 +155,6 @@ void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
   if (maps == MapUpdate::kReset)
     for (int k = 0; k < map_slots_; ++k)
       if (k != st.map_head) std::copy(cur, cur + kMapCells, map_slot(i, k));
-  if (config_.observe_continuation) {  // the collision-aware search's test of the continuation
-    ObstaclePathFilter& f = path_filters_[i];
-    f.prepare(field_, i, st.root, st.max_speed > 0, frame_dt_);
-    // A frame too close to its clip's end to be matched has no continuation: the next decision
-    // must jump, which the observation tells as a hit right away.
-    st.continuation_hit = 0;
-    if (source_->can_continue(st)) {
-      const int hit = f.first_hit(source_->current(st));
-      st.continuation_hit = hit < 0 ? -1 : kPathSampleFrames[hit];
-    }
-  }
 }
 
 void ObstacleVecEnv::observe(int i, float* obs) const {
@@ -176,15 +165,7 @@ void ObstacleVecEnv::observe(int i, float* obs) const {
   for (int k = 0; k < kMapCells; ++k) obs[kPrevMapOffset + k] = prev[k];
   observe_pose(s, obs + kPoseOffset);
   observe_goal(s, obs + kGoalOffset);
-  if (config_.observe_continuation) {
-    float* c = obs + kContinuationOffset;
-    const float* trajectory = source_->current(s).features + kPoseDim;
-    std::copy(trajectory, trajectory + kTrajectoryDim, c);
-    const bool hits = s.continuation_hit >= 0;
-    c[kTrajectoryDim] = hits ? 1.0f : 0.0f;
-    c[kTrajectoryDim + 1] = static_cast<float>(hits ? s.continuation_hit : config_.path_horizon) * frame_dt_;
-  }
-  observe_request(i, obs + request_offset());
+  observe_request(i, obs + kObsDim);
 }
 
 void ObstacleVecEnv::begin_episode(int i) {
@@ -200,13 +181,6 @@ void ObstacleVecEnv::begin_episode(int i) {
   std::fill(s.hit_inside, s.hit_inside + 3, uint8_t{0});
   s.collided = false;
   refresh(i, false, true);
-}
-
-float ObstacleVecEnv::decision_transition_cost(int i) const {
-  if (!config_.bias_yields || config_.transition_cost == 0.0f) return config_.transition_cost;
-  float raw[kTrajectoryDim];
-  const float* continuation = candidate_raw_trajectory(db_, source_->current(envs_[i]), raw);
-  return trajectory_hits(i, continuation) > 0 ? 0.0f : config_.transition_cost;
 }
 
 int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8_t* inside) const {
@@ -240,11 +214,8 @@ int ObstacleVecEnv::trajectory_hits(int i, const float* raw, float* points, uint
 TaskStep ObstacleVecEnv::advance(int i, const float* action) {
   ObstacleEnvState& s = envs_[i];
   decide(i, action);
-  // Both tests use the root and the obstacles at the step's start, before anything moves.
-  float played[kTrajectoryDim];
-  const float* path = candidate_raw_trajectory(db_, source_->chosen(s, s.decision), played);
-  s.last_hits = config_.hit_played ? trajectory_hits(i, path, s.hit_points, s.hit_inside)
-                                   : action_hits(i, action, s.hit_points, s.hit_inside);
+  // The hit test uses the root and the obstacles at the step's start, before anything moves.
+  s.last_hits = action_hits(i, action, s.hit_points, s.hit_inside);
   const float r2 = config_.success_radius * config_.success_radius;
   const bool moving = s.max_speed > 0;
   bool success = false, collision = false;

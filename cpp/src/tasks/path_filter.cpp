@@ -43,8 +43,7 @@ void ObstaclePathFilter::init(const Database& db, int capacity, const PathFilter
 
 void ObstaclePathFilter::prepare(const ObstacleField& field, int env, const RootState& root, bool moving,
                                  float frame_dt) {
-  // The same obstacles seen from the same root: what the last call prepared still holds (with
-  // observe_continuation the observation's test and the next decision's search see one state).
+  // The same obstacles seen from the same root: what the last call prepared still holds.
   const PreparedFor key{&field, env, field.generation(env), root.x, root.z, root.yaw, moving, frame_dt};
   if (prepared_ && key == prepared_for_) return;
   prepared_for_ = key;

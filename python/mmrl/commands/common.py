@@ -13,6 +13,7 @@ from typing import Any, Dict, List
 from ..errors import InputError
 from ..motion.sources import data_spec, database_from_spec
 from ..tasks import Task, get_task, task_names
+from ..tasks.options import retired_error
 
 
 # ---------------------------------------------------------------------- values checked where they are read
@@ -193,6 +194,9 @@ def split_overrides(items, *dataclasses_) -> List[Dict[str, Any]]:
                     raise InputError(f"--set {k}={v}: {e}, got {v!r}") from None
                 break
         else:
+            for d in dataclasses_:
+                if k in getattr(d, "retired", {}):
+                    raise InputError(f"--set {k}: {retired_error(type(d), k)}")
             names = sorted({f.name for d in dataclasses_ for f in fields(d)})
             raise InputError(f"--set: unknown option {k!r}; options are {', '.join(names)}")
     return out

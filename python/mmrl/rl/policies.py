@@ -2,8 +2,7 @@
 
 Observations are the plane task's (D = 17, see :mod:`mmrl.tasks.plane`): ``obs = [pose features (15,
 normalized), target (x, z) in the character frame (meters)]``, or the moving-obstacles task's
-(D = 529, :mod:`mmrl.tasks.obstacles`; 543 with ``observe_continuation``), which holds the same
-17 floats after its sensor maps.
+(D = 529, :mod:`mmrl.tasks.obstacles`), which holds the same 17 floats after its sensor maps.
 Actions are the 12-d trajectory features in the database's normalized units.
 """
 from __future__ import annotations
@@ -15,10 +14,9 @@ import numpy as np
 from .. import _core
 from ..motion.database import POSE_DIM, TRAJECTORY_DIM, Database
 
-#: Observation sizes the scripted policies read: the plane task's and the moving-obstacles task's
-#: (the obstacles task's with and without ``observe_continuation``'s 14 floats after g_t).
+#: Observation sizes the scripted policies read: the plane task's and the moving-obstacles task's.
 _OBSTACLE_GOAL = sum(size for name, size in _core.ObstacleVecEnv.layout if name != "goal")
-OBSERVATION_DIMS = (POSE_DIM + 2, _OBSTACLE_GOAL + 2, _OBSTACLE_GOAL + 2 + TRAJECTORY_DIM + 2)
+OBSERVATION_DIMS = (POSE_DIM + 2, _OBSTACLE_GOAL + 2)
 
 
 def goal_offset(obs_dim: int) -> int:

@@ -33,10 +33,11 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..motion.clip_costs import clip_cost_array
-from ..motion.tags import request_group_list
-from .requests import RequestMethods
 from ..motion.database import Database
 from ..motion.sources import resolve_database
+from ..motion.tags import request_group_list
+from .options import check_retired
+from .requests import RequestMethods
 
 
 # ----------------------------------------------------------------------------- config
@@ -66,25 +67,20 @@ class TaskConfig:
     random_heading: bool = True
     """Start with a uniformly random heading (else facing +Z)."""
     transition_cost: float = 0.0
-    """Transition cost of the match, in squared normalized feature distance: another frame
-    replaces the current clip's continuation only when its cost is lower by more than this.
-    0 is the paper's rule (any strictly better frame wins)."""
+    """Squared normalized feature distance by which another frame must beat the current clip's
+    continuation to replace it; 0 is the paper's rule (any strictly better frame wins)."""
     transition_pose_weight: float = 0.0
-    """Reward term: minus this weight times the squared normalized, weighted distance between
-    the pose features of the clip's continuation and of the matched frame (what a transition
-    asks the blend to hide; 0 when the clip continues). 0 is the paper's reward."""
+    """Reward term: minus this times the squared normalized pose-feature distance between the
+    continuation and the matched frame (what a transition asks the blend to hide); 0: the paper's."""
     transition_penalty: float = 0.0
-    """Reward term: minus this at every decision whose match is a transition. In the reward's
-    own units (the plane task pays at most 1 per step before the success bonus), so it means
-    the same on every database. 0 is the paper's reward."""
-
+    """Reward term: minus this at every transition, in the reward's own units (the plane task pays
+    at most 1 per step before the bonus), the same on every database; 0: the paper's reward."""
     clip_costs: str = ""
-    """Costs added to the match cost of chosen clips, the decision's candidate filter (one C++
-    rule, ClipCostFilter, honoured by the training env, the full path, ``mmrl play`` and the
-    engine runtime): ``"PATTERN=COST;PATTERN=COST"``, each PATTERN a shell-style pattern of clip
-    names (``fnmatch``; a clip's file name, with or without its extension, matches too), each
-    COST >= 0 in squared normalized feature distance or ``inf`` (never play those clips). Costs of patterns matching the same clip add up; a pattern that matches
-    no clip is an error. Empty: no filter."""
+    """Costs added to the match cost of chosen clips (the C++ ClipCostFilter, honoured on every
+    decision path): ``"PATTERN=COST;PATTERN=COST"``, each PATTERN an ``fnmatch`` pattern of clip
+    names (with or without the file's extension), each COST >= 0 in squared normalized feature
+    distance or ``inf`` (never play those clips); costs of patterns matching one clip add up; a
+    pattern that matches no clip is an error. Empty: no filter."""
 
     request_groups: str = ""
     """Tag groups the policy is conditioned on (docs/styles.md), comma-separated (``"style,gait"``;
@@ -99,9 +95,12 @@ class TaskConfig:
 
     #: Fields the trainer reads and the C++ core never sees (``Task.training_config``).
     training_only: ClassVar[Tuple[str, ...]] = ()
+    #: Options of experiments that lost, removed from the code (``options.check_retired``).
+    retired: ClassVar[Mapping[str, Any]] = {}
 
     def replace(self, **overrides) -> "TaskConfig":
-        """A copy with ``overrides`` applied; an unknown name raises TypeError listing the options."""
+        """A copy with ``overrides`` applied; an unknown name: TypeError (a retired one: ValueError)."""
+        check_retired(type(self), overrides, every_value=True)
         names = [f.name for f in fields(self)]
         unknown = [k for k in overrides if k not in names]
         if unknown:
@@ -491,8 +490,9 @@ class Task:
         return self.config_type()
 
     def config_from_dict(self, values: Mapping[str, Any], *, strict: bool = False):
-        """The task's config from saved values (``config.json``); unknown keys are dropped
-        unless ``strict`` (then TypeError)."""
+        """The task's config from saved values (``config.json``); unknown keys are dropped unless
+        ``strict`` (then TypeError); a retired option on: ValueError (``options.check_retired``)."""
+        check_retired(self.config_type, values)
         names = {f.name for f in fields(self.config_type)}
         unknown = [k for k in values if k not in names]
         if unknown and strict:

@@ -10,8 +10,7 @@ curriculum callback and the full path's scene (obstacles, sensor maps, hit point
   binary sensor maps as (channel, row, col) in C order (channel 0 current; row along the
   character's forward Z, col along its left X; the 6 x 6 m square sits 1.5 m ahead of the
   root by default), then c_t (15 normalized pose features), then g_t (target (x, z) in the
-  character frame, meters); with ``observe_continuation`` 14 more (``env.layout``): the
-  continuation's trajectory and whether (and when) its played path hits.
+  character frame, meters).
 - action: the same 12-d box as the plane task.
 - reward: ``exp(-|g_t|) + exp(-hits(a_t))`` (the second term off with ``hit_reward=False``),
   plus ``success_bonus`` on success (default 10: the paper says 10 in section 4 and no bonus
@@ -49,7 +48,7 @@ from .base import SingleEnv, TargetVectorEnv, Task, TaskConfig, TaskFlag
 from .curriculum import Curriculum, stage_params
 
 #: Flat observation layout: (name, size) of each consecutive segment (``ObstacleActorCritic``'s
-#: format); an env with ``observe_continuation`` appends two (its ``layout``).
+#: format); with ``request_groups`` an env appends the request's code (its ``observation_layout``).
 OBSTACLE_LAYOUT = tuple((str(name), int(size)) for name, size in _core.ObstacleVecEnv.layout)
 #: Shape of the "maps" segment: (channel, row, col), channel 0 current, 1 previous.
 OBSTACLE_MAP_SHAPE = (2, _core.OBSTACLE_MAP_SIDE, _core.OBSTACLE_MAP_SIDE)
@@ -63,6 +62,7 @@ class ObstaclesConfig(TaskConfig):
 
     task_label = "moving-obstacles"
     training_only = ("train_path_filter",)
+    retired = {"hit_played": False, "bias_yields": False, "observe_continuation": False}
 
     # Redeclared: other defaults or meaning than TaskConfig's.
     target_half_extent: float = 5.0
@@ -88,15 +88,6 @@ class ObstaclesConfig(TaskConfig):
     """Test each trajectory point against the obstacles where they will be at that point's time
     (10 / 20 / 30 frames ahead, constant velocity with bounces); False is the paper's test
     against the current positions."""
-    hit_played: bool = False
-    """Test the future trajectory of the frame the step matched (the path the clip plays, in
-    the character frame at the step's start) instead of the action's; False is the paper's
-    test of the action. ``env_state``'s hit points follow the test; ``mmrl render`` draws the
-    action's points either way."""
-    bias_yields: bool = False
-    """With a ``transition_cost``: a decision whose continuation would run into an obstacle
-    (the current frame's own future trajectory, tested as the hit reward tests a trajectory)
-    matches without the bias, so the clip being played never holds back a dodge."""
     path_filter: bool = False
     """The collision-aware search (environment-aware motion matching, Ponton et al. 2025): every
     candidate frame's own path (the root positions its clip plays, 2 to ``path_horizon`` frames
@@ -161,13 +152,6 @@ class ObstaclesConfig(TaskConfig):
     """The observation's second map is the one read this many RL steps ago (1: the paper's
     previous step). At 0.5 m/s an obstacle moves 0.1 m in one step, under the 0.375 m sensor
     pitch; a longer lag makes its motion show."""
-    observe_continuation: bool = False
-    """Append the continuation to the observation (14 floats after g_t): the current frame's
-    own 12 trajectory features, normalized as the action (where the clip goes if nothing else
-    is matched), then whether its played path hits an obstacle within ``path_horizon`` frames
-    (1/0, the collision-aware search's test) and the seconds to that first hit (the horizon's
-    when clear; (1, 0) when the clip is too close to its end to continue). The policy sees when
-    its own clip is about to run into something."""
     grid_cell_size: float = 1.5
     """Cell side (meters) of the uniform grid used for sensors, hits and collisions."""
 

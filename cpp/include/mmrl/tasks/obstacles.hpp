@@ -10,15 +10,7 @@
 //   [512, 527)  c_t: normalized pose features of the current frame
 //   [527, 529)  g_t: target (x, z) in the character frame, meters
 //   i.e. maps as (channel, row, col) with channel 0 current, 1 previous.
-//   With observe_continuation (kContinuationDim = 14 more floats, obs_dim() = 543):
-//   [529, 541)  the continuation's trajectory: the current frame's own 12 trajectory features
-//               (where the clip goes if no other frame is matched), normalized as the action
-//   [541, 543)  whether the continuation's played path hits an obstacle within path_horizon
-//               frames (1 or 0; the collision-aware search's test, tasks/path_filter.hpp, with
-//               the path options, whether or not path_filter is on) and the seconds until that
-//               first hit (path_horizon / fps when clear); a frame too close to its clip's end
-//               to be matched (no continuation: the next decision jumps) reads (1, 0)
-//   With request_groups: the request's code last (request_offset(), vecenv.hpp's request_dim).
+//   With request_groups: the request's code last (vecenv.hpp's request_dim).
 // action       12-d trajectory feature in normalized units, clipped to the box of
 //              mean +- action_limit_std * std (as the plane task)
 // reward       exp(-|g_t|) after the step
@@ -27,8 +19,7 @@
 //                frame at the step's start, lie inside an obstacle at the step's start;
 //                the paper's test. hit_radius > 0 tests a disc of that radius instead of
 //                the point, and hit_lookahead tests position k against the obstacles as
-//                they will be at its own time, 10 / 20 / 30 frames ahead; hit_played
-//                tests the matched frame's own future positions instead). The term is
+//                they will be at its own time, 10 / 20 / 30 frames ahead). The term is
 //                hit_weight * exp(-hits), minus hit_weight if hit_penalty (a penalty that
 //                is 0 for a clear action: the paper's form also pays for every surviving step)
 //              + success_bonus on success. The paper says both "10 rewards" on success
@@ -76,11 +67,6 @@ struct ObstacleTaskConfig : TaskConfig {
   bool hit_penalty = false;          // ... minus hit_weight: 0 for a clear action, so no reward for surviving
   float hit_radius = 0.0f;           // a trajectory point hits when a disc this wide overlaps an obstacle (0: the point)
   bool hit_lookahead = false;        // test point k against the obstacles as they will be at its time (10/20/30 frames)
-  bool hit_played = false;           // test the matched frame's own future trajectory (the path the clip plays) instead of the action's
-  // The bias yields: a decision whose continuation would run into an obstacle (the current
-  // frame's own future trajectory, tested as the hit reward tests a trajectory) matches with
-  // the paper's rule (no bias), so a dodge is never held back by the clip being played.
-  bool bias_yields = false;
   // The collision-aware search (tasks/path_filter.hpp): every candidate's played path is tested
   // against where the obstacles will be, up to path_horizon frames ahead, with a disc of
   // body_radius + path_margin; a first hit at t frames adds path_cost * (2 - t / path_horizon)
@@ -112,7 +98,6 @@ struct ObstacleTaskConfig : TaskConfig {
   float sensor_size = 6.0f;            // sensor square side (meters)
   float sensor_forward = 1.5f;         // sensor square centre ahead of the root (meters; 0 = centred)
   int previous_map_lag = 1;            // the "previous" map is this many RL steps old (1: the paper's)
-  bool observe_continuation = false;   // append the continuation's trajectory and path hit to the observation
   float grid_cell_size = 1.5f;         // broadphase cell side (meters)
 
   template <class Visit>
@@ -125,8 +110,6 @@ struct ObstacleTaskConfig : TaskConfig {
     v("hit_penalty", &ObstacleTaskConfig::hit_penalty);
     v("hit_radius", &ObstacleTaskConfig::hit_radius);
     v("hit_lookahead", &ObstacleTaskConfig::hit_lookahead);
-    v("hit_played", &ObstacleTaskConfig::hit_played);
-    v("bias_yields", &ObstacleTaskConfig::bias_yields);
     v("path_filter", &ObstacleTaskConfig::path_filter);
     v("path_cost", &ObstacleTaskConfig::path_cost);
     v("path_horizon", &ObstacleTaskConfig::path_horizon);
@@ -146,7 +129,6 @@ struct ObstacleTaskConfig : TaskConfig {
     v("sensor_size", &ObstacleTaskConfig::sensor_size);
     v("sensor_forward", &ObstacleTaskConfig::sensor_forward);
     v("previous_map_lag", &ObstacleTaskConfig::previous_map_lag);
-    v("observe_continuation", &ObstacleTaskConfig::observe_continuation);
     v("grid_cell_size", &ObstacleTaskConfig::grid_cell_size);
   }
 };
@@ -154,13 +136,12 @@ struct ObstacleTaskConfig : TaskConfig {
 struct ObstacleEnvState : TargetEnvState {
   // The stage this episode runs with.
   float max_speed = 0, target_half_extent = 0;
-  // The last step's hits: the three tested trajectory positions in world (x, z) (the action's,
-  // or with hit_played the matched frame's) and which were inside.
+  // The last step's hits: the action's three tested trajectory positions in world (x, z) and
+  // which were inside.
   int last_hits = 0;
   float hit_points[6] = {0, 0, 0, 0, 0, 0};
   uint8_t hit_inside[3] = {0, 0, 0};
   bool collided = false;
-  int continuation_hit = -1;  // frames ahead of the continuation's first path hit, -1 clear (observe_continuation)
   int grid_age = 0;  // RL steps since env's grid was rebuilt
   int map_head = 0;  // ring slot of the current sensor map (the previous one is the next slot)
 };
@@ -172,24 +153,12 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   static constexpr int kPoseOffset = 2 * kMapCells;
   static constexpr int kGoalOffset = kPoseOffset + kPoseDim;
   static constexpr int kObsDim = kGoalOffset + 2;  // the paper's observation
-  static constexpr int kContinuationOffset = kObsDim;
-  static constexpr int kContinuationDim = kTrajectoryDim + 2;
-  // Where the request code (vecenv.hpp's request_dim floats) starts: after the optional segments.
-  int request_offset() const { return kObsDim + (config_.observe_continuation ? kContinuationDim : 0); }
-  int obs_dim() const { return request_offset() + request_dim(); }
-  ObsLayout task_obs_layout() const {
-    ObsLayout layout{{"maps", 2 * kMapCells}, {"pose", kPoseDim}, {"goal", 2}};
-    if (config_.observe_continuation) {
-      layout.push_back({"continuation", kTrajectoryDim, "task.observe_continuation on"});
-      layout.push_back({"continuation_hit", 2, "task.observe_continuation on"});
-    }
-    return layout;
-  }
+  int obs_dim() const { return kObsDim + request_dim(); }  // with request_groups: the request's code last
+  ObsLayout task_obs_layout() const { return {{"maps", 2 * kMapCells}, {"pose", kPoseDim}, {"goal", 2}}; }
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
   // Plays compressed controllers (TargetVecEnv::set_compressed) without the collision-aware
-  // search: a projection has no database candidates to test (docs/compressed.md); the
-  // continuation's path test of observe_continuation is then "clear".
+  // search: a projection has no database candidates to test (docs/compressed.md).
   static constexpr bool kPlaysCompressed = true;
 
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
@@ -280,13 +249,11 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   // After set_state: rebuild the grid and both sensor maps around the new root.
   void on_state_set(int i) { refresh(i, false, true); }
   // After the motion source changed (set_compressed): the path filters are ready for its
-  // candidates, and the maps and the continuation test follow the new state.
+  // candidates, and the maps follow the new state.
   void on_source_set() {
     for (ObstaclePathFilter& f : path_filters_) f.set_prices_states(source().rowless_candidates());
     for (int i = 0; i < num_envs(); ++i) refresh(i, false, true);
   }
-  // transition_cost, or 0 when bias_yields and env i's continuation hits an obstacle.
-  float decision_transition_cost(int i) const;
   // The clip costs, or with path_filter env i's collision-aware filter prepared for its
   // current state (on top of the clip costs).
   const CandidateFilter* candidate_filter(int i);
