@@ -58,17 +58,29 @@ inline py::dict target_state_dict(const TargetEnvState& st) {
   return d;
 }
 
-// A task's config class: a default constructor and every field of Config::visit, by name.
+// A task's config class: a default constructor, every field of Config::visit as a property
+// with its doc, and the option table `options`: a tuple of (name, kind, default, lo, hi,
+// lo_open, inf_ok, doc) per field, kind one of "int", "float", "bool", "floats", "texts" (what
+// python/mmrl/tasks/options.py builds the Python config from).
 template <class Config>
 py::class_<Config> bind_task_config(py::module_& m, const char* name, const char* doc) {
   py::class_<Config> c(m, name, doc);
   c.def(py::init<>());
-  py::list names;
-  Config::visit([&](const char* field, auto member) {
-    c.def_readwrite(field, member);
+  py::list names, options;
+  const Config defaults;
+  Config::visit([&](const char* field, auto member, const OptionRange& range, const char* field_doc) {
+    using T = typename std::decay<decltype(defaults.*member)>::type;
+    c.def_readwrite(field, member, field_doc);
     names.append(field);
+    const char* kind = std::is_same<T, bool>::value ? "bool"
+                       : std::is_integral<T>::value ? "int"
+                       : std::is_floating_point<T>::value ? "float"
+                       : std::is_same<T, std::vector<float>>::value ? "floats" : "texts";
+    options.append(py::make_tuple(field, kind, py::cast(defaults.*member), range.lo, range.hi, range.lo_open,
+                                  range.inf_ok, field_doc));
   });
   c.attr("field_names") = py::tuple(names);
+  c.attr("options") = py::tuple(options);
   return c;
 }
 

@@ -1,28 +1,43 @@
 #include "mmrl/vecenv.hpp"
 
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <string>
 
 namespace mmrl {
 
+namespace {
+
+std::string number_text(double v) {
+  if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.9g", v);
+  return buf;
+}
+
+}  // namespace
+
+void check_option(const char* name, double value, const OptionRange& r) {
+  const bool inf_ok = r.inf_ok && value == kOptionInf;
+  const bool ok = (std::isfinite(value) || inf_ok) && (r.lo_open ? value > r.lo : value >= r.lo) && value <= r.hi;
+  if (ok) return;
+  std::string rule;
+  if (r.hi == kOptionInf && r.lo == -kOptionInf)
+    rule = "finite";
+  else if (r.hi == kOptionInf)
+    rule = std::string(r.inf_ok ? "" : "finite and ") + (r.lo_open ? "> " : ">= ") + number_text(r.lo) +
+           (r.inf_ok ? " (inf allowed)" : "");
+  else
+    rule = "in " + std::string(r.lo_open ? "(" : "[") + number_text(r.lo) + ", " + number_text(r.hi) + "]";
+  throw std::invalid_argument(std::string(name) + " must be " + rule + ", got " + number_text(value));
+}
+
 void check_task_config(const TaskConfig& c) {
-  auto finite = [](float v) { return std::isfinite(v); };
   check_frames_per_step(c.frames_per_step);
-  if (!(c.success_radius > 0) || !finite(c.success_radius))
-    throw std::invalid_argument("success_radius must be finite and > 0, got " + std::to_string(c.success_radius));
-  if (c.max_steps < 1) throw std::invalid_argument("max_steps must be >= 1, got " + std::to_string(c.max_steps));
-  if (!(c.action_limit_std > 0) || !finite(c.action_limit_std))
-    throw std::invalid_argument("action_limit_std must be finite and > 0, got " + std::to_string(c.action_limit_std));
-  if (!(c.min_target_distance >= 0) || !(c.target_half_extent > c.min_target_distance) || !finite(c.target_half_extent))
-    throw std::invalid_argument("target_half_extent must be finite and larger than min_target_distance >= 0");
-  if (!finite(c.success_bonus)) throw std::invalid_argument("success_bonus must be finite");
-  if (!(c.transition_cost >= 0.0f) || !finite(c.transition_cost))
-    throw std::invalid_argument("transition_cost must be finite and >= 0");
-  if (!(c.transition_pose_weight >= 0.0f) || !finite(c.transition_pose_weight))
-    throw std::invalid_argument("transition_pose_weight must be finite and >= 0");
-  if (!(c.transition_penalty >= 0.0f) || !finite(c.transition_penalty))
-    throw std::invalid_argument("transition_penalty must be finite and >= 0");
+  if (!(c.target_half_extent > c.min_target_distance))
+    throw std::invalid_argument("target_half_extent must be larger than min_target_distance, got " +
+                                number_text(c.target_half_extent) + " <= " + number_text(c.min_target_distance));
 }
 
 void target_env_check(const Database& db, const Matcher& matcher, int num_envs, const TaskConfig& config) {

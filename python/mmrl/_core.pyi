@@ -284,84 +284,118 @@ class PlaneTaskConfig:
     Numbers of the plane task (see tasks/plane.hpp).
     """
     field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any')
-    random_heading: bool
+    options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
     @property
     def action_limit_std(self) -> float:
-        ...
+        """
+        Half-width of the action box in standard deviations of each normalized trajectory feature.
+        """
     @action_limit_std.setter
     def action_limit_std(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def clip_costs(self) -> list[float]:
-        ...
+        """
+        Costs added to the match cost of chosen clips: 'PATTERN=COST;...', each PATTERN an fnmatch pattern of clip names, each COST >= 0 or inf (never play them); costs of patterns matching one clip add up.
+        """
     @clip_costs.setter
     def clip_costs(self, arg0: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> None:
         ...
     @property
     def frames_per_step(self) -> int:
-        ...
+        """
+        Frames played per RL step (6 = 0.2 s at 30 fps).
+        """
     @frames_per_step.setter
     def frames_per_step(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def max_steps(self) -> int:
-        ...
+        """
+        Steps before truncation (100 steps = 20 s at 6 frames per step).
+        """
     @max_steps.setter
     def max_steps(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def min_target_distance(self) -> float:
-        ...
+        """
+        Targets closer than this (meters) to the start are redrawn, so no episode starts solved.
+        """
     @min_target_distance.setter
     def min_target_distance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
-    def request_any(self) -> float:
+    def random_heading(self) -> bool:
+        """
+        Start with a uniformly random heading (else facing +Z).
+        """
+    @random_heading.setter
+    def random_heading(self, arg0: bool) -> None:
         ...
+    @property
+    def request_any(self) -> float:
+        """
+        Per conditioned group, the probability that an episode's request leaves it free.
+        """
     @request_any.setter
     def request_any(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def request_groups(self) -> list[str]:
-        ...
+        """
+        Tag groups the policy is conditioned on, comma-separated ('style,gait'; docs/styles.md): each episode draws a request over them and the observation ends with its code.
+        """
     @request_groups.setter
     def request_groups(self, arg0: collections.abc.Sequence[str]) -> None:
         ...
     @property
     def success_bonus(self) -> float:
-        ...
+        """
+        Reward added on success.
+        """
     @success_bonus.setter
     def success_bonus(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def success_radius(self) -> float:
-        ...
+        """
+        Reaching within this distance (meters) of the target is success.
+        """
     @success_radius.setter
     def success_radius(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def target_half_extent(self) -> float:
-        ...
+        """
+        Targets are uniform in a square of side 2 * this (meters) around the start (a stage's, with a curriculum).
+        """
     @target_half_extent.setter
     def target_half_extent(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def transition_cost(self) -> float:
-        ...
+        """
+        Squared normalized feature distance by which another frame must beat the playing clip's continuation to replace it; 0 is the paper's rule.
+        """
     @transition_cost.setter
     def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def transition_penalty(self) -> float:
-        ...
+        """
+        Reward term: minus this at every transition, in the reward's own units; 0 is the paper's reward.
+        """
     @transition_penalty.setter
     def transition_penalty(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def transition_pose_weight(self) -> float:
-        ...
+        """
+        Reward term: minus this times the squared normalized pose-feature distance a transition asks the blend to hide; 0 is the paper's reward.
+        """
     @transition_pose_weight.setter
     def transition_pose_weight(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
@@ -630,226 +664,334 @@ class ObstacleTaskConfig:
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
     field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
-    hit_lookahead: bool
-    hit_penalty: bool
-    hit_reward: bool
-    path_filter: bool
-    random_heading: bool
+    options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
     @property
     def action_limit_std(self) -> float:
-        ...
+        """
+        Half-width of the action box in standard deviations of each normalized trajectory feature.
+        """
     @action_limit_std.setter
     def action_limit_std(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def body_radius(self) -> float:
-        ...
+        """
+        Collision disc around the root (meters).
+        """
     @body_radius.setter
     def body_radius(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def clip_costs(self) -> list[float]:
-        ...
+        """
+        Costs added to the match cost of chosen clips: 'PATTERN=COST;...', each PATTERN an fnmatch pattern of clip names, each COST >= 0 or inf (never play them); costs of patterns matching one clip add up.
+        """
     @clip_costs.setter
     def clip_costs(self, arg0: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> None:
         ...
     @property
     def compressed_path_fan(self) -> int:
-        ...
+        """
+        A compressed controller under the path filter: the projections of the query and of the query turned by +-1..n x path_fan_degrees are its candidates (docs/compressed.md).
+        """
     @compressed_path_fan.setter
     def compressed_path_fan(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def frames_per_step(self) -> int:
-        ...
+        """
+        Frames played per RL step (6 = 0.2 s at 30 fps).
+        """
     @frames_per_step.setter
     def frames_per_step(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def grid_cell_size(self) -> float:
-        ...
+        """
+        Cell side (meters) of the uniform grid used for sensors, hits and collisions.
+        """
     @grid_cell_size.setter
     def grid_cell_size(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
-    def hit_radius(self) -> float:
+    def hit_lookahead(self) -> bool:
+        """
+        Test each trajectory point against the obstacles where they will be at its time (10/20/30 frames ahead).
+        """
+    @hit_lookahead.setter
+    def hit_lookahead(self, arg0: bool) -> None:
         ...
+    @property
+    def hit_penalty(self) -> bool:
+        """
+        Subtract hit_weight from the hit term: 0 for a clear action, so surviving is not paid.
+        """
+    @hit_penalty.setter
+    def hit_penalty(self, arg0: bool) -> None:
+        ...
+    @property
+    def hit_radius(self) -> float:
+        """
+        A trajectory point hits when a disc of this radius (meters) overlaps an obstacle; 0: the paper's point.
+        """
     @hit_radius.setter
     def hit_radius(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
-    def hit_weight(self) -> float:
+    def hit_reward(self) -> bool:
+        """
+        Add the hit term to the reward (false: the --no-hit-reward ablation).
+        """
+    @hit_reward.setter
+    def hit_reward(self, arg0: bool) -> None:
         ...
+    @property
+    def hit_weight(self) -> float:
+        """
+        The hit term is hit_weight * exp(-hits) (the paper: 1).
+        """
     @hit_weight.setter
     def hit_weight(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def max_steps(self) -> int:
-        ...
+        """
+        Steps before truncation (100 steps = 20 s at 6 frames per step).
+        """
     @max_steps.setter
     def max_steps(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def min_target_distance(self) -> float:
-        ...
+        """
+        Targets closer than this (meters) to the start are redrawn, so no episode starts solved.
+        """
     @min_target_distance.setter
     def min_target_distance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def num_obstacles(self) -> int:
-        ...
+        """
+        Rectangles per environment.
+        """
     @num_obstacles.setter
     def num_obstacles(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def obstacle_max_side(self) -> float:
-        ...
+        """
+        Largest rectangle side (meters); the paper's 3 m.
+        """
     @obstacle_max_side.setter
     def obstacle_max_side(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def obstacle_max_speed(self) -> float:
-        ...
+        """
+        Stage before any set_stage: obstacle speeds uniform in [0, this] m/s (at most speed_cap).
+        """
     @obstacle_max_speed.setter
     def obstacle_max_speed(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def obstacle_min_side(self) -> float:
-        ...
+        """
+        Each rectangle side is uniform in [obstacle_min_side, obstacle_max_side] meters.
+        """
     @obstacle_min_side.setter
     def obstacle_min_side(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def obstacle_square_half(self) -> float:
-        ...
+        """
+        Obstacle centres start uniform in, and bounce inside, a square of side 2 * this (meters) around the start.
+        """
     @obstacle_square_half.setter
     def obstacle_square_half(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def path_candidates(self) -> int:
-        ...
+        """
+        The path filter re-ranks this many nearest candidates of each decision (and the continuation); 0: the exact filtered search over the whole database (slow, for baselines).
+        """
     @path_candidates.setter
     def path_candidates(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def path_cost(self) -> float:
-        ...
+        """
+        Extra match cost of a path that hits at the horizon, twice that right away; inf: never play a path that hits unless every candidate does.
+        """
     @path_cost.setter
     def path_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def path_fan(self) -> int:
-        ...
+        """
+        Turns each way of the path fan: the query's trajectory turned by +-1..n x path_fan_degrees adds path_fan_candidates nearest frames each, so turning clips join the shortlist.
+        """
     @path_fan.setter
     def path_fan(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def path_fan_candidates(self) -> int:
-        ...
+        """
+        How many nearest candidates each turned query of the path fan adds.
+        """
     @path_fan_candidates.setter
     def path_fan_candidates(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def path_fan_degrees(self) -> float:
-        ...
+        """
+        The turn between the path fan's queries (degrees).
+        """
     @path_fan_degrees.setter
     def path_fan_degrees(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
-    def path_horizon(self) -> int:
+    def path_filter(self) -> bool:
+        """
+        The collision-aware search: every candidate's played path is tested against where the obstacles will be, and a path that hits costs more in the match (tasks/path_filter.hpp).
+        """
+    @path_filter.setter
+    def path_filter(self, arg0: bool) -> None:
         ...
+    @property
+    def path_horizon(self) -> int:
+        """
+        How far ahead (frames) the path filter tests a candidate's path.
+        """
     @path_horizon.setter
     def path_horizon(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def path_margin(self) -> float:
-        ...
+        """
+        Added to body_radius for the path test (meters): covers the frames between the path's samples.
+        """
     @path_margin.setter
     def path_margin(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def previous_map_lag(self) -> int:
-        ...
+        """
+        The observation's second map is the one read this many RL steps ago (1: the paper's previous step).
+        """
     @previous_map_lag.setter
     def previous_map_lag(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
-    def request_any(self) -> float:
+    def random_heading(self) -> bool:
+        """
+        Start with a uniformly random heading (else facing +Z).
+        """
+    @random_heading.setter
+    def random_heading(self, arg0: bool) -> None:
         ...
+    @property
+    def request_any(self) -> float:
+        """
+        Per conditioned group, the probability that an episode's request leaves it free.
+        """
     @request_any.setter
     def request_any(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def request_groups(self) -> list[str]:
-        ...
+        """
+        Tag groups the policy is conditioned on, comma-separated ('style,gait'; docs/styles.md): each episode draws a request over them and the observation ends with its code.
+        """
     @request_groups.setter
     def request_groups(self, arg0: collections.abc.Sequence[str]) -> None:
         ...
     @property
     def sensor_forward(self) -> float:
-        ...
+        """
+        Centre of the sensor square ahead of the root (meters); 0 centres it on the character.
+        """
     @sensor_forward.setter
     def sensor_forward(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def sensor_size(self) -> float:
-        ...
+        """
+        Side of the square sensor map (meters), 16 x 16 point sensors.
+        """
     @sensor_size.setter
     def sensor_size(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def speed_cap(self) -> float:
-        ...
+        """
+        The largest max speed (m/s) set_stage accepts; sizes the collision grid's margin.
+        """
     @speed_cap.setter
     def speed_cap(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def start_clearance(self) -> float:
-        ...
+        """
+        No obstacle starts within body_radius + this (meters) of the character.
+        """
     @start_clearance.setter
     def start_clearance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def success_bonus(self) -> float:
-        ...
+        """
+        Reward added on success.
+        """
     @success_bonus.setter
     def success_bonus(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def success_radius(self) -> float:
-        ...
+        """
+        Reaching within this distance (meters) of the target is success.
+        """
     @success_radius.setter
     def success_radius(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def target_clearance(self) -> float:
-        ...
+        """
+        No obstacle starts within this (meters) of the target.
+        """
     @target_clearance.setter
     def target_clearance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def target_half_extent(self) -> float:
-        ...
+        """
+        Targets are uniform in a square of side 2 * this (meters) around the start (a stage's, with a curriculum).
+        """
     @target_half_extent.setter
     def target_half_extent(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def transition_cost(self) -> float:
-        ...
+        """
+        Squared normalized feature distance by which another frame must beat the playing clip's continuation to replace it; 0 is the paper's rule.
+        """
     @transition_cost.setter
     def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def transition_penalty(self) -> float:
-        ...
+        """
+        Reward term: minus this at every transition, in the reward's own units; 0 is the paper's reward.
+        """
     @transition_penalty.setter
     def transition_penalty(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def transition_pose_weight(self) -> float:
-        ...
+        """
+        Reward term: minus this times the squared normalized pose-feature distance a transition asks the blend to hide; 0 is the paper's reward.
+        """
     @transition_pose_weight.setter
     def transition_pose_weight(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...

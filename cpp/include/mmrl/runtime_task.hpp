@@ -101,7 +101,7 @@ const RuntimeTaskType* find_runtime_task(const std::string& core);
 template <class Config>
 Config runtime_task_config(const ControllerFile& f, const RuntimeTask& t, int64_t num_clips) {
   Config c;
-  Config::visit([&](const char* name, auto member) {
+  Config::visit([&](const char* name, auto member, const OptionRange&, const char*) {
     using T = typename std::decay<decltype(c.*member)>::type;
     if constexpr (std::is_same<T, std::vector<float>>::value) {
       const std::string section = std::string("task.") + name;

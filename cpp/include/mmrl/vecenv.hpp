@@ -272,6 +272,7 @@ class TargetVecEnv {
         config_(config),
         envs_(static_cast<size_t>(num_envs)),
         pool_(num_threads) {
+    check_options(config);  // every option against its range (task_config.hpp), then the cross-field rules
     target_env_check(db, matcher, num_envs, config);
     database_source_ = DatabaseSource(db, matcher);
     source_ = &database_source_;

@@ -42,6 +42,8 @@ def register_cli(sub) -> None:
     t.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a PPOConfig field or a task option, e.g. --set learning_rate=3e-4 "
                         "--set max_steps=150 (repeatable)")
+    t.add_argument("--list-options", action="store_true",
+                   help="print the task's options (--set KEY=VALUE): each default, range and what it does; then exit")
     t.add_argument("--request-groups", metavar="GROUPS", default=None, dest="request_groups",
                    help="condition one policy on requests over these tag groups of the database, e.g. "
                         "--request-groups style or style,gait (task option request_groups; docs/styles.md): each "
@@ -82,6 +84,21 @@ def register_cli(sub) -> None:
 
 
 # ---------------------------------------------------------------------- options
+def options_text(task: Task) -> str:
+    """The task's options as ``mmrl train TASK --list-options`` prints them: from the C++ option
+    table (name, default, range, doc), then the trainer's own (training_only)."""
+    from dataclasses import fields
+
+    cfg = task.default_config()
+    lines = [f"{task.name} options (--set KEY=VALUE; defaults before any preset):"]
+    for f in fields(cfg):
+        info = cfg.option_table.get(f.name)
+        doc = info.doc if info else f.metadata.get("doc", "")
+        rng = f", {info.range_text()}" if info and info.range_text() else ""
+        lines.append(f"  {f.name} = {getattr(cfg, f.name)!r}{rng}: {doc}".rstrip(": "))
+    return "\n".join(lines)
+
+
 def _configs(task: Task, args, saved: Dict[str, Any]):
     """(task config, PPOConfig, callback options) from the task's defaults, a resumed run's
     saved values, the preset, the task's flags and --set, in that order; a new run conditioned
@@ -125,6 +142,9 @@ def cmd_train(args: argparse.Namespace) -> int:
 
     if args.task is None and not args.resume:
         raise InputError(f"train: name the task ({', '.join(task_names())}), e.g. mmrl train plane --seconds 60")
+    if getattr(args, "list_options", False):
+        print(options_text(get_task(args.task)) if args.task else "--list-options: name the task")
+        return 0 if args.task else 2
     if args.resume:
         resumed = RunDir(args.resume, require_run=True)
         if args.task is None:

@@ -41,57 +41,19 @@ from .requests import RequestMethods
 
 
 # ----------------------------------------------------------------------------- config
-@dataclass
 class TaskConfig:
-    """The numbers every target-reaching task has; each task's config dataclass extends it
-    (and may change a default by redeclaring the field). Copies with overrides, and the
-    C++ config struct, by field name."""
+    """What every task's config shares: copies with overrides, and the C++ config struct, by
+    field name. A task's config is a dataclass made from its C++ option table
+    (``@task_options(_core.MyTaskConfig)``, :mod:`mmrl.tasks.options`): the shared numbers
+    (frames per step, target square, success radius and bonus, step limit, action box,
+    transition cost and reward terms, clip costs, request groups) and the task's own, each with
+    its default, range and doc (``option_info``)."""
 
     #: The task's name in error messages ("plane-task option ...").
     task_label = "task"
-
-    frames_per_step: int = 6
-    """Frames played per RL step (6 = 0.2 s at 30 fps)."""
-    target_half_extent: float = 5.0
-    """Targets are uniform in a square of side 2 * this (meters) around the start."""
-    min_target_distance: float = 0.6
-    """Targets closer than this (meters) to the start are redrawn, so no episode starts solved."""
-    success_radius: float = 0.5
-    """Reaching within this distance (meters) of the target is success."""
-    success_bonus: float = 1000.0
-    """Reward added on success."""
-    max_steps: int = 100
-    """Steps before truncation (100 steps = 20 s)."""
-    action_limit_std: float = 3.0
-    """Half-width of the action box in standard deviations of each normalized trajectory feature."""
-    random_heading: bool = True
-    """Start with a uniformly random heading (else facing +Z)."""
-    transition_cost: float = 0.0
-    """Squared normalized feature distance by which another frame must beat the current clip's
-    continuation to replace it; 0 is the paper's rule (any strictly better frame wins)."""
-    transition_pose_weight: float = 0.0
-    """Reward term: minus this times the squared normalized pose-feature distance between the
-    continuation and the matched frame (what a transition asks the blend to hide); 0: the paper's."""
-    transition_penalty: float = 0.0
-    """Reward term: minus this at every transition, in the reward's own units (the plane task pays
-    at most 1 per step before the bonus), the same on every database; 0: the paper's reward."""
-    clip_costs: str = ""
-    """Costs added to the match cost of chosen clips (the C++ ClipCostFilter, honoured on every
-    decision path): ``"PATTERN=COST;PATTERN=COST"``, each PATTERN an ``fnmatch`` pattern of clip
-    names (with or without the file's extension), each COST >= 0 in squared normalized feature
-    distance or ``inf`` (never play those clips); costs of patterns matching one clip add up; a
-    pattern that matches no clip is an error. Empty: no filter."""
-
-    request_groups: str = ""
-    """Tag groups the policy is conditioned on (docs/styles.md), comma-separated (``"style,gait"``;
-    ``mmrl train --request-groups``): each episode draws a request over them (``request_any``), matching
-    keeps to the clips carrying it, and the observation ends with its code (per group, one float
-    per value, 1 for the requested ones; all 0 where the request leaves the group free). Empty:
-    no request code; matching uses every clip unless a request is set (``set_request``)."""
-    request_any: float = 0.125
-    """Per conditioned group, the probability that an episode's request leaves it free; the
-    other requests are uniform over the group's values (combinations that select no valid
-    frame are left out)."""
+    #: The C++ config class and its option table (set by ``task_options``).
+    core_type: ClassVar[Any] = None
+    option_table: ClassVar[Mapping[str, Any]] = {}
 
     #: Fields the trainer reads and the C++ core never sees (``Task.training_config``).
     training_only: ClassVar[Tuple[str, ...]] = ()
@@ -109,10 +71,10 @@ class TaskConfig:
         values.update(overrides)
         return type(self)(**values)
 
-    def to_core(self, core_config_type, db: Optional[Database] = None):
+    def to_core(self, core_config_type=None, db: Optional[Database] = None):
         """The matching C++ config struct (every field copied by name; ``clip_costs`` resolved
-        against ``db``'s clips, which it then needs)."""
-        c = core_config_type()
+        against ``db``'s clips, which it then needs); ``core_config_type``: ``core_type``."""
+        c = (core_config_type or self.core_type)()
         for f in fields(self):
             if f.name in self.training_only:
                 continue

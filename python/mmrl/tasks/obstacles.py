@@ -37,7 +37,7 @@ target.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import field
 from typing import Any, Dict, Mapping, Optional
 
 import gymnasium as gym
@@ -46,6 +46,7 @@ import numpy as np
 from .. import _core
 from .base import SingleEnv, TargetVectorEnv, Task, TaskConfig, TaskFlag
 from .curriculum import Curriculum, stage_params
+from .options import task_options
 
 #: Flat observation layout: (name, size) of each consecutive segment (``ObstacleActorCritic``'s
 #: format); with ``request_groups`` an env appends the request's code (its ``observation_layout``).
@@ -56,107 +57,18 @@ OBSTACLE_MAP_SHAPE = (2, _core.OBSTACLE_MAP_SIDE, _core.OBSTACLE_MAP_SIDE)
 OBSTACLE_MAP_RANGE = (0, 2 * _core.OBSTACLE_MAP_SIDE ** 2)
 
 
-@dataclass
+@task_options(_core.ObstacleTaskConfig)
 class ObstaclesConfig(TaskConfig):
-    """Numbers of the moving-obstacles task. The defaults are the paper's hardest stage."""
+    """Numbers of the moving-obstacles task (its options: cpp/include/mmrl/tasks/obstacles.hpp's
+    table). The defaults are the paper's hardest stage."""
 
     task_label = "moving-obstacles"
     training_only = ("train_path_filter",)
     retired = {"hit_played": False, "bias_yields": False, "observe_continuation": False}
 
-    # Redeclared: other defaults or meaning than TaskConfig's.
-    target_half_extent: float = 5.0
-    """Stage before any ``set_stage``: targets uniform in a square of side 2 * this (meters)."""
-    obstacle_max_speed: float = 0.5
-    """Stage before any ``set_stage``: obstacle speeds uniform in [0, this] m/s."""
-    speed_cap: float = 2.0
-    """The largest max speed (m/s) ``set_stage`` accepts; sizes the collision grid's margin."""
-    success_bonus: float = 10.0
-    """Reward added on success. The paper says 10 (section 4) and none (section 5); 10 here."""
-    hit_reward: bool = True
-    """Add exp(-hits(a_t)) to the reward (False: the ``--no-hit-reward`` ablation)."""
-    hit_weight: float = 1.0
-    """The hit term is ``hit_weight * exp(-hits)`` (the paper: 1)."""
-    hit_penalty: bool = False
-    """Subtract ``hit_weight`` from the hit term, making it a penalty that is 0 for a clear
-    action. The paper's form pays up to 1 for every surviving step, which (with the distance
-    term) is what makes a small success bonus teach wandering."""
-    hit_radius: float = 0.0
-    """A trajectory point counts as a hit when a disc of this radius (meters) around it overlaps
-    an obstacle; 0 is the paper's point test."""
-    hit_lookahead: bool = False
-    """Test each trajectory point against the obstacles where they will be at that point's time
-    (10 / 20 / 30 frames ahead, constant velocity with bounces); False is the paper's test
-    against the current positions."""
-    path_filter: bool = False
-    """The collision-aware search (environment-aware motion matching, Ponton et al. 2025): every
-    candidate frame's own path (the root positions its clip plays, 2 to ``path_horizon`` frames
-    ahead) is tested against where the obstacles will be at that time, with a disc of
-    ``body_radius + path_margin``; a path whose first hit is t frames ahead costs
-    ``path_cost * (2 - t / path_horizon)`` more in the match. The continuation keeps its place
-    while its path is clear. In the env, the full path, the runtime and ``mmrl play`` alike."""
-    path_cost: float = 100.0
-    """Extra match cost (squared normalized feature distance) of a path that hits at the
-    horizon; twice that for a hit right away. ``inf``: never play a path that hits (unless every
-    candidate does)."""
-    path_horizon: int = 30
-    """How far ahead (frames, 2..30) the path filter tests a candidate's path."""
-    path_margin: float = 0.05
-    """Added to ``body_radius`` for the path test (meters): covers the frames between the path's
-    samples (every 2 frames, then every 5)."""
-    path_candidates: int = 16
-    """The path filter re-ranks this many nearest candidates of each decision (by feature
-    distance, plus the continuation; 1..256): the test runs on that many paths, not on every
-    frame the filter makes dearer. 0: the exact filtered search over the whole database (every
-    row whose distance could still win is tested: tens of milliseconds per decision in a crowd,
-    for baselines rather than training)."""
-    path_fan: int = 0
-    """With ``path_fan`` = n > 0 the shortlist also takes the ``path_fan_candidates`` nearest of the
-    query with its trajectory turned by +-1..n x ``path_fan_degrees`` (0..4 turns each way), all
-    ranked by distance to the query itself: turning clips join the candidates the filter sees."""
-    path_fan_degrees: float = 30.0
-    """The turn between the path fan's queries (degrees, (0, 90])."""
-    path_fan_candidates: int = 1
-    """How many nearest candidates each turned query of the path fan adds (1..256)."""
-    compressed_path_fan: int = 3
-    """A compressed controller (docs/compressed.md) under the path filter: the projections of the
-    query and of the query turned by +-1..n x ``path_fan_degrees`` (0..3 turns each way) are its
-    candidates, each path read from its own trajectory features (quadratic through the start and
-    the 10-, 20- and 30-frame positions)."""
-    train_path_filter: bool = True
-    """Whether the training envs run the collision-aware search too. False trains the policy
-    without it (it learns to dodge on its own) and keeps ``path_filter`` for everything after
-    training: evaluation, rendering, ``mmrl play`` and the exported controller. A trainer's
-    option: the C++ core never sees it."""
-    max_steps: int = 1500
-    """Safety cap on the episode length (truncation; 1500 steps = 300 s). The paper has none."""
-    num_obstacles: int = 100
-    """Rectangles per environment."""
-    obstacle_square_half: float = 10.0
-    """Obstacle centres start uniform in, and bounce inside, a square of side 2 * this (meters) around the start."""
-    obstacle_min_side: float = 0.25
-    """Each rectangle side is uniform in [min_side, max_side] meters."""
-    obstacle_max_side: float = 3.0
-    """Largest rectangle side (meters); the paper's 3 x 3 m maximum."""
-    body_radius: float = 0.25
-    """Collision disc around the root (meters)."""
-    start_clearance: float = 0.5
-    """No obstacle starts within body_radius + this (meters) of the character."""
-    target_clearance: float = 0.5
-    """No obstacle starts within this (meters) of the target."""
-    sensor_size: float = 6.0
-    """Side of the square sensor map (meters), 16 x 16 point sensors."""
-    sensor_forward: float = 1.5
-    """Centre of the sensor square ahead of the root (meters); 0 centres it on the character."""
-    previous_map_lag: int = 1
-    """The observation's second map is the one read this many RL steps ago (1: the paper's
-    previous step). At 0.5 m/s an obstacle moves 0.1 m in one step, under the 0.375 m sensor
-    pitch; a longer lag makes its motion show."""
-    grid_cell_size: float = 1.5
-    """Cell side (meters) of the uniform grid used for sensors, hits and collisions."""
-
-    def to_core(self, core_config_type=_core.ObstacleTaskConfig, db=None):
-        return super().to_core(core_config_type, db)
+    train_path_filter: bool = field(default=True, metadata={"doc": (
+        "Whether the training envs run the collision-aware search too; false trains without it and keeps "
+        "path_filter for everything after training (eval, render, play, export). The C++ core never sees it.")})
 
 
 #: ``mmrl train obstacles --preset NAME``: option overrides (task options and PPOConfig fields).

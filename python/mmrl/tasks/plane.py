@@ -19,22 +19,18 @@ released; see :mod:`mmrl.tasks.base` for the autoreset and infos contract.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 from .. import _core
 from .drawing import drawing
 from .base import SingleEnv, TargetVectorEnv, Task, TaskConfig
+from .options import task_options
 
 
-@dataclass
+@task_options(_core.PlaneTaskConfig)
 class PlaneConfig(TaskConfig):
     """Numbers of the plane task (all configurable): exactly the shared ones of
     :class:`~mmrl.tasks.base.TaskConfig`, with its defaults."""
 
     task_label = "plane-task"
-
-    def to_core(self, core_config_type=_core.PlaneTaskConfig, db=None):
-        return super().to_core(core_config_type, db)
 
 
 class PlaneVectorEnv(TargetVectorEnv):

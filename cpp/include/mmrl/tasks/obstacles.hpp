@@ -54,82 +54,97 @@
 namespace mmrl {
 
 // The base's numbers (tasks/task_config.hpp; target_half_extent is the initial stage's) and
-// the task's own. Defaults that differ from the base: success_bonus 10, max_steps 1500.
+// the task's own, each with its range and doc in visit(). Defaults that differ from the base:
+// success_bonus 10, max_steps 1500.
 struct ObstacleTaskConfig : TaskConfig {
   ObstacleTaskConfig() {
     success_bonus = 10.0f;
-    max_steps = 1500;  // safety cap (truncation), 300 s at 6 frames per step
+    max_steps = 1500;
   }
-  float obstacle_max_speed = 0.5f;   // initial stage: obstacle speeds uniform in [0, this] m/s
-  float speed_cap = 2.0f;            // the largest max_speed set_stage accepts (sizes the grid)
-  bool hit_reward = true;            // add exp(-hits(a_t)) to the reward
-  float hit_weight = 1.0f;           // the hit term is hit_weight * exp(-hits) (the paper: 1)
-  bool hit_penalty = false;          // ... minus hit_weight: 0 for a clear action, so no reward for surviving
-  float hit_radius = 0.0f;           // a trajectory point hits when a disc this wide overlaps an obstacle (0: the point)
-  bool hit_lookahead = false;        // test point k against the obstacles as they will be at its time (10/20/30 frames)
-  // The collision-aware search (tasks/path_filter.hpp): every candidate's played path is tested
-  // against where the obstacles will be, up to path_horizon frames ahead, with a disc of
-  // body_radius + path_margin; a first hit at t frames adds path_cost * (2 - t / path_horizon)
-  // to its match cost (inf: never play a path that hits unless all do). The filter re-ranks the
-  // path_candidates nearest candidates (and the continuation) of each decision.
+  float obstacle_max_speed = 0.5f;
+  float speed_cap = 2.0f;
+  bool hit_reward = true;
+  float hit_weight = 1.0f;
+  bool hit_penalty = false;
+  float hit_radius = 0.0f;
+  bool hit_lookahead = false;
   bool path_filter = false;
   float path_cost = 100.0f;
   int path_horizon = 30;
   float path_margin = 0.05f;
-  // The filter re-ranks this many nearest candidates (search.hpp's shortlist); 0: the exact
-  // filtered search over the whole database (kdtree.hpp), far slower in crowds.
   int path_candidates = 16;
-  // ... of the query and of the query turned by +-path_fan_degrees, +-2 path_fan_degrees, ...
-  // (path_fan turns each way, 0..4): turning clips join the shortlist.
   int path_fan = 0;
   float path_fan_degrees = 30.0f;
-  int path_fan_candidates = 1;  // the nearest candidates taken from each turned query
-  // A compressed controller's candidates under the path filter: the projections of the query
-  // and of the query turned by +-1..compressed_path_fan x path_fan_degrees (0..3 turns each
-  // way), each path read from its own trajectory features (path_filter.hpp's trajectory_path).
+  int path_fan_candidates = 1;
   int compressed_path_fan = 3;
   int num_obstacles = 100;
-  float obstacle_square_half = 10.0f;  // obstacle centres in a 20 x 20 m square around the start
-  float obstacle_min_side = 0.25f;     // rectangle sides uniform in [min, max] meters
+  float obstacle_square_half = 10.0f;
+  float obstacle_min_side = 0.25f;
   float obstacle_max_side = 3.0f;
-  float body_radius = 0.25f;           // collision disc around the root (meters)
-  float start_clearance = 0.5f;        // no obstacle starts within body_radius + this of the root
-  float target_clearance = 0.5f;       // no obstacle starts within this of the target
-  float sensor_size = 6.0f;            // sensor square side (meters)
-  float sensor_forward = 1.5f;         // sensor square centre ahead of the root (meters; 0 = centred)
-  int previous_map_lag = 1;            // the "previous" map is this many RL steps old (1: the paper's)
-  float grid_cell_size = 1.5f;         // broadphase cell side (meters)
+  float body_radius = 0.25f;
+  float start_clearance = 0.5f;
+  float target_clearance = 0.5f;
+  float sensor_size = 6.0f;
+  float sensor_forward = 1.5f;
+  int previous_map_lag = 1;
+  float grid_cell_size = 1.5f;
 
   template <class Visit>
   static void visit(Visit&& v) {
+    using C = ObstacleTaskConfig;
     visit_task_config_fields(v);
-    v("obstacle_max_speed", &ObstacleTaskConfig::obstacle_max_speed);
-    v("speed_cap", &ObstacleTaskConfig::speed_cap);
-    v("hit_reward", &ObstacleTaskConfig::hit_reward);
-    v("hit_weight", &ObstacleTaskConfig::hit_weight);
-    v("hit_penalty", &ObstacleTaskConfig::hit_penalty);
-    v("hit_radius", &ObstacleTaskConfig::hit_radius);
-    v("hit_lookahead", &ObstacleTaskConfig::hit_lookahead);
-    v("path_filter", &ObstacleTaskConfig::path_filter);
-    v("path_cost", &ObstacleTaskConfig::path_cost);
-    v("path_horizon", &ObstacleTaskConfig::path_horizon);
-    v("path_margin", &ObstacleTaskConfig::path_margin);
-    v("path_candidates", &ObstacleTaskConfig::path_candidates);
-    v("path_fan", &ObstacleTaskConfig::path_fan);
-    v("path_fan_degrees", &ObstacleTaskConfig::path_fan_degrees);
-    v("path_fan_candidates", &ObstacleTaskConfig::path_fan_candidates);
-    v("compressed_path_fan", &ObstacleTaskConfig::compressed_path_fan);
-    v("num_obstacles", &ObstacleTaskConfig::num_obstacles);
-    v("obstacle_square_half", &ObstacleTaskConfig::obstacle_square_half);
-    v("obstacle_min_side", &ObstacleTaskConfig::obstacle_min_side);
-    v("obstacle_max_side", &ObstacleTaskConfig::obstacle_max_side);
-    v("body_radius", &ObstacleTaskConfig::body_radius);
-    v("start_clearance", &ObstacleTaskConfig::start_clearance);
-    v("target_clearance", &ObstacleTaskConfig::target_clearance);
-    v("sensor_size", &ObstacleTaskConfig::sensor_size);
-    v("sensor_forward", &ObstacleTaskConfig::sensor_forward);
-    v("previous_map_lag", &ObstacleTaskConfig::previous_map_lag);
-    v("grid_cell_size", &ObstacleTaskConfig::grid_cell_size);
+    v("obstacle_max_speed", &C::obstacle_max_speed, kNonNegative,
+      "Stage before any set_stage: obstacle speeds uniform in [0, this] m/s (at most speed_cap).");
+    v("speed_cap", &C::speed_cap, kNonNegative,
+      "The largest max speed (m/s) set_stage accepts; sizes the collision grid's margin.");
+    v("hit_reward", &C::hit_reward, kAny, "Add the hit term to the reward (false: the --no-hit-reward ablation).");
+    v("hit_weight", &C::hit_weight, kNonNegative, "The hit term is hit_weight * exp(-hits) (the paper: 1).");
+    v("hit_penalty", &C::hit_penalty, kAny,
+      "Subtract hit_weight from the hit term: 0 for a clear action, so surviving is not paid.");
+    v("hit_radius", &C::hit_radius, kNonNegative,
+      "A trajectory point hits when a disc of this radius (meters) overlaps an obstacle; 0: the paper's point.");
+    v("hit_lookahead", &C::hit_lookahead, kAny,
+      "Test each trajectory point against the obstacles where they will be at its time (10/20/30 frames ahead).");
+    v("path_filter", &C::path_filter, kAny,
+      "The collision-aware search: every candidate's played path is tested against where the obstacles will be, "
+      "and a path that hits costs more in the match (tasks/path_filter.hpp).");
+    v("path_cost", &C::path_cost, OptionRange{0.0, kOptionInf, false, true},
+      "Extra match cost of a path that hits at the horizon, twice that right away; inf: never play a path that "
+      "hits unless every candidate does.");
+    v("path_horizon", &C::path_horizon, closed_range(kPathSampleFrames[0], kPathSampleFrames[kPathSamples - 1]),
+      "How far ahead (frames) the path filter tests a candidate's path.");
+    v("path_margin", &C::path_margin, kNonNegative,
+      "Added to body_radius for the path test (meters): covers the frames between the path's samples.");
+    v("path_candidates", &C::path_candidates, closed_range(0, kMaxShortlist),
+      "The path filter re-ranks this many nearest candidates of each decision (and the continuation); 0: the "
+      "exact filtered search over the whole database (slow, for baselines).");
+    v("path_fan", &C::path_fan, closed_range(0, (kMaxShortlistQueries - 1) / 2),
+      "Turns each way of the path fan: the query's trajectory turned by +-1..n x path_fan_degrees adds "
+      "path_fan_candidates nearest frames each, so turning clips join the shortlist.");
+    v("path_fan_degrees", &C::path_fan_degrees, OptionRange{0.0, 90.0, true},
+      "The turn between the path fan's queries (degrees).");
+    v("path_fan_candidates", &C::path_fan_candidates, closed_range(1, kMaxShortlist),
+      "How many nearest candidates each turned query of the path fan adds.");
+    v("compressed_path_fan", &C::compressed_path_fan, closed_range(0, (kMlpMaxRows - 1) / 2),
+      "A compressed controller under the path filter: the projections of the query and of the query turned by "
+      "+-1..n x path_fan_degrees are its candidates (docs/compressed.md).");
+    v("num_obstacles", &C::num_obstacles, closed_range(0, 30000), "Rectangles per environment.");
+    v("obstacle_square_half", &C::obstacle_square_half, kPositive,
+      "Obstacle centres start uniform in, and bounce inside, a square of side 2 * this (meters) around the start.");
+    v("obstacle_min_side", &C::obstacle_min_side, kPositive,
+      "Each rectangle side is uniform in [obstacle_min_side, obstacle_max_side] meters.");
+    v("obstacle_max_side", &C::obstacle_max_side, kPositive, "Largest rectangle side (meters); the paper's 3 m.");
+    v("body_radius", &C::body_radius, kNonNegative, "Collision disc around the root (meters).");
+    v("start_clearance", &C::start_clearance, kNonNegative,
+      "No obstacle starts within body_radius + this (meters) of the character.");
+    v("target_clearance", &C::target_clearance, kNonNegative, "No obstacle starts within this (meters) of the target.");
+    v("sensor_size", &C::sensor_size, kPositive, "Side of the square sensor map (meters), 16 x 16 point sensors.");
+    v("sensor_forward", &C::sensor_forward, kAny,
+      "Centre of the sensor square ahead of the root (meters); 0 centres it on the character.");
+    v("previous_map_lag", &C::previous_map_lag, closed_range(1, 30),
+      "The observation's second map is the one read this many RL steps ago (1: the paper's previous step).");
+    v("grid_cell_size", &C::grid_cell_size, kPositive,
+      "Cell side (meters) of the uniform grid used for sensors, hits and collisions.");
   }
 };
 

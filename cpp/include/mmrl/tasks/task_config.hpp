@@ -1,78 +1,114 @@
-// The numbers every target-reaching task has (the base of each task's config), the one place
-// they are checked, and a field table that the bindings, the runtime file loader and the
-// defaults test read, so a field is declared once.
+// The numbers every target-reaching task has (the base of each task's config) and the option
+// table: each field is declared once, as a member with its default, and listed once in its
+// config's visit() with its range and a one-line doc. From that table come the Python config
+// (python/mmrl/tasks/options.py builds the dataclass: names, types, defaults, docs), the
+// bindings' properties and their docs (so the stub), the runtime file loader (by field name),
+// and the range checks (check_options, one message for every option).
 //
 // A task's config derives from TaskConfig, adds its own fields, and lists them:
 //   struct MyTaskConfig : TaskConfig {
 //     float my_radius = 1.0f;
 //     template <class Visit> static void visit(Visit&& v) {
 //       visit_task_config_fields(v);
-//       v("my_radius", &MyTaskConfig::my_radius);
+//       v("my_radius", &MyTaskConfig::my_radius, kPositive, "Radius of my thing (meters).");
 //     }
 //   };
-// Each v(name, member pointer) call names a field as Python's config dataclass names it.
+// Cross-field rules (target_half_extent > min_target_distance, ...) stay in the task's checks.
 #pragma once
 
+#include <cmath>
+#include <limits>
+#include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "mmrl/decision.hpp"
 
 namespace mmrl {
 
+// The values a numeric option accepts: [lo, hi], lo excluded when lo_open; finite unless
+// inf_ok (which allows +inf). Booleans and lists take kAny (not checked).
+struct OptionRange {
+  double lo, hi;
+  bool lo_open = false;
+  bool inf_ok = false;
+};
+constexpr double kOptionInf = std::numeric_limits<double>::infinity();
+constexpr OptionRange kAny{-kOptionInf, kOptionInf};
+constexpr OptionRange kNonNegative{0.0, kOptionInf};
+constexpr OptionRange kPositive{0.0, kOptionInf, true};
+constexpr OptionRange closed_range(double lo, double hi) { return OptionRange{lo, hi}; }
+
+// std::invalid_argument "NAME must be ..., got VALUE" unless `value` is in `range`.
+void check_option(const char* name, double value, const OptionRange& range);
+
+// Every numeric field of a config against its range (Config::visit).
+template <class Config>
+void check_options(const Config& c) {
+  Config::visit([&](const char* name, auto member, const OptionRange& range, const char*) {
+    using T = typename std::decay<decltype(c.*member)>::type;
+    if constexpr (std::is_arithmetic<T>::value && !std::is_same<T, bool>::value)
+      check_option(name, static_cast<double>(c.*member), range);
+  });
+}
+
 struct TaskConfig {
-  int frames_per_step = 6;           // frames played per RL step (0.2 s at 30 fps), 1..kMaxFramesPerStep
-  float target_half_extent = 5.0f;   // targets uniform in a (2h x 2h) m square around the start
-  float min_target_distance = 0.6f;  // targets closer than this to the start are redrawn
-  float success_radius = 0.5f;       // meters
-  float success_bonus = 1000.0f;     // reward on success
-  int max_steps = 100;               // truncation (20 s at 6 frames per step, 30 fps)
-  float action_limit_std = 3.0f;     // action box half-width, in standard deviations
-  bool random_heading = true;        // start heading uniform in [-pi, pi)
-  float transition_cost = 0.0f;      // transition cost of the match (decision.hpp); 0: the paper's rule
-  // Reward - transition_pose_weight * (the squared normalized, weighted distance between the pose
-  // features of the continuation and of the matched frame: what a transition asks the blend
-  // to hide; 0 without a transition). 0: the paper's reward.
+  int frames_per_step = 6;
+  float target_half_extent = 5.0f;
+  float min_target_distance = 0.6f;
+  float success_radius = 0.5f;
+  float success_bonus = 1000.0f;
+  int max_steps = 100;
+  float action_limit_std = 3.0f;
+  bool random_heading = true;
+  float transition_cost = 0.0f;
   float transition_pose_weight = 0.0f;
-  // Reward - transition_penalty at each decision whose match is a transition (not the
-  // continuation), in the reward's own units (the plane task's reward per step is at most 1
-  // before the success bonus), so it means the same on every database. 0: the paper's reward.
   float transition_penalty = 0.0f;
-  // Per clip, added to the match cost of its frames (+inf: never played); empty: none. The
-  // candidate filter of decision.hpp's ClipCostFilter.
-  std::vector<float> clip_costs;
-  // Tag groups the policy is conditioned on (tags.hpp's RequestCode): the observation ends
-  // with the request's code, and each episode draws a request over these groups (RequestMix).
-  // Empty: no request code, and every episode plays every clip unless a request is set.
-  std::vector<std::string> request_groups;
-  // Per group, the probability that an episode's request leaves it free (any value).
+  std::vector<float> clip_costs;            // one per clip (Python: a "PATTERN=COST;..." spec)
+  std::vector<std::string> request_groups;  // (Python: "style,gait")
   float request_any = 0.125f;
 };
 
 // The base's fields, in declaration order.
 template <class Visit>
 void visit_task_config_fields(Visit&& v) {
-  v("frames_per_step", &TaskConfig::frames_per_step);
-  v("target_half_extent", &TaskConfig::target_half_extent);
-  v("min_target_distance", &TaskConfig::min_target_distance);
-  v("success_radius", &TaskConfig::success_radius);
-  v("success_bonus", &TaskConfig::success_bonus);
-  v("max_steps", &TaskConfig::max_steps);
-  v("action_limit_std", &TaskConfig::action_limit_std);
-  v("random_heading", &TaskConfig::random_heading);
-  v("transition_cost", &TaskConfig::transition_cost);
-  v("transition_pose_weight", &TaskConfig::transition_pose_weight);
-  v("transition_penalty", &TaskConfig::transition_penalty);
-  v("clip_costs", &TaskConfig::clip_costs);
-  v("request_groups", &TaskConfig::request_groups);
-  v("request_any", &TaskConfig::request_any);
+  v("frames_per_step", &TaskConfig::frames_per_step, closed_range(1, kMaxFramesPerStep),
+    "Frames played per RL step (6 = 0.2 s at 30 fps).");
+  v("target_half_extent", &TaskConfig::target_half_extent, kPositive,
+    "Targets are uniform in a square of side 2 * this (meters) around the start (a stage's, with a curriculum).");
+  v("min_target_distance", &TaskConfig::min_target_distance, kNonNegative,
+    "Targets closer than this (meters) to the start are redrawn, so no episode starts solved.");
+  v("success_radius", &TaskConfig::success_radius, kPositive,
+    "Reaching within this distance (meters) of the target is success.");
+  v("success_bonus", &TaskConfig::success_bonus, kAny, "Reward added on success.");
+  v("max_steps", &TaskConfig::max_steps, closed_range(1, 1e9),
+    "Steps before truncation (100 steps = 20 s at 6 frames per step).");
+  v("action_limit_std", &TaskConfig::action_limit_std, kPositive,
+    "Half-width of the action box in standard deviations of each normalized trajectory feature.");
+  v("random_heading", &TaskConfig::random_heading, kAny,
+    "Start with a uniformly random heading (else facing +Z).");
+  v("transition_cost", &TaskConfig::transition_cost, kNonNegative,
+    "Squared normalized feature distance by which another frame must beat the playing clip's continuation "
+    "to replace it; 0 is the paper's rule.");
+  v("transition_pose_weight", &TaskConfig::transition_pose_weight, kNonNegative,
+    "Reward term: minus this times the squared normalized pose-feature distance a transition asks the blend "
+    "to hide; 0 is the paper's reward.");
+  v("transition_penalty", &TaskConfig::transition_penalty, kNonNegative,
+    "Reward term: minus this at every transition, in the reward's own units; 0 is the paper's reward.");
+  v("clip_costs", &TaskConfig::clip_costs, kAny,
+    "Costs added to the match cost of chosen clips: 'PATTERN=COST;...', each PATTERN an fnmatch pattern of "
+    "clip names, each COST >= 0 or inf (never play them); costs of patterns matching one clip add up.");
+  v("request_groups", &TaskConfig::request_groups, kAny,
+    "Tag groups the policy is conditioned on, comma-separated ('style,gait'; docs/styles.md): each episode "
+    "draws a request over them and the observation ends with its code.");
+  v("request_any", &TaskConfig::request_any, closed_range(0, 1),
+    "Per conditioned group, the probability that an episode's request leaves it free.");
 }
 
-// Checks the base's numbers (std::invalid_argument naming the field): frames_per_step in
-// [1, kMaxFramesPerStep], success_radius, max_steps and action_limit_std positive,
-// target_half_extent finite and larger than min_target_distance >= 0, success_bonus finite,
-// transition_cost, transition_pose_weight and transition_penalty finite and >= 0. (clip_costs needs the database:
-// ClipCostFilter checks it.)
+// The base's cross-field rules (std::invalid_argument naming the fields): frames_per_step
+// within the decision's reach, target_half_extent larger than min_target_distance. The ranges
+// are check_options'. (clip_costs needs the database: ClipCostFilter checks it.)
 void check_task_config(const TaskConfig& c);
 
 }  // namespace mmrl
