@@ -62,7 +62,7 @@ def decision_errors(task, db, policy, config, cc, episodes: int, seed: int) -> d
         rows = cc.core.playback(chosen, F)[0][1:]
         out = run.step(action)
         ended += int(out["done"])
-        played = out["res"].frames[:out["shown"]]
+        played = out["res"].frames[:out["step_frames"]]
         with torch.no_grad():
             p = _positions(torch.as_tensor(np.array(rows[:len(played)]), dtype=torch.float64), list(db.parents),
                            db.num_joints)

@@ -1,5 +1,6 @@
-"""The plane env's step, where its fixed cost shows: 64 envs, near actions (and policy-like ones),
-for two builds of mmrl measured in the same run, alternating, and their ratio.
+"""A task env's step (the plane task's by default, --task obstacles), where its fixed cost shows:
+64 envs, near actions (and policy-like ones), for two builds of mmrl measured in the same run,
+alternating, and their ratio.
 
     python bench/bench_env_step.py                          # this build alone
     python bench/bench_env_step.py --compare OLD_PKG NEW_PKG --rounds 3
@@ -41,10 +42,9 @@ def load_db(args):
 
 def measure(args) -> dict:
     import mmrl
-    from mmrl.tasks.plane import PlaneVectorEnv
 
     db = load_db(args)
-    env = PlaneVectorEnv(args.envs, db=db, num_threads=args.threads)
+    env = mmrl.get_task(args.task).make_vector_env(args.envs, db=db, num_threads=args.threads)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     rows = np.flatnonzero(db.valid_mask)
@@ -76,7 +76,7 @@ def compare(args) -> None:
     for r in range(args.rounds):
         for label, pkg in (("old", args.compare[0]), ("new", args.compare[1])):
             cmd = [sys.executable, __file__, "--envs", str(args.envs), "--seconds", str(args.seconds),
-                   "--threads", str(args.threads), "--json"] + (["--db", args.db] if args.db else [])
+                   "--threads", str(args.threads), "--task", args.task, "--json"] + (["--db", args.db] if args.db else [])
             env = dict(os.environ, PYTHONPATH=str(Path(pkg).resolve()))
             res = json.loads(subprocess.run(cmd, env=env, check=True, capture_output=True, text=True).stdout)
             rows[label].append(res)
@@ -92,6 +92,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=str(DEFAULT_DATA))
     ap.add_argument("--db", default=None, help="a database .npz instead of --data")
+    ap.add_argument("--task", default="plane", help="the task whose env steps (plane, obstacles)")
     ap.add_argument("--envs", type=int, default=64)
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--seconds", type=float, default=3.0)

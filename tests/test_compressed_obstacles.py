@@ -219,7 +219,7 @@ def test_the_runtime_plays_a_compressed_obstacles_controller_as_python_does(db, 
             hits_seen += fp.obs[-2] > 0  # the compressed continuation's path test
             out = fp.step(rt.act(fp.obs))
             res = out["res"]
-            for f in range(out["shown"]):
+            for f in range(out["step_frames"]):
                 ch.advance_frame()
                 np.testing.assert_allclose(ch.root, res.roots[f], atol=1e-4)
                 np.testing.assert_allclose(ch.global_positions(), res.positions[f], atol=1e-4)

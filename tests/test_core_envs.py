@@ -33,13 +33,13 @@ def policy_actions(db, rng, n):
     return np.ascontiguousarray(t + rng.normal(0, 0.5, t.shape), np.float32)
 
 
-def test_obstacles_after_and_last_step_frames_agree_with_stepping():
+def test_obstacles_after_and_step_frames_agree_with_stepping():
     cfg = _core.ObstacleTaskConfig()
     cfg.num_obstacles, cfg.obstacle_max_speed, cfg.target_half_extent = 60, 2.0, 1.5
     n = 12
     db, env, _ = core_env(_core.ObstacleVecEnv, cfg, n, 4)
     played = np.full(n, -1, np.int32)
-    env.last_step_frames(played)
+    env.step_frames(played)
     assert (played == 0).all()
     rng = np.random.default_rng(0)
     b = buffers(env, n, True)
@@ -51,12 +51,12 @@ def test_obstacles_after_and_last_step_frames_agree_with_stepping():
             same = env.obstacles_after(i, 0)
             assert all(np.array_equal(same[k], now[i][k]) for k in now[i])
         env.step(policy_actions(db, rng, n), *b.values())
-        env.last_step_frames(played)
+        env.step_frames(played)
         frames = np.zeros(n, np.int64)
         env.current_frames(frames)
         for i in range(n):
             st = env.state(i)
-            assert frames[i] == st["frame"] and played[i] == st["last_step_frames"]
+            assert frames[i] == st["frame"] and played[i] == st["step_frames"]
             if b["terminated"][i] or b["truncated"][i]:
                 assert 1 <= played[i] <= cfg.frames_per_step
                 ended_early += played[i] < cfg.frames_per_step
@@ -70,7 +70,7 @@ def test_obstacles_after_and_last_step_frames_agree_with_stepping():
     assert ended_early >= 5 and continued >= 100
 
 
-def test_plane_last_step_frames_counts_to_the_first_frame_inside_the_disc():
+def test_plane_step_frames_counts_to_the_first_frame_inside_the_disc():
     cfg = _core.TargetTaskConfig()
     n = 4
     db, env, _ = core_env(_core.PlaneVecEnv, cfg, n, 2)
@@ -80,19 +80,19 @@ def test_plane_last_step_frames_counts_to_the_first_frame_inside_the_disc():
     b = buffers(env, n, False)
     env.step(policy_actions(db, np.random.default_rng(1), n), *b.values())
     played = np.zeros(n, np.int32)
-    env.last_step_frames(played)
+    env.step_frames(played)
     assert b["success"].all() and (played == 1).all()
     for i in range(n):
         env.set_target(i, 30.0, 30.0)  # out of reach
     env.step(policy_actions(db, np.random.default_rng(2), n), *b.values())
-    env.last_step_frames(played)
+    env.step_frames(played)
     assert (played == cfg.frames_per_step).all()
 
 
 def test_bad_arguments_are_refused_by_name():
     _, env, _ = core_env(_core.ObstacleVecEnv, _core.ObstacleTaskConfig(), 2, 0)
     with pytest.raises(TypeError, match="out: expected dtype int32"):
-        env.last_step_frames(np.zeros(2, np.int64))
+        env.step_frames(np.zeros(2, np.int64))
     with pytest.raises(ValueError, match="out: expected size 2"):
         env.current_frames(np.zeros(3, np.int64))
     with pytest.raises(ValueError, match="frames: must be >= 0"):
@@ -104,6 +104,6 @@ def test_bad_arguments_are_refused_by_name():
         env.set_obstacles(0, z, z, np.zeros(1, np.float32), np.full((1, 2), 5.0, np.float32))
     _, plane, _ = core_env(_core.PlaneVecEnv, _core.TargetTaskConfig(), 2, 0)
     with pytest.raises(TypeError, match="out: expected dtype int32"):
-        plane.last_step_frames(np.zeros(2, np.float32))
+        plane.step_frames(np.zeros(2, np.float32))
     with pytest.raises(ValueError, match="target must be finite"):
         plane.set_target(0, float("nan"), 0.0)

@@ -262,7 +262,7 @@ def test_core_env_frame_and_match_buffers(vector_env, data):
     _, env = vector_env
     core = env.unwrapped._core
     method, name, valid = data.draw(st.sampled_from([
-        ("current_frames", "out", np.zeros(3, np.int64)), ("last_step_frames", "out", np.zeros(3, np.int32)),
+        ("current_frames", "out", np.zeros(3, np.int64)), ("step_frames", "out", np.zeros(3, np.int32)),
         ("reset", "obs", np.zeros((3, core.obs_dim), np.float32))]))
     _, bad = data.draw(hostile(valid))
     call = (lambda a: core.reset(0, a)) if method == "reset" else getattr(core, method)
@@ -271,7 +271,7 @@ def test_core_env_frame_and_match_buffers(vector_env, data):
             and bad.flags.writeable and bad.flags.c_contiguous:
         assert ((bad >= 0) & (bad < env.unwrapped.db.num_frames)).all()
     _, transitions = data.draw(hostile(np.zeros(3, np.uint8)))
-    refused_or_equal(lambda t: core.last_step_matches(t, np.zeros(3, np.float32)), "transitions", (transitions,))
+    refused_or_equal(lambda t: core.last_step_transitions(t, np.zeros(3, np.float32)), "transitions", (transitions,))
 
 
 @EXAMPLES

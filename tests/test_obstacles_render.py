@@ -53,7 +53,7 @@ def run_lockstep(db, steps, seed, stage=10):
         if out["done"]:
             # The episode's last root (at the ending frame) is the controller's shown one.
             assert out["goal_error"] < 1e-4
-            assert 1 <= out["shown"] <= run.config.frames_per_step
+            assert 1 <= out["step_frames"] <= run.config.frames_per_step
             ends["success"] += out["success"]
             ends["collision"] += out["collision"]
             continue

@@ -77,7 +77,7 @@ def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path
             assert res.match == match and res.cost == cost
             np.testing.assert_array_equal(res.frames, match + 1 + np.arange(res.frames.size))
             # runtime
-            for k in range(out["shown"]):
+            for k in range(out["step_frames"]):
                 character.advance_frame()
                 assert character.frame == res.frames[k]
                 np.testing.assert_allclose(character.root, res.roots[k], atol=1e-5)

@@ -20,9 +20,9 @@ def db():
     return mmrl.default_database()
 
 
-def _last_step_matches(env):
+def _last_step_transitions(env):
     t, c = np.zeros(env.num_envs, np.uint8), np.zeros(env.num_envs, np.float32)
-    env._core.last_step_matches(t, c)
+    env._core.last_step_transitions(t, c)
     return t, c
 
 
@@ -39,7 +39,7 @@ def test_fast_path_flag_and_cost_equal_the_full_path_controller(db, task_name, s
         noise = 0.3 if t % 2 else 2.0
         action = (db.normalized_features[rng.choice(valid), 15:] + rng.normal(0, noise, 12)).astype(np.float32)
         out = run.step(action)
-        flag, cost = _last_step_matches(run.env)
+        flag, cost = _last_step_transitions(run.env)
         assert bool(flag[0]) == out["res"].transition, f"step {t}"
         assert cost[0] == np.float32(out["res"].cost), f"step {t}"
         transitions += out["res"].transition

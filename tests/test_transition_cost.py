@@ -66,7 +66,7 @@ def test_a_larger_transition_cost_means_fewer_transitions(db):
         total = 0
         for t in range(300):
             env.step(actions[t])
-            env._core.last_step_matches(transitions, costs)
+            env._core.last_step_transitions(transitions, costs)
             total += int(transitions.sum())
         counts.append(total)
     assert counts[2] < counts[1] < counts[0], counts

@@ -120,7 +120,7 @@ void bind_obstacles(py::module_& m) {
           py::arg("costs") = py::none(), py::arg("episode_frames") = py::none(),
           "One step of every env (actions float32 N x 12, finite), writing every buffer; collision (uint8, N) and "
           "hits (int32, N) are the task's. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if "
-          "given, get every env's last_step_frames and last_step_matches, and episode_frames (int64, N) where an "
+          "given, get every env's step_frames and last_step_transitions, and episode_frames (int64, N) where an "
           "episode ended the frames it played: one call returns all a step produced.")
       .def(
           "obstacles", [](const PyObstacleVecEnv& s, int i) { return obstacle_dict(s.env, checked_index(s, i), kNow); },
@@ -136,7 +136,7 @@ void bind_obstacles(py::module_& m) {
           py::arg("index"), py::arg("frames"),
           "Env i's obstacles (the obstacles() dict) after `frames` more played frames of the env's own motion "
           "(constant velocity, bounce at the square's border), bit for bit as steps move them. Called at a step's "
-          "start with frames = last_step_frames, it gives the obstacles at the step's end.")
+          "start with frames = step_frames, it gives the obstacles at the step's end.")
       .def(
           "set_obstacles",
           [](PyObstacleVecEnv& s, int i, const py::handle& centres, const py::handle& half_sizes,

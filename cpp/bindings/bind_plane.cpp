@@ -43,8 +43,8 @@ void bind_plane(py::module_& m) {
       py::arg("step_frames") = py::none(), py::arg("transitions") = py::none(), py::arg("costs") = py::none(),
       py::arg("episode_frames") = py::none(),
       "One step of every env (actions float32 N x 12, finite), writing every buffer. step_frames (int32, N), "
-      "transitions (uint8, N) and costs (float32, N), if given, get every env's last_step_frames and "
-      "last_step_matches, and episode_frames (int64, N) where an episode ended the frames it played: one call "
+      "transitions (uint8, N) and costs (float32, N), if given, get every env's step_frames and "
+      "last_step_transitions, and episode_frames (int64, N) where an episode ended the frames it played: one call "
       "returns all a step produced.");
 }
 

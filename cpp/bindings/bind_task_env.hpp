@@ -52,7 +52,8 @@ inline py::dict target_state_dict(const TargetEnvState& st) {
   d["last_transition"] = st.decision.transition;
   d["last_cost"] = st.decision.cost;
   d["last_pose_jump"] = st.decision.pose_jump;
-  d["last_step_frames"] = st.last_step_frames;
+  d["step_frames"] = st.step_frames;
+  d["last_step_frames"] = st.step_frames;  // the old key of step_frames, for one release
   d["last_step_transition_cost"] = st.last_step.transition_cost;
   d["last_step_match"] = st.last_step.match;
   return d;
@@ -118,12 +119,12 @@ TargetStepBuffers step_buffers(const Env& env, const py::handle& obs, const py::
 
 // The methods every task env has: construction from (db, matcher, num_envs, config,
 // num_threads), its sizes and action box, reset, reset_env, observe (into a buffer), state
-// (state_dict(env, i): the shared keys and the task's own), current_frames, last_step_frames,
-// last_step_matches, last_step_decision, last_step_transition_cost, the autoreset mode,
-// set_state and set_target. last_step_frames_doc: what ends a step early in this task.
+// (state_dict(env, i): the shared keys and the task's own), current_frames, step_frames,
+// last_step_transitions, last_step_decision, last_step_transition_cost, the autoreset mode,
+// set_state and set_target. step_frames_doc: what ends a step early in this task.
 // long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 template <class Wrapper, class StateDict>
-void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* last_step_frames_doc) {
+void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* step_frames_doc) {
   using Env = decltype(std::declval<Wrapper&>().env);
   using Config = typename std::decay<decltype(std::declval<const Env&>().config())>::type;
   c.def(py::init([](const Database& db, PyMatcher& matcher, int num_envs, const Config& config, int num_threads) {
@@ -179,18 +180,18 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* las
        },
        py::arg("out"), "Writes each environment's current database frame into out (int64, N).")
       .def(
-          "last_step_frames",
+          "step_frames",
           [](const Wrapper& s, const py::handle& out) {
-            s.env.last_step_frames(writable_buffer<int32_t>(out, "out", {s.env.num_envs()}));
+            s.env.step_frames(writable_buffer<int32_t>(out, "out", {s.env.num_envs()}));
           },
-          py::arg("out"), last_step_frames_doc)
+          py::arg("out"), step_frames_doc)
       .def(
-          "last_step_matches",
+          "last_step_transitions",
           [](const Wrapper& s, const py::handle& transitions, const py::handle& costs) {
             const py::ssize_t n = s.env.num_envs();
             uint8_t* t = writable_buffer<uint8_t>(transitions, "transitions", {n});
             float* cost = writable_buffer<float>(costs, "costs", {n});
-            s.env.last_step_matches(t, cost);
+            s.env.last_step_transitions(t, cost);
           },
           py::arg("transitions"), py::arg("costs"),
           "Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the "

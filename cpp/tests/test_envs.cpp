@@ -173,7 +173,7 @@ TEST(PlaneVecEnv, ContinuingStepEqualsHandComputation) {
     std::vector<int64_t> frames(n);
     std::vector<int32_t> played(n);
     env.current_frames(frames.data());
-    env.last_step_frames(played.data());
+    env.step_frames(played.data());
     for (int i = 0; i < n; ++i) {
       EXPECT_EQ(frames[i], env.state(i).frame);
       EXPECT_EQ(played[i], cfg.frames_per_step);
@@ -190,7 +190,7 @@ TEST(PlaneVecEnv, AutoresetWritesFinalObsAndResetsFromTheEnvsOwnStream) {
   env.reset(7, buf.obs.data());
   twin.reset(7, tbuf.obs.data());
   std::vector<int32_t> played(n, -1);
-  env.last_step_frames(played.data());
+  env.step_frames(played.data());
   EXPECT_EQ(played, std::vector<int32_t>(n, 0));
   // The twin's next episode of env 1 is the one env 1's autoreset must draw (a plane step
   // draws nothing from the env's RNG).
@@ -233,7 +233,7 @@ TEST(PlaneVecEnv, AutoresetWritesFinalObsAndResetsFromTheEnvsOwnStream) {
   EXPECT_NEAR(buf.rewards[1], std::exp(-std::hypot(gx, gz)) + cfg.success_bonus, 1e-3);
   EXPECT_EQ(buf.ret[1], buf.rewards[1]);
   EXPECT_EQ(buf.len[1], 1);
-  env.last_step_frames(played.data());
+  env.step_frames(played.data());
   EXPECT_EQ(played[1], first + 1);  // the first frame inside the disc, found by brute force above
   // ... and it was reset at once from its own stream: the twin's second episode.
   const TargetEnvState &r = env.state(1), &t = twin.state(1);

@@ -1,5 +1,5 @@
 // What the motion-quality metrics read from the C++ core:
-//   - the envs' last_step_matches (the fast-path transition flag and matched cost logged during
+//   - the envs' last_step_transitions (the fast-path transition flag and matched cost logged during
 //     training) against decision.hpp's rule (decision_for_action) in lockstep with the same
 //     actions and a hand computation of the cost, through autoresets, for both tasks;
 //   - Character::animated_feet (the ankles before foot locking and IK) against a second
@@ -57,7 +57,7 @@ struct Lockstep {
 };
 
 // Steps `env` (through `step`) and decides for each env's state before the step by the rule;
-// the env's last_step_matches must equal that decision bit for bit.
+// the env's last_step_transitions must equal that decision bit for bit.
 template <class Env, class StepFn>
 Lockstep run_lockstep(Env& env, int steps, StepFn&& step) {
   const int n = env.num_envs();
@@ -70,7 +70,7 @@ Lockstep run_lockstep(Env& env, int steps, StepFn&& step) {
     std::vector<TargetEnvState> before;
     for (int i = 0; i < n; ++i) before.push_back(env.state(i));
     step(act, ended);
-    env.last_step_matches(transitions.data(), costs.data());
+    env.last_step_transitions(transitions.data(), costs.data());
     for (int i = 0; i < n; ++i) {
       float rule_cost = 0;
       const int64_t match = decision_for_action(database(), matcher(), before[i].frame, &act[i * kTrajectoryDim],
@@ -112,7 +112,7 @@ TEST(PlaneVecEnv, LastStepMatchesEqualACharacterInLockstepThroughAutoresets) {
   std::vector<uint8_t> transitions(n, 7);
   std::vector<float> costs(n, -1.0f);
   env.reset(4, obs.data());
-  env.last_step_matches(transitions.data(), costs.data());
+  env.last_step_transitions(transitions.data(), costs.data());
   for (int i = 0; i < n; ++i) {
     EXPECT_EQ(transitions[i], 0);
     EXPECT_EQ(costs[i], 0.0f);

@@ -98,7 +98,7 @@ TEST(ObstacleVecEnv, LastStepFramesEqualsBruteForceResimulation) {
       }
     }
     buf.step(env, act);
-    env.last_step_frames(played.data());
+    env.step_frames(played.data());
     for (int i = 0; i < n; ++i) {
       const int64_t j = decision_for_action(db, matcher(), s0[i].frame, &act[i * kTrajectoryDim], env.action_low(),
                                           env.action_high());

@@ -436,17 +436,13 @@ class PlaneVecEnv:
         """
         (match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.
         """
-    def last_step_frames(self, out: typing.Any) -> None:
-        """
-        Writes into out (int32, N) how many frames of the last step each environment played before its episode ended: the index of the first frame within success_radius + 1, else frames_per_step (0 after reset).
-        """
-    def last_step_matches(self, transitions: typing.Any, costs: typing.Any) -> None:
-        """
-        Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, weighted feature space). Kept through the autoreset; 0 after reset.
-        """
     def last_step_transition_cost(self, index: typing.SupportsInt | typing.SupportsIndex) -> float:
         """
         The transition cost env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
+        """
+    def last_step_transitions(self, transitions: typing.Any, costs: typing.Any) -> None:
+        """
+        Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, weighted feature space). Kept through the autoreset; 0 after reset.
         """
     def observe(self, index: typing.SupportsInt | typing.SupportsIndex, out: typing.Any) -> None:
         """
@@ -494,7 +490,11 @@ class PlaneVecEnv:
         """
     def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None, episode_frames: typing.Any = None) -> None:
         """
-        One step of every env (actions float32 N x 12, finite), writing every buffer. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's last_step_frames and last_step_matches, and episode_frames (int64, N) where an episode ended the frames it played: one call returns all a step produced.
+        One step of every env (actions float32 N x 12, finite), writing every buffer. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's step_frames and last_step_transitions, and episode_frames (int64, N) where an episode ended the frames it played: one call returns all a step produced.
+        """
+    def step_frames(self, out: typing.Any) -> None:
+        """
+        Writes into out (int32, N) how many frames of the last step each environment played before its episode ended: the index of the first frame within success_radius + 1, else frames_per_step (0 after reset).
         """
     @property
     def action_high(self) -> numpy.typing.NDArray[numpy.float32]:
@@ -1041,17 +1041,13 @@ class ObstacleVecEnv:
         """
         (match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.
         """
-    def last_step_frames(self, out: typing.Any) -> None:
-        """
-        Writes into out (int32, N) how many frames of the last step each environment played before its episode ended: the index of the frame that succeeded or collided + 1, else frames_per_step (0 after reset).
-        """
-    def last_step_matches(self, transitions: typing.Any, costs: typing.Any) -> None:
-        """
-        Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, weighted feature space). Kept through the autoreset; 0 after reset.
-        """
     def last_step_transition_cost(self, index: typing.SupportsInt | typing.SupportsIndex) -> float:
         """
         The transition cost env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
+        """
+    def last_step_transitions(self, transitions: typing.Any, costs: typing.Any) -> None:
+        """
+        Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, weighted feature space). Kept through the autoreset; 0 after reset.
         """
     def observe(self, index: typing.SupportsInt | typing.SupportsIndex, out: typing.Any) -> None:
         """
@@ -1063,7 +1059,7 @@ class ObstacleVecEnv:
         """
     def obstacles_after(self, index: typing.SupportsInt | typing.SupportsIndex, frames: typing.SupportsInt | typing.SupportsIndex) -> dict:
         """
-        Env i's obstacles (the obstacles() dict) after `frames` more played frames of the env's own motion (constant velocity, bounce at the square's border), bit for bit as steps move them. Called at a step's start with frames = last_step_frames, it gives the obstacles at the step's end.
+        Env i's obstacles (the obstacles() dict) after `frames` more played frames of the env's own motion (constant velocity, bounce at the square's border), bit for bit as steps move them. Called at a step's start with frames = step_frames, it gives the obstacles at the step's end.
         """
     def path_hits(self, index: typing.SupportsInt | typing.SupportsIndex, rows: typing.Any) -> numpy.typing.NDArray[numpy.int32]:
         """
@@ -1137,7 +1133,11 @@ class ObstacleVecEnv:
         """
     def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, collision: typing.Any, hits: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None, episode_frames: typing.Any = None) -> None:
         """
-        One step of every env (actions float32 N x 12, finite), writing every buffer; collision (uint8, N) and hits (int32, N) are the task's. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's last_step_frames and last_step_matches, and episode_frames (int64, N) where an episode ended the frames it played: one call returns all a step produced.
+        One step of every env (actions float32 N x 12, finite), writing every buffer; collision (uint8, N) and hits (int32, N) are the task's. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's step_frames and last_step_transitions, and episode_frames (int64, N) where an episode ended the frames it played: one call returns all a step produced.
+        """
+    def step_frames(self, out: typing.Any) -> None:
+        """
+        Writes into out (int32, N) how many frames of the last step each environment played before its episode ended: the index of the frame that succeeded or collided + 1, else frames_per_step (0 after reset).
         """
     @property
     def action_high(self) -> numpy.typing.NDArray[numpy.float32]:

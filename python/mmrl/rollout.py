@@ -249,8 +249,9 @@ class FullPath:
 
     def step(self, action: np.ndarray) -> Dict[str, Any]:
         """One RL step of both. Returns the env's outcome, the controller's StepResult
-        (``res``), ``shown`` (frames of the step played before the episode ended), the task
-        scene's per-step values, and at an episode's end its infos."""
+        (``res``), ``step_frames`` (frames of the step played before the episode ended; ``shown``
+        is its old name, kept for one release), the task scene's per-step values, and at an
+        episode's end its infos."""
         a = np.asarray(action, np.float32).reshape(1, -1)
         out: Dict[str, Any] = {"target": self.target.copy()}
         if self.scene is not None:
@@ -267,7 +268,7 @@ class FullPath:
         done = bool(term[0] or trunc[0])
         shown = int(self.env.step_frames[0])
         out.update(res=res, reward=float(reward[0]), terminated=bool(term[0]), truncated=bool(trunc[0] and not term[0]),
-                   done=done, shown=shown, success=False)
+                   done=done, step_frames=shown, shown=shown, success=False)
         if self.scene is not None:
             out.update(self.scene.after_step(shown))
         if done:
@@ -492,7 +493,7 @@ class FollowLog:
         for key, value in out.get("scene_step", {}).items():
             self.per_step.setdefault(key, []).append(value)
         # A continuous run shows the whole step; a cut one only up to the ending frame.
-        shown = out["res"].frames.size if self.run.continuous else out["shown"]
+        shown = out["res"].frames.size if self.run.continuous else out["step_frames"]
         self._frame_values({"targets": np.repeat(out["target"][None], shown, 0)})
         self._frame_values(out.get("scene_frames", {}))
         self.in_episode += shown

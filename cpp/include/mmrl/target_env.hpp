@@ -38,7 +38,7 @@ struct TargetEnvState : MotionState {
   // Frames the last step played before its episode ended: the index of the frame of the
   // ending event + 1, or frames_per_step when the step did not end the episode (truncation
   // included). Kept like last_step; 0 after reset(seed).
-  int last_step_frames = 0;
+  int step_frames = 0;
   // NEXT_STEP autoreset: the episode ended on the last step and the next step resets it.
   bool autoreset_pending = false;
   int64_t episode_frames = 0;  // frames played in this episode (the last step up to its ending frame)
@@ -78,12 +78,12 @@ struct TaskStep {
   float reward = 0;
   bool terminated = false;
   bool success = false;
-  int frames_played = 0;  // see TargetEnvState::last_step_frames
+  int step_frames = 0;  // see TargetEnvState::step_frames
 };
 
 // The step outputs every task writes, N rows each (obs and final_obs: N x obs_dim()).
 // final_obs, episode_return and episode_length rows are written only where an episode ended.
-// The last three are optional (null: not written): each env's last_step_frames and its
+// The last three are optional (null: not written): each env's step_frames and its
 // decision (a transition, the matched cost), every row on every step, so one call returns
 // everything a step produced.
 struct TargetStepBuffers {

@@ -71,7 +71,7 @@ class TargetVecEnv {
   void reset(uint64_t seed, float* obs) {
     for (int i = 0; i < num_envs(); ++i) {
       envs_[i].rng = Rng(seed, static_cast<uint64_t>(i));
-      envs_[i].last_step_frames = 0;
+      envs_[i].step_frames = 0;
       envs_[i].last_step = Decision{};
     }
     pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
@@ -249,15 +249,15 @@ class TargetVecEnv {
   void current_frames(int64_t* out) const {
     for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].frame;
   }
-  // Each environment's frames played in the last step (N; see TargetEnvState::last_step_frames).
-  void last_step_frames(int32_t* out) const {
-    for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].last_step_frames;
+  // Each environment's frames played in the last step (N; see TargetEnvState::step_frames).
+  void step_frames(int32_t* out) const {
+    for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].step_frames;
   }
   // Each environment's last step's decision (N each; see TargetEnvState::last_step):
   // transitions[i] = 1 where the match was not the continuation of the current clip, costs[i]
   // the match's squared distance to the query (normalized, weighted feature space). Training
   // reads this after every step for its cheap motion-quality log.
-  void last_step_matches(uint8_t* transitions, float* costs) const {
+  void last_step_transitions(uint8_t* transitions, float* costs) const {
     for (int i = 0; i < num_envs(); ++i) {
       transitions[i] = envs_[i].last_step.transition;
       costs[i] = envs_[i].last_step.cost;
@@ -296,7 +296,7 @@ class TargetVecEnv {
         float* row = out.obs + i * task().obs_dim();
         if (s.autoreset_pending) {  // NEXT_STEP: this step is the reset; the action is ignored
           reset_env(env, row);
-          s.last_step_frames = 0;
+          s.step_frames = 0;
           s.last_step = Decision{};
           out.rewards[i] = 0;
           out.terminated[i] = out.truncated[i] = out.success[i] = 0;
@@ -309,13 +309,13 @@ class TargetVecEnv {
         if (s.decision.transition) r.reward -= config_.transition_penalty;
         s.steps += 1;
         s.episode_return += r.reward;
-        s.last_step_frames = r.frames_played;
+        s.step_frames = r.step_frames;
         s.last_step = s.decision;
-        s.episode_frames += r.frames_played;
+        s.episode_frames += r.step_frames;
         s.stats.decisions += 1;
         s.stats.transitions += s.decision.transition;
         s.stats.cost_sum += s.decision.cost;
-        s.stats.frames += r.frames_played;
+        s.stats.frames += r.step_frames;
         const bool truncated = !r.terminated && s.steps >= config_.max_steps;
         out.rewards[i] = r.reward;
         out.terminated[i] = r.terminated;
@@ -344,7 +344,7 @@ class TargetVecEnv {
 
   // The optional per-step rows of TargetStepBuffers.
   static void write_decision(const State& s, const TargetStepBuffers& out, int64_t i) {
-    if (out.step_frames) out.step_frames[i] = s.last_step_frames;
+    if (out.step_frames) out.step_frames[i] = s.step_frames;
     if (out.transitions) out.transitions[i] = s.last_step.transition;
     if (out.costs) out.costs[i] = s.last_step.cost;
   }

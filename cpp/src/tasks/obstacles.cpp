@@ -204,7 +204,7 @@ TaskStep ObstacleVecEnv::advance(int i, const float* action) {
   end_playback(s);
   s.collided = collision;
   TaskStep out;
-  out.frames_played = k;
+  out.step_frames = k;
   out.reward = std::exp(-target_distance(s));
   if (config_.hit_reward)
     out.reward += config_.hit_weight * (std::exp(-static_cast<float>(s.last_hits)) - (config_.hit_penalty ? 1.0f : 0.0f));

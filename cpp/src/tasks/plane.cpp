@@ -24,13 +24,13 @@ TaskStep PlaneVecEnv::advance(int i, const float* action) {
   decide(i, action);
   const float r2 = config_.success_radius * config_.success_radius;
   TaskStep out;
-  out.frames_played = config_.frames_per_step;
+  out.step_frames = config_.frames_per_step;
   for (int k = 0; k < config_.frames_per_step; ++k) {
     root_advance(s.root, played_delta(s, k));
     const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
     if (dx * dx + dz * dz <= r2 && !out.success) {  // tested on every played frame
       out.success = true;
-      out.frames_played = k + 1;
+      out.step_frames = k + 1;
     }
   }
   end_playback(s);

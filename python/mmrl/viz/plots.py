@@ -57,7 +57,7 @@ def rollout_to_targets(policy, db, targets, seed: int = 0, max_steps: int = 100,
         path = [run.character.root[:2]]
         while True:
             out = run.step(policy_actions(policy, run.obs[None], layout=run.env.observation_layout).reshape(-1))
-            path.extend(map(tuple, out["res"].roots[:out["shown"], :2]))
+            path.extend(map(tuple, out["res"].roots[:out["step_frames"], :2]))
             if out["done"]:
                 break
         paths.append(np.array(path))

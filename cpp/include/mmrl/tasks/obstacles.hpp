@@ -27,7 +27,7 @@
 // terminated   success (root within success_radius of the target) or collision (the body
 //              disc of body_radius around the root overlaps an obstacle), both tested on
 //              every played frame after the obstacles and the root have moved one frame;
-//              the first event ends the step (no later frame is played: last_step_frames
+//              the first event ends the step (no later frame is played: step_frames
 //              is that frame's index + 1); collision wins a tie.
 // truncated    max_steps steps (the paper has no step limit; this cap only stops runaway
 //              episodes: 1500 steps = 300 s, far longer than any reasonable path).
@@ -231,7 +231,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   // Env i's obstacle centres and velocities (n x 2 each) after `frames` more played frames
   // (frames >= 0) of the env's own motion (grid.hpp: constant velocity, bounce at the
   // square's border), as a step would move them: called at a step's start, frames =
-  // last_step_frames gives the positions at the step's end. Sizes and angles do not change.
+  // step_frames gives the positions at the step's end. Sizes and angles do not change.
   void obstacles_after(int i, int frames, float* centres, float* velocities) const;
 
   // Scene editing (tests, evaluation, rendering). set_root and set_obstacles rebuild the

@@ -8,7 +8,7 @@
 //   reward       exp(-|g_t|) after the step, + success_bonus on success
 //   terminated   the root came within success_radius of the target on any played frame
 //                (every frame of the step is played: the step does not stop there; the
-//                step's frames played (last_step_frames) count up to that first frame)
+//                step's frames played (step_frames) count up to that first frame)
 //   truncated    max_steps steps without success
 #pragma once
 
