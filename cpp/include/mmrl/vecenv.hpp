@@ -44,6 +44,7 @@
 
 #include "mmrl/compressed_source.hpp"
 #include "mmrl/database_source.hpp"
+#include "mmrl/rules.hpp"
 #include "mmrl/target_env.hpp"
 #include "mmrl/threadpool.hpp"
 
@@ -278,6 +279,10 @@ class TargetVecEnv {
     source_ = &database_source_;
     decider_ = Decider(db, config.action_limit_std);
     clip_filter_ = ClipCostFilter(db, config.clip_costs);
+    rules_.resize(envs_.size());
+    for (auto& env_rules : rules_)
+      for (const CandidateRuleType& type : candidate_rule_types())
+        if (auto rule = type.make(db, config)) env_rules.push_back(std::move(rule));
     request_code_ = RequestCode(db, config.request_groups);
     request_mix_ = mmrl::request_mix(db, request_code_, config.request_any);
     every_clip_ = select_request(db, TagRequest{});
@@ -366,10 +371,19 @@ class TargetVecEnv {
   // its state): the config's transition_cost.
   float decision_transition_cost(int) const { return config_.transition_cost; }
 
-  // The candidate filter of env i's next match (a task hides it to add its own rules): the
-  // config's clip costs (decision.hpp's ClipCostFilter), or none.
-  // Env i's request over them (RequestFilter) when it restricts the clips.
-  const CandidateFilter* candidate_filter(int i) { return request_filter(i); }
+  // The candidate filter of env i's next match (a task hides it to add its own on top of
+  // rule_chain): the registered rules over env i's request over the clip costs, or none.
+  const CandidateFilter* candidate_filter(int i) { return rule_chain(i, request_filter(i)); }
+  // Env i's registered rules (rules.hpp) chained over `below` and prepared for its state now;
+  // `below` itself when no rule is on.
+  const CandidateFilter* rule_chain(int i, const CandidateFilter* below) {
+    for (const auto& rule : rules_[static_cast<size_t>(i)]) {
+      rule->set_below(below);
+      rule->prepare(*source_, envs_[i]);
+      below = rule.get();
+    }
+    return below;
+  }
   // The queries a compressed controller projects (shortlist_queries' fan; k is unused): the
   // query alone, unless a task's filter prices projections and wants its turned copies too.
   Shortlist compressed_shortlist() const { return {}; }
@@ -436,6 +450,7 @@ class TargetVecEnv {
   const MotionSource* source_ = nullptr;
   Decider decider_;
   ClipCostFilter clip_filter_;
+  std::vector<std::vector<std::unique_ptr<CandidateRule>>> rules_;  // per env, rules.hpp's registered ones that are on
   RequestCode request_code_;
   RequestMix request_mix_;
   RequestSelection every_clip_;  // the request of an env without one: every clip

@@ -59,7 +59,7 @@ ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int n
 }
 
 const CandidateFilter* ObstacleVecEnv::candidate_filter(int i) {
-  const CandidateFilter* base = request_filter(i);
+  const CandidateFilter* base = rule_chain(i, request_filter(i));
   if (!config_.path_filter) return base;
   const ObstacleEnvState& s = envs_[i];
   path_filters_[i].set_base(base);

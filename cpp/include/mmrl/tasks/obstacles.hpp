@@ -169,7 +169,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   static constexpr int kGoalOffset = kPoseOffset + kPoseDim;
   static constexpr int kObsDim = kGoalOffset + 2;  // the paper's observation
   int obs_dim() const { return kObsDim + request_dim(); }  // with request_groups: the request's code last
-  ObsLayout task_obs_layout() const { return {{"maps", 2 * kMapCells}, {"pose", kPoseDim}, {"goal", 2}}; }
+  ObsLayout task_obs_layout() const { return {{"maps", 2 * kMapCells, ""}, {"pose", kPoseDim, ""}, {"goal", 2, ""}}; }
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
   // Plays compressed controllers (TargetVecEnv::set_compressed) without the collision-aware
@@ -269,8 +269,8 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
     for (ObstaclePathFilter& f : path_filters_) f.set_prices_states(source().rowless_candidates());
     for (int i = 0; i < num_envs(); ++i) refresh(i, false, true);
   }
-  // The clip costs, or with path_filter env i's collision-aware filter prepared for its
-  // current state (on top of the clip costs).
+  // The base's chain (registered rules over the request over the clip costs), or with
+  // path_filter env i's collision-aware filter prepared for its current state on top of it.
   const CandidateFilter* candidate_filter(int i);
   Shortlist candidate_shortlist() const {
     if (!config_.path_filter) return {};

@@ -34,7 +34,7 @@ class PlaneVecEnv : public TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvS
   static constexpr const char* kCoreName = "plane";  // the name a controller file gives this core
   static constexpr bool kPlaysCompressed = true;     // TargetVecEnv::set_compressed
   int obs_dim() const { return kObsDim + request_dim(); }  // with request_groups: the request's code last
-  ObsLayout task_obs_layout() const { return {{"pose", kPoseDim}, {"goal", 2}}; }
+  ObsLayout task_obs_layout() const { return {{"pose", kPoseDim, ""}, {"goal", 2, ""}}; }
 
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
   // Throws std::invalid_argument on a bad config.

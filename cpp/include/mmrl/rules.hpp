@@ -1,0 +1,68 @@
+// Candidate rules by registration: a rule that changes which frame plays (which candidate a
+// decision picks) is one class and one registration, and every decision path honours it: the
+// batched envs, the full path and mmrl play (through the env's decide), the engine runtime and
+// the C interface (through the env of the task's core), for both motion sources (a rule prices
+// a Candidate: a database row, or a compressed controller's state with its features only).
+//
+// Each env of every task holds one instance of each registered rule that its config turns on
+// (CandidateRuleType::make), chained over the env's request and clip costs (vecenv.hpp's
+// rule_chain); a task's own filter (the obstacles' path filter) sits on top. Before each
+// decision the env prepares the rule for the character's state; the search then prices
+// candidates through extra_cost, so a rule only adds cost (>= 0; +inf refuses) and the search
+// stays exact under it. When the rule refuses every candidate the decision falls back to the
+// rules below it (decision.hpp).
+//
+// Adding a rule: a class deriving from CandidateRule (its cost, and prepare if it needs the
+// character's state), its option in the task config's table (task_config.hpp) if it has one,
+// and one line in rules.cpp's builtin list, or register_candidate_rule (a plug-in, a test).
+#pragma once
+
+#include <limits>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "mmrl/decider.hpp"
+#include "mmrl/tasks/task_config.hpp"
+
+namespace mmrl {
+
+class CandidateRule : public CandidateFilter {
+ public:
+  // The rules below this one, or null.
+  void set_below(const CandidateFilter* below) { below_ = below; }
+  // Before each decision of a character in state s (the candidate it shows: source.current(s)).
+  virtual void prepare(const MotionSource& /*source*/, const MotionState& /*s*/) {}
+  // The cost of the rules below, plus this rule's own (refused below: refused).
+  float extra_cost(const Candidate& c) const final {
+    const float below = below_ ? below_->extra_cost(c) : 0.0f;
+    if (!(below < std::numeric_limits<float>::infinity())) return below;
+    return below + cost(c);
+  }
+  const CandidateFilter* fallback() const final { return below_; }
+
+ protected:
+  // This rule's own cost of candidate c: >= 0 in squared normalized feature distance, +inf
+  // (or NaN) refuses it. Called for candidates whose distance alone could still win.
+  virtual float cost(const Candidate& c) const = 0;
+
+ private:
+  const CandidateFilter* below_ = nullptr;
+};
+
+// A registered rule: its name and what builds it for one env of a task with config c over db
+// (null when c leaves it off; std::invalid_argument for a bad config).
+struct CandidateRuleType {
+  std::string name;
+  std::unique_ptr<CandidateRule> (*make)(const Database& db, const TaskConfig& c) = nullptr;
+};
+
+// The registered rules, in chain order (the builtin ones first).
+const std::vector<CandidateRuleType>& candidate_rule_types();
+// Adds a rule type after the registered ones (before any env that should use it is built; not
+// thread-safe against env construction). Returns its index.
+int register_candidate_rule(CandidateRuleType type);
+// Removes the rule types registered after the first n (tests).
+void unregister_candidate_rules_after(int n);
+
+}  // namespace mmrl
