@@ -11,6 +11,7 @@
 #include <random>
 #include <vector>
 
+#include "compressed_test_model.hpp"
 #include "env_test_database.hpp"
 #include "mmrl/compressed.hpp"
 #include "mmrl/rules.hpp"
@@ -136,33 +137,8 @@ TEST(CandidateRules, TheRuntimesDecisionContextHonoursARegisteredRule) {
 TEST(CandidateRules, ACompressedControllersStatesArePricedByARegisteredRule) {
   const Database& db = database();
   ToyRuleRegistered registered;
-  // A small compressed model with random weights (its states' features are priced by the rule).
-  CompressedModel m;
-  m.num_joints = db.num_joints;
-  m.latent = 2;
-  const int S = m.state_dim(), P = m.pose_dim();
-  std::mt19937 wrng(3);
-  auto mlp = [&](const std::vector<int>& sizes, float scale) {
-    std::normal_distribution<float> w(0.0f, 1.0f);
-    Mlp net;
-    for (size_t k = 0; k + 1 < sizes.size(); ++k) {
-      Mlp::Layer l;
-      l.in = sizes[k];
-      l.out = sizes[k + 1];
-      for (int i = 0; i < l.in * l.out; ++i) l.weight.push_back(scale * w(wrng) / std::sqrt(float(l.in)));
-      l.bias.assign(static_cast<size_t>(l.out), 0.0f);
-      net.layers.push_back(std::move(l));
-    }
-    return net;
-  };
-  m.decompressor = mlp({S, 8, P}, 1.0f);
-  m.stepper = mlp({S, 8, S}, 0.02f);
-  m.projector = mlp({kFeatureDim, 8, S}, 1.0f);
-  m.y_mean.assign(P, 0.0f);
-  m.y_std.assign(P, 0.1f);
-  m.z_mean.assign(m.latent, 0.0f);
-  m.z_std.assign(m.latent, 1.0f);
-  m.prepare();
+  const CompressedModel m = testing_db::random_model(3);  // its states' features are priced by the rule
+  const int S = m.state_dim();
   std::vector<float> states(static_cast<size_t>(db.num_frames) * S, 0.0f);
   for (int64_t f = 0; f < db.num_frames; ++f)
     for (int k = 0; k < kFeatureDim; ++k) states[f * S + k] = db.normalized[f * kFeatureDim + k];
