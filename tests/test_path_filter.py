@@ -393,12 +393,24 @@ def test_a_retired_option_is_refused_everywhere_with_one_line(name, tmp_path, ca
     task = mmrl.get_task("obstacles")
     with pytest.raises(ValueError, match="retired"):
         task.default_config().replace(**{name: True})
-    assert task.config_from_dict({name: False, "num_obstacles": 7}).num_obstacles == 7  # old runs' saved default
+    for strict in (False, True):  # old runs' saved default (strict: what an RLlib worker reads)
+        assert task.config_from_dict({name: False, "num_obstacles": 7}, strict=strict).num_obstacles == 7
     run = tmp_path / "run"
     run.mkdir()
     (run / "config.json").write_text(json.dumps({"task": "obstacles", "task_config": {name: True}}))
     with pytest.raises(InputError, match=f"config.json: .*{name}"):
         RunDir(run).task_config()
+    old = tmp_path / "old-run"  # a run that trained with it on cannot be resumed without it
+    assert main(["train", "obstacles", "--steps", "256", "--envs", "4", "--out", str(old), "--no-progress",
+                 "--set", "network=small-cnn"]) == 0
+    config_file = old / "config.json"
+    saved = json.loads(config_file.read_text())
+    saved["task_config"][name] = True
+    config_file.write_text(json.dumps(saved))
+    capsys.readouterr()
+    assert main(["train", "--resume", str(old), "--steps", "512", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--resume" in err[0] and name in err[0], err
     path = tmp_path / "c.mmrl"
     write_controller(path, synthetic_db, random_obstacle_policy(2), "obstacles", config())
     sections = read_sections(path)

@@ -9,6 +9,7 @@ from typing import Any, Dict
 from ..errors import InputError
 from ..rl.quality_log import MatchQualityLog
 from ..tasks import Task, get_task, task_names
+from ..tasks.options import check_retired
 from .common import (add_data_options, apply_values, bounded_int, check_ppo_overrides, count, deprecated_alias,
                      positive_float, positive_int, report_training, resolve_run, seed, split_overrides,
                      task_flag_options)
@@ -109,6 +110,10 @@ def _configs(task: Task, args, saved: Dict[str, Any]):
     cfg = ppo.PPOConfig(seed=args.seed)
     apply_values(cfg, dict(task.ppo_defaults))
     if saved:
+        try:  # a run that ran a retired option cannot go on without it
+            check_retired(type(task_cfg), saved.get("task_config", {}))
+        except ValueError as e:
+            raise InputError(f"--resume: {e}") from None
         apply_values(task_cfg, {k: v for k, v in saved.get("task_config", {}).items() if hasattr(task_cfg, k)})
         apply_values(cfg, {k: v for k, v in saved.get("ppo", {}).items() if hasattr(cfg, k)})
     sets = list(args.set)

@@ -456,7 +456,7 @@ class Task:
         ``strict`` (then TypeError); a retired option on: ValueError (``options.check_retired``)."""
         check_retired(self.config_type, values)
         names = {f.name for f in fields(self.config_type)}
-        unknown = [k for k in values if k not in names]
+        unknown = [k for k in values if k not in names and k not in self.config_type.retired]
         if unknown and strict:
             raise TypeError(f"unknown {self.name} option {unknown[0]!r}; options are {sorted(names)}")
         return self.config_type(**{k: v for k, v in values.items() if k in names})
