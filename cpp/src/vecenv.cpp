@@ -12,7 +12,7 @@ namespace {
 std::string number_text(double v) {
   if (std::isinf(v)) return v > 0 ? "inf" : "-inf";
   char buf[32];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
+  std::snprintf(buf, sizeof buf, "%.7g", v);  // float32 options: 0.6, not 0.600000024
   return buf;
 }
 

@@ -1,7 +1,7 @@
 // Candidate rules by registration: a rule that changes which frame plays (which candidate a
-// decision picks) is one class and one registration, and every decision path honours it: the
-// batched envs, the full path and mmrl play (through the env's decide), the engine runtime and
-// the C interface (through the env of the task's core), for both motion sources (a rule prices
+// decision picks) is one class and one registration, and every decision path of a task honours
+// it: the batched envs, the full path and mmrl play (through the env's decide), the engine
+// runtime and the C interface (through the env of the task's core), for both motion sources (a rule prices
 // a Candidate: a database row, or a compressed controller's state with its features only).
 //
 // Each env of every task holds one instance of each registered rule that its config turns on
@@ -11,6 +11,9 @@
 // candidates through extra_cost, so a rule only adds cost (>= 0; +inf refuses) and the search
 // stays exact under it. When the rule refuses every candidate the decision falls back to the
 // rules below it (decision.hpp).
+//
+// (mmrl.Character.step, a character deciding outside any task, uses the clip costs only:
+// database_source.hpp's DatabaseDecider.)
 //
 // Adding a rule: a class deriving from CandidateRule (its cost, and prepare if it needs the
 // character's state), its option in the task config's table (task_config.hpp) if it has one,
@@ -37,7 +40,8 @@ class CandidateRule : public CandidateFilter {
   float extra_cost(const Candidate& c) const final {
     const float below = below_ ? below_->extra_cost(c) : 0.0f;
     if (!(below < std::numeric_limits<float>::infinity())) return below;
-    return below + cost(c);
+    const float own = cost(c);
+    return own > 0.0f || own != own ? below + own : below;  // a negative cost counts as 0; NaN refuses
   }
   const CandidateFilter* fallback() const final { return below_; }
 

@@ -90,7 +90,6 @@ RuntimeTaskType obstacles_runtime_task() {
         f.fail(std::string("task.") + key + " is on: an experiment's option this runtime no longer has " +
                "(docs/obstacles.md, \"Retired options\")");
     }
-    if (config->num_obstacles < 0 || config->num_obstacles > 100000) f.fail("task.num_obstacles out of range");
     task.num_obstacles = config->num_obstacles;
     task.path_filter = config->path_filter;
     task.config = std::move(config);

@@ -16,7 +16,12 @@ constexpr int kMaxRebuildInterval = 16;
 // Validates the task config and derives the obstacle field's config from it.
 ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c) {
   // Every option's range is checked by the env template (check_options); the rules between them here.
-  if (!(c.obstacle_max_speed <= c.speed_cap)) throw std::invalid_argument("obstacle_max_speed must be in [0, speed_cap]");
+  if (!(c.obstacle_max_speed <= c.speed_cap))
+    throw std::invalid_argument("obstacle_max_speed must be in [0, speed_cap], got " + std::to_string(c.obstacle_max_speed) +
+                                " with speed_cap " + std::to_string(c.speed_cap));
+  if (!(c.obstacle_min_side <= c.obstacle_max_side))
+    throw std::invalid_argument("obstacle_min_side must be <= obstacle_max_side, got " +
+                                std::to_string(c.obstacle_min_side) + " > " + std::to_string(c.obstacle_max_side));
   if (!(db.fps > 0)) throw std::invalid_argument("database fps must be positive");
   // A body that does not fit in the sensor map's half or the obstacle square cannot be steered
   // by what it senses: refuse such a task rather than train on it.

@@ -148,8 +148,10 @@ def cmd_train(args: argparse.Namespace) -> int:
     if args.task is None and not args.resume:
         raise InputError(f"train: name the task ({', '.join(task_names())}), e.g. mmrl train plane --seconds 60")
     if getattr(args, "list_options", False):
-        print(options_text(get_task(args.task)) if args.task else "--list-options: name the task")
-        return 0 if args.task else 2
+        if not args.task:
+            raise InputError("--list-options: name the task, e.g. mmrl train obstacles --list-options")
+        print(options_text(get_task(args.task)))
+        return 0
     if args.resume:
         resumed = RunDir(args.resume, require_run=True)
         if args.task is None:

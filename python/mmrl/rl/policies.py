@@ -117,8 +117,8 @@ class JoystickPolicy:
         return out
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """Actions (N, 12) in the env's normalized units for observations (N, 17), (N, 529) or (N, 543),
-        each possibly followed by a request code (docs/styles.md)."""
+        """Actions (N, 12) in the env's normalized units for observations (N, 17) or (N, 529), each
+        possibly followed by a request code (docs/styles.md)."""
         obs = np.asarray(obs)
         if obs.ndim != 2 or obs.shape[1] < OBSERVATION_DIMS[0]:
             raise ValueError(f"obs: expected shape (N, D) with D in {OBSERVATION_DIMS} (plane, obstacles), "
