@@ -34,7 +34,6 @@ void check_option(const char* name, double value, const OptionRange& r) {
 }
 
 void check_task_config(const TaskConfig& c) {
-  check_frames_per_step(c.frames_per_step);
   if (!(c.target_half_extent > c.min_target_distance))
     throw std::invalid_argument("target_half_extent must be larger than min_target_distance, got " +
                                 number_text(c.target_half_extent) + " <= " + number_text(c.min_target_distance));

@@ -13,6 +13,7 @@ import numpy as np
 
 from .. import _core
 from ..motion.database import POSE_DIM, TRAJECTORY_DIM, Database
+from ..tasks.layout import obs_segment
 
 #: Observation sizes the scripted policies read: the plane task's and the moving-obstacles task's.
 _OBSTACLE_GOAL = sum(size for name, size in _core.ObstacleVecEnv.layout if name != "goal")
@@ -84,14 +85,11 @@ class JoystickPolicy:
     def bind_layout(self, layout) -> "JoystickPolicy":
         """Read g_t where the env's ``observation_layout`` ((name, size), ...) puts the "goal"
         segment (the episode loops call it through ``policy_actions``). Returns self."""
-        start = 0
-        for name, size in layout:
-            if name == "goal":
-                self._goal = start
-                return self
-            start += int(size)
-        raise ValueError(f"layout: the joystick reads the 'goal' segment, which this observation lacks "
-                         f"({', '.join(n for n, _ in layout)})")
+        try:
+            self._goal = obs_segment(layout, "goal").start
+        except KeyError as e:
+            raise ValueError(f"layout: the joystick reads the goal, but {e.args[0]}") from None
+        return self
 
     @classmethod
     def preset(cls, db: Database, name: str) -> "JoystickPolicy":

@@ -106,9 +106,8 @@ void visit_task_config_fields(Visit&& v) {
     "Per conditioned group, the probability that an episode's request leaves it free.");
 }
 
-// The base's cross-field rules (std::invalid_argument naming the fields): frames_per_step
-// within the decision's reach, target_half_extent larger than min_target_distance. The ranges
-// are check_options'. (clip_costs needs the database: ClipCostFilter checks it.)
+// The base's cross-field rule (std::invalid_argument naming the fields): target_half_extent
+// larger than min_target_distance. The ranges (frames_per_step's included) are check_options'. (clip_costs needs the database: ClipCostFilter checks it.)
 void check_task_config(const TaskConfig& c);
 
 }  // namespace mmrl
