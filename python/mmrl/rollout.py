@@ -29,7 +29,8 @@ import numpy as np
 
 from . import _core, metrics
 from .character import Character
-from .motion.database import POSE_DIM, TRAJECTORY_DIM, Database
+from .motion.database import POSE_DIM, Database
+from .motion.playback import playback_of
 from .tasks import Task
 from .tasks.layout import obs_segment
 
@@ -174,14 +175,10 @@ class FullPath:
         self.continuous = bool(continuous)
         self.env = task.make_vector_env(1, db=db, config=config, num_threads=1)
         self.compressed = compressed
-        if compressed is not None:
-            if request:
-                raise ValueError("request: a compressed controller keeps to no tags (its projector searches every "
-                                 "clip it learned); play requests with the database")
-            if compressed.num_joints != db.num_joints:
-                raise ValueError(f"compressed: {compressed.path} has {compressed.num_joints} joints, the database "
-                                 f"{db.num_joints}")
-            self.env._core.set_compressed(compressed.core)
+        self.playback = playback_of(db, compressed)  # how the character shows the env's decisions
+        if request:
+            self.playback.check_request(request)
+        self.playback.attach(self.env)
         self.request = ""
         self.request_clips: Optional[np.ndarray] = None  # (C,) bool of the request's clips; None: every clip
         if request:
@@ -208,20 +205,15 @@ class FullPath:
 
     def _start_episode(self) -> None:
         s = self.env.env_state(0)
-        if self.compressed is not None:
-            row = self.compressed.decode(self.env._core.compressed_state(0)[None])[0]
-            self.character.reset_row(row, (float(s["x"]), float(s["z"])), float(s["yaw"]))
-        else:
-            self.character.reset(int(s["frame"]), (float(s["x"]), float(s["z"])), float(s["yaw"]))
+        self.playback.start(self.character, self.env, 0, (s["x"], s["z"], s["yaw"]))
         self.target = np.array(s["target"], np.float64)
         self.episode_steps = 0
 
     def set_request(self, request: str) -> None:
         """Pin a request (``""`` for every clip) from the next decision on (ValueError listing the
-        tags available when it names an unknown one or selects nothing; a compressed controller
-        takes none)."""
-        if request.strip() and getattr(self, "compressed", None) is not None:
-            raise ValueError("request: a compressed controller keeps to no tags (docs/compressed.md)")
+        tags available when it names an unknown one or selects nothing, or when the motion source
+        keeps to none)."""
+        self.playback.check_request(request)
         self.obs = self.env.set_request(0, request)
         self.request = self.env.request(0)
         self.request_clips = (None if not self.request else
@@ -239,9 +231,8 @@ class FullPath:
         ``target_half_extent``, not too close) around the character, from the env's own random
         stream (the C++ rule, not a copy of it)."""
         x, z, yaw = self.character.root
-        if self.compressed is not None:  # where the playback ended (the env's autoreset drew a new start)
-            self.env._core.set_compressed_state(0, self.env._core.compressed_played(0))
-        self.env.set_state(0, self.character.frame, x, z, yaw)  # frame -1 (compressed): the env keeps its state
+        self.playback.keep_played(self.env, 0)  # the env's autoreset drew a new start since
+        self.env.set_state(0, self.character.frame, x, z, yaw)  # frame -1 (no database frame): the env keeps its state
         if target is None:
             target = self.env._core.draw_target_around_root(0, float(self.config.target_half_extent))
         self.set_target(float(target[0]), float(target[1]))
@@ -259,11 +250,7 @@ class FullPath:
         obs, reward, term, trunc, info = self.env.step(a)
         # The controller plays the env's decision; it never decides again, so it cannot drift.
         match, cost = self.env.last_step_decision(0)
-        if self.compressed is not None:
-            res = self.character.play_rows(self.env._core.compressed_rows(0), bool(self.env._step_transitions[0]), cost,
-                                      a[0])
-        else:
-            res = self.character.play(match, cost, a[0])
+        res = self.playback.play(self.character, self.env, 0, match, cost, a[0])
         self.episode_steps += 1
         done = bool(term[0] or trunc[0])
         shown = int(self.env.step_frames[0])
@@ -487,9 +474,8 @@ class FollowLog:
         self.per_step["query_frames"].append(self.frames_so_far() - 1)
         self.per_step["query_points"].append(points.astype(np.float32))
         self.per_step["query_directions"].append(directions.astype(np.float32))
-        if self.run.compressed is not None:  # what the decision played: the projection or the continuation
-            self.per_step.setdefault("match_features", []).append(
-                self.run.env._core.compressed_chosen(0)[POSE_DIM:POSE_DIM + TRAJECTORY_DIM].astype(np.float32))
+        for key, value in self.run.playback.step_values(self.run.env, 0).items():
+            self.per_step.setdefault(key, []).append(value)
         for key, value in out.get("scene_step", {}).items():
             self.per_step.setdefault(key, []).append(value)
         # A continuous run shows the whole step; a cut one only up to the ending frame.

@@ -17,6 +17,7 @@ from .. import _core
 from .pose import pose_dim, pose_layout
 from .files import CompressedFileError, all_networks_from, load_compressed, stage_of
 from .networks import CompressData
+from .playback import CompressedPlayback
 
 __all__ = ["CompressedModel", "linear_layers"]
 
@@ -73,6 +74,10 @@ class CompressedModel:
     def memory_bytes(self) -> int:
         """Bytes of the networks the runtime keeps (decompressor, stepper, projector, normalizations)."""
         return int(self.core.memory_bytes)
+
+    def playback(self, db) -> "CompressedPlayback":
+        """How the full path shows this controller's decisions (:mod:`mmrl.compress.playback`)."""
+        return CompressedPlayback(self, db)
 
     def decode(self, states: np.ndarray) -> np.ndarray:
         """Pose rows (N, 9 J + 5) of states (N, 27 + latent)."""

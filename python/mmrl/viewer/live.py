@@ -97,8 +97,7 @@ class LiveSession:
         the tags available), applied at the next decision, like a new target."""
         from .. import _core
 
-        if request.strip() and self.run.compressed is not None:
-            raise ValueError("a compressed controller keeps to no tags (docs/compressed.md)")
+        self.run.playback.check_request(request)
         canon = _core.select_request(self.db._db, request)[0] if request.strip() else ""
         with self._lock:
             self._pending["request"] = canon
@@ -186,8 +185,7 @@ class LiveSession:
         self.last, self.k = res, 0
         self.decisions += 1
         self.window.append(res)
-        chosen = (run.env._core.compressed_chosen(0) if run.compressed is not None else  # the projection
-                  self.db.normalized_features[res.match])
+        chosen = run.playback.chosen_features(run.env, 0, res.match)
         match_points, match_directions = _world_query(
             self.db, np.asarray(chosen[POSE_DIM:POSE_DIM + 12], np.float32), root_before)
         self.shown.update(query_points=points, query_directions=directions, match_points=match_points,
@@ -203,18 +201,13 @@ class LiveSession:
                                    inertialization_halflife=0.1 if self.inertialization else 0.0, ik=self.ik,
                                    foot_locking=self.ik, action_limit_std=self.config.action_limit_std,
                                    transition_cost=self.config.transition_cost,
-                                   start_frame=None if frame < 0 else frame, position=(x, z), yaw=yaw)
-        if self.run.compressed is not None:  # start the new character on the pose shown now
-            row = self.run.compressed.decode(self.run.env._core.compressed_state(0)[None])[0]
-            self.run.character.reset_row(row, (x, z), yaw)
-        self._wrap_controller_timing()
+                                   position=(x, z), yaw=yaw)
+        self.run.playback.restart(self.run.character, self.run.env, 0, frame, (x, z, yaw))  # the pose shown now
 
     def _wrap_controller_timing(self) -> None:
-        """Time the character's playback of each decision: ``play`` (the database) and
-        ``play_rows`` (a compressed controller), what the full path calls."""
-        ctrl = self.run.character
-        for name in ("play", "play_rows"):
-            setattr(ctrl, name, self._timed(getattr(ctrl, name)))
+        """Time the character's playback of each decision: the playback's ``play``, what the full
+        path calls whatever the motion source."""
+        self.run.playback.play = self._timed(self.run.playback.play)
 
     def _timed(self, inner):
         def timed(*args, **kwargs):
@@ -271,17 +264,10 @@ class LiveSession:
         if not hasattr(env, "path_hits"):
             return None
         state = env.env_state(0)
-        frame = int(state["frame"])
-        if getattr(self.run, "compressed", None) is not None:  # the state's own path (docs/compressed.md)
-            feats = np.ascontiguousarray(env._core.compressed_state(0)[:27])
-            raw = np.ascontiguousarray(self.db.denormalize(feats)[15:], np.float32)
-            local = np.asarray(_core.trajectory_path(raw), np.float64)
-            hit = int(env.state_path_hits(0, feats[None])[0])
-        elif not self.db.valid_mask[frame]:
+        path = self.run.playback.continuation(env, 0)  # the path the motion shown now would take
+        if path is None:
             return None
-        else:
-            local = np.asarray(self.db.path_samples[frame], np.float64)
-            hit = int(env.path_hits(0, np.array([frame], np.int64))[0])
+        local, hit = path
         c, s = np.cos(state["yaw"]), np.sin(state["yaw"])
         world = local @ np.array([[c, s], [-s, c]]).T + np.array([state["x"], state["z"]])
         inside = (np.asarray(_core.PATH_SAMPLE_FRAMES) >= hit) if hit > 0 else np.zeros(len(world), bool)
