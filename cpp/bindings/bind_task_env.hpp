@@ -9,28 +9,10 @@
 #include <type_traits>
 
 #include "bind_compressed.hpp"
-#include "bindings.hpp"
 #include "mmrl/vecenv.hpp"
 #include "py_matcher.hpp"
 
 namespace mmrl {
-
-// Env index i of wrapper s (an object with an `env` member), or IndexError naming the range.
-template <class Wrapper>
-int checked_env_index(const Wrapper& s, int i) {
-  if (i < 0 || i >= s.env.num_envs())
-    throw py::index_error("env index " + std::to_string(i) + " out of range [0, " + std::to_string(s.env.num_envs()) +
-                          ")");
-  return i;
-}
-
-// The compressed controller wrapper s's env plays, or ValueError naming the method.
-template <class Wrapper>
-const CompressedModel& compressed_of(const Wrapper& s, const char* method) {
-  const CompressedModel* m = s.env.compressed();
-  if (m == nullptr) throw py::value_error(std::string(method) + ": no compressed controller is set");
-  return *m;
-}
 
 // An observation layout as Python reads it: a tuple of (name, size).
 inline py::tuple layout_tuple(const ObsLayout& layout) {
@@ -136,7 +118,7 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* ste
        py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
       .def_property_readonly("num_envs", [](const Wrapper& s) { return s.env.num_envs(); })
       .def_property_readonly_static("core_name", [](py::object) { return std::string(Env::kCoreName); })
-      .def_property_readonly_static("plays_compressed", [](py::object) { return Env::kPlaysCompressed; })
+      .def_property_readonly_static("plays_compressed", [](py::object) { return true; })
       .def_property_readonly("obs_dim", [](const Wrapper& s) { return s.env.obs_dim(); })
       .def_property_readonly(
           "obs_layout", [](const Wrapper& s) { return layout_tuple(s.env.obs_layout()); },
@@ -239,58 +221,6 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* ste
           py::arg("index"), py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"),
           "Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.")
       .def(
-          "set_compressed",
-          [](Wrapper& s, PyCompressed* model) {
-            if (model == nullptr) {
-              s.env.set_compressed(nullptr, nullptr);
-              return;
-            }
-            if (model->num_frame_states != s.env.database().num_frames)
-              throw py::value_error("set_compressed: the model has " + std::to_string(model->num_frame_states) +
-                                    " frame states, the database " + std::to_string(s.env.database().num_frames) +
-                                    " frames");
-            s.env.set_compressed(&model->model, model->frame_states.data());
-          },
-          py::arg("model"), py::keep_alive<1, 2>(),
-          "Plays a compressed controller (CompressedModel with the database's frame states) instead of the database, "
-          "from the next episode start (every env restarts its state from its frame now); None: the database again.")
-      .def(
-          "compressed_rows",
-          [](const Wrapper& s, int i) {
-            const CompressedModel& m = compressed_of(s, "compressed_rows");
-            const py::ssize_t F = s.env.config().frames_per_step + 1, P = m.pose_dim();
-            return py::array_t<float>({F, P}, s.env.motion(checked_env_index(s, i)).crows.data());
-          },
-          py::arg("index"), "Env i's last decision's pose rows (frames_per_step + 1, pose_dim): row 0 the chosen state.")
-      .def(
-          "compressed_state",
-          [](const Wrapper& s, int i) {
-            return py::array_t<float>(compressed_of(s, "compressed_state").state_dim(),
-                                      s.env.motion(checked_env_index(s, i)).cstate.data());
-          },
-          py::arg("index"), "Env i's compressed state shown now (state_dim).")
-      .def(
-          "compressed_played",
-          [](const Wrapper& s, int i) {
-            return py::array_t<float>(compressed_of(s, "compressed_played").state_dim(),
-                                      s.env.motion(checked_env_index(s, i)).cnext.data());
-          },
-          py::arg("index"), "The state at the end of env i's last playback (kept through the autoreset).")
-      .def(
-          "compressed_chosen",
-          [](const Wrapper& s, int i) {
-            return py::array_t<float>(compressed_of(s, "compressed_chosen").state_dim(),
-                                      s.env.motion(checked_env_index(s, i)).cchosen.data());
-          },
-          py::arg("index"), "The state env i's last decision chose (the projection or the continuation; state_dim).")
-      .def(
-          "set_compressed_state",
-          [](Wrapper& s, int i, const py::handle& state) {
-            auto a = check_array<float>(state, "state", {compressed_of(s, "set_compressed_state").state_dim()});
-            s.env.set_compressed_state(checked_env_index(s, i), a.data());
-          },
-          py::arg("index"), py::arg("state"), "Sets env i's compressed state (state_dim, finite).")
-      .def(
           "draw_target_around_root",
           [](Wrapper& s, int i, float half_extent) {
             const int e = checked_env_index(s, i);
@@ -329,6 +259,7 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* ste
             return out;
           },
           "The requests training draws per episode: (text, probability) pairs ([] without request_groups).");
+  bind_compressed_env(c);  // set_compressed and the compressed state's accessors (bind_compressed.hpp)
 }
 
 }  // namespace mmrl

@@ -87,4 +87,13 @@ template <class T>
 py::array make_view(const T* data, std::vector<py::ssize_t> shape, py::handle owner);
 py::array skeleton_offsets(const Skeleton& sk);
 py::dict roles_to_dict(const Skeleton& sk, const JointRoles& roles);
+// Env index i of wrapper s (an object with an `env` member), or IndexError naming the range.
+template <class Wrapper>
+int checked_env_index(const Wrapper& s, int i) {
+  if (i < 0 || i >= s.env.num_envs())
+    throw py::index_error("env index " + std::to_string(i) + " out of range [0, " + std::to_string(s.env.num_envs()) +
+                          ")");
+  return i;
+}
+
 }  // namespace mmrl

@@ -180,7 +180,7 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   c->times_.search_tree = seconds_since(t0);
   try {  // the task env's own checks of its config (and of the clip costs), once, at load
     const std::unique_ptr<RuntimeTaskEnv> env = c->task_type_->make_env(c->db_, *c->matcher_, c->task_);
-    if (c->compressed_) env->set_compressed(*c->compressed_, c->frame_states_.data(), c->action_box_);
+    if (c->source_) env->set_source(c->source_, c->action_box_);
     c->task_.layout = env->layout();
     Character(c->db_, c->options_);
   } catch (const std::invalid_argument& e) {
@@ -230,8 +230,7 @@ RuntimeCharacter::RuntimeCharacter(std::shared_ptr<const RuntimeController> cont
   angles_.assign(cap, 0.0f);
   // The env's motion source holds the character's place in its motion from now on (a
   // compressed controller's state, or the frame the character shows); the character shows it.
-  if (const CompressedModel* m = controller_->compressed())
-    env_->set_compressed(*m, controller_->frame_states(), controller_->action_box());
+  if (controller_->motion_source()) env_->set_source(controller_->motion_source(), controller_->action_box());
   env_->start(start_frame, yaw);
   env_->source().show(character_, env_->motion(), RootState{x, z, wrap_angle(yaw)});
   pose_.num_joints = controller_->num_joints();

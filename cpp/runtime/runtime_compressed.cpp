@@ -4,6 +4,7 @@
 #include <memory>
 #include <string>
 
+#include "mmrl/compressed_source.hpp"
 #include "mmrl/runtime.hpp"
 
 namespace mmrl {
@@ -66,6 +67,7 @@ void RuntimeController::read_compressed(const ControllerFile& file) {
     if (!(box[k] <= box[kTrajectoryDim + k])) file.fail("section 'lmm.action_box': low must be <= high");
   std::copy(box.begin(), box.end(), action_box_);
   compressed_ = std::move(model);
+  source_ = std::make_shared<CompressedSource>(db_, *compressed_, frame_states_.data());
 }
 
 }  // namespace mmrl

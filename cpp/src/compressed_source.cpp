@@ -1,6 +1,7 @@
 #include "mmrl/compressed_source.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -25,6 +26,12 @@ void CompressedSource::prepare(MotionState& s, int frames_per_step) const {
   s.cnext.assign(S, 0.0f);
   s.crows.assign(static_cast<size_t>(frames_per_step + 1) * model_->pose_dim(), 0.0f);
   s.cscratch = model_->make_scratch();
+}
+
+void CompressedSource::set_state(MotionState& s, const float* state) const {
+  for (size_t k = 0; k < s.cstate.size(); ++k)
+    if (!std::isfinite(state[k])) throw std::invalid_argument("set_state: the state is not finite");
+  std::copy(state, state + s.cstate.size(), s.cstate.begin());
 }
 
 void CompressedSource::start(MotionState& s, int64_t frame) const {

@@ -7,6 +7,10 @@
 
 namespace mmrl {
 
+void MotionSource::set_state(MotionState&, const float*) const {
+  throw std::invalid_argument("set_state: this motion source shows database frames (set its frame instead)");
+}
+
 const float* candidate_raw_trajectory(const Database& db, const Candidate& c, float* scratch) {
   if (c.row >= 0) return &db.features[static_cast<size_t>(c.row) * kFeatureDim + kPoseDim];
   trajectory_denormalize(db, c.features + kPoseDim, scratch);

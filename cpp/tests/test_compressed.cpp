@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <limits>
+#include <memory>
 #include <new>
 #include <random>
 #include <vector>
@@ -16,6 +17,7 @@
 #include "env_test_database.hpp"
 #include "mmrl/character.hpp"
 #include "mmrl/compressed.hpp"
+#include "mmrl/compressed_source.hpp"
 #include "mmrl/tasks/plane.hpp"
 
 namespace {
@@ -275,7 +277,7 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
       states[f * m.state_dim() + k] = k < kFeatureDim ? db.normalized[f * kFeatureDim + k] : 0.0f;
   PlaneTaskConfig config;
   PlaneVecEnv env(db, matcher(), 1, config, 1);
-  env.set_compressed(&m, states.data());
+  env.set_source(std::make_shared<CompressedSource>(db, m, states.data()));
   std::vector<float> obs(env.obs_dim());
   env.reset(7, obs.data());
   CharacterOptions o;
@@ -316,8 +318,8 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
   unpacked.stepper = random_mlp(rng9, {m.state_dim(), 16, m.state_dim()}, 0.02f);
   unpacked.check();
   EXPECT_FALSE(unpacked.prepared());
-  EXPECT_THROW(env.set_compressed(&unpacked, states.data()), std::invalid_argument);
-  EXPECT_THROW(env.set_compressed(&other, states.data()), std::invalid_argument);
+  EXPECT_THROW(env.set_source(std::make_shared<CompressedSource>(db, unpacked, states.data())), std::invalid_argument);
+  EXPECT_THROW(env.set_source(std::make_shared<CompressedSource>(db, other, states.data())), std::invalid_argument);
 }
 
 }  // namespace

@@ -14,6 +14,7 @@
 #include "compressed_test_model.hpp"
 #include "env_test_database.hpp"
 #include "mmrl/compressed.hpp"
+#include "mmrl/compressed_source.hpp"
 #include "mmrl/rules.hpp"
 #include "mmrl/runtime_task.hpp"
 #include "mmrl/tasks/plane.hpp"
@@ -145,7 +146,7 @@ TEST(CandidateRules, ACompressedControllersStatesArePricedByARegisteredRule) {
   g_weight = kWeight;
   PlaneVecEnv env(db, matcher(), 1, PlaneTaskConfig{}, 1);
   g_weight = 0.0f;
-  env.set_compressed(&m, states.data());
+  env.set_source(std::make_shared<CompressedSource>(db, m, states.data()));
   FootRule rule(kWeight);
   std::vector<float> obs(env.obs_dim());
   env.reset(2, obs.data());

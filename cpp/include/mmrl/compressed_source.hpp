@@ -37,6 +37,8 @@ class CompressedSource final : public MotionSource {
   }
   void play(Character& character, const MotionState& s, const Decision& d) const override;
   void show(Character& character, MotionState& s, const RootState& root) const override;
+  int state_dim() const override { return model_->state_dim(); }
+  void set_state(MotionState& s, const float* state) const override;
 
  private:
   const Database* db_;

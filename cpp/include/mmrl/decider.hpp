@@ -88,6 +88,12 @@ class MotionSource {
   virtual bool rowless_candidates() const = 0;
   // Puts a character on what s shows now, at the world root (no blend, no locks).
   virtual void show(Character& character, MotionState& s, const RootState& root) const = 0;
+  // The floats of a state a caller may set (set_state): 0 when what is shown is a database
+  // frame and nothing more.
+  virtual int state_dim() const { return 0; }
+  // Sets what s shows from state_dim() floats (std::invalid_argument when not finite, or when
+  // the source has no such state).
+  virtual void set_state(MotionState& s, const float* state) const;
 };
 
 // A candidate's trajectory features in raw units (meters and unit directions, the character

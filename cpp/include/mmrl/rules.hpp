@@ -5,9 +5,11 @@
 // a Candidate: a database row, or a compressed controller's state with its features only).
 //
 // Each env of every task holds one instance of each registered rule that its config turns on
-// (CandidateRuleType::make), chained over the env's request and clip costs (vecenv.hpp's
-// rule_chain); a task's own filter (the obstacles' path filter) sits on top. Before each
-// decision the env prepares the rule for the character's state; the search then prices
+// (CandidateRuleType::make), built once from the config. The builtin rules come first: the clip
+// costs (task.clip_costs), then the env's request (its clips only). Before each decision the env
+// prepares every rule for the character (RuleContext) and chains the ones that price this
+// decision, in registration order, each over the ones before it (vecenv.hpp's rule_chain); a
+// task's own filter (the obstacles' path filter) sits on top. The search then prices
 // candidates through extra_cost, so a rule only adds cost (>= 0; +inf refuses) and the search
 // stays exact under it. When the rule refuses every candidate the decision falls back to the
 // rules below it (decision.hpp).
@@ -26,16 +28,25 @@
 #include <vector>
 
 #include "mmrl/decider.hpp"
+#include "mmrl/tags.hpp"
 #include "mmrl/tasks/task_config.hpp"
 
 namespace mmrl {
+
+// What a rule may read of the character before a decision.
+struct RuleContext {
+  const MotionSource& source;
+  const MotionState& state;         // the candidate it shows: source.current(state)
+  const RequestSelection& request;  // the clips it keeps to now (restricts(): some only)
+};
 
 class CandidateRule : public CandidateFilter {
  public:
   // The rules below this one, or null.
   void set_below(const CandidateFilter* below) { below_ = below; }
-  // Before each decision of a character in state s (the candidate it shows: source.current(s)).
-  virtual void prepare(const MotionSource& /*source*/, const MotionState& /*s*/) {}
+  // Before each decision of a character: returns whether this rule prices the decision (false
+  // leaves it out of the chain, which then runs as if the rule were off).
+  virtual bool prepare(const RuleContext& /*context*/) { return true; }
   // The cost of the rules below, plus this rule's own (refused below: refused).
   float extra_cost(const Candidate& c) const final {
     const float below = below_ ? below_->extra_cost(c) : 0.0f;

@@ -76,6 +76,9 @@ class RuntimeController {
   const CompressedModel* compressed() const { return compressed_.get(); }
   const float* frame_states() const { return frame_states_.data(); }
   const float* action_box() const { return action_box_; }  // low (12), high (12); compressed files
+  // The motion source the characters decide over when it is not the database (a compressed
+  // controller's: compressed_source.hpp), or null.
+  const std::shared_ptr<const MotionSource>& motion_source() const { return source_; }
   // Bytes held: the database's arrays, the search tree, the policy's weights and (compressed)
   // the networks and start states.
   size_t memory_bytes() const;
@@ -89,6 +92,7 @@ class RuntimeController {
   Database db_;
   std::unique_ptr<CompressedModel> compressed_;
   std::vector<float> frame_states_;
+  std::shared_ptr<const MotionSource> source_;  // over compressed_ and frame_states_, or null
   float action_box_[2 * kTrajectoryDim] = {};
   std::unique_ptr<Matcher> matcher_;  // borrows db_.normalized
   PolicyNet policy_;

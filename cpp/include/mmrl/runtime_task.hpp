@@ -57,9 +57,9 @@ class RuntimeTaskEnv {
   virtual const MotionSource& source() const = 0;
   virtual MotionState& motion() = 0;
   virtual const Decision& decision() const = 0;
-  // A compressed controller instead of the database (frame_states: a row per database frame;
-  // box: the training database's action box, 12 + 12).
-  virtual void set_compressed(const CompressedModel& model, const float* frame_states, const float* box) = 0;
+  // Another motion source instead of the database (a compressed controller's), with the
+  // training database's action box (12 + 12).
+  virtual void set_source(std::shared_ptr<const MotionSource> source, const float* box) = 0;
   // Puts the env's character on database frame `frame` (-1 keeps a compressed state) facing yaw.
   virtual void start(int64_t frame, float yaw) = 0;
   virtual void set_request(const std::string& request) = 0;
@@ -132,8 +132,8 @@ class RuntimeTaskEnvOf : public RuntimeTaskEnv {
   const MotionSource& source() const override { return env_.source(); }
   MotionState& motion() override { return env_.state(0); }
   const Decision& decision() const override { return env_.state(0).decision; }
-  void set_compressed(const CompressedModel& model, const float* frame_states, const float* box) override {
-    env_.set_compressed(&model, frame_states);
+  void set_source(std::shared_ptr<const MotionSource> source, const float* box) override {
+    env_.set_source(std::move(source));
     env_.set_action_box(box, box + kTrajectoryDim);
   }
   void start(int64_t frame, float yaw) override { env_.set_state(0, frame, 0.0f, 0.0f, wrap_angle(yaw)); }

@@ -7,9 +7,9 @@
 // The empty request (or "*") selects every clip. A clip satisfies a request when, for every
 // term, it carries one of the term's tags.
 //
-// Every decision path honours a request through one candidate filter (RequestFilter): the
-// batched envs (vecenv.hpp keeps one per env), the full path (which plays the env's
-// decisions), the engine runtime (a one-env env) and the viewer. A policy is told the request
+// Every decision path honours a request through one candidate filter (RequestFilter), the
+// builtin request rule of every env's rule chain (rules.hpp): the batched envs, the full path
+// (which plays the env's decisions), the engine runtime and the viewer. A policy is told the request
 // by its code (RequestCode): for each group it is conditioned on, one float per value of the
 // group, 1 for the values the request allows there (all 0: the request leaves the group free).
 #pragma once

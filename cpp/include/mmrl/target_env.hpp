@@ -50,7 +50,6 @@ struct TargetEnvState : MotionState {
   int request_index = -1;
   RequestSelection pinned_request;
   std::vector<float> pinned_code;
-  RequestFilter request_filter;  // set for each decision (TargetVecEnv::request_filter)
 };
 
 // A task's observation, segment by segment in order (name, floats): what a policy, a network

@@ -29,8 +29,8 @@
 // State derives from TargetEnvState (target_env.hpp, with the step records and start rules).
 //
 // The motion: each env decides through one Decider (decider.hpp) over the env's motion source,
-// the database (database_source.hpp) or a compressed controller (compressed_source.hpp, after
-// set_compressed); a task reads what it needs of the motion through source() and the decision
+// the database (database_source.hpp) or another one set by set_source (compressed_source.hpp's);
+// a task reads what it needs of the motion through source() and the decision
 // record, never asking which source it has.
 #pragma once
 
@@ -42,7 +42,6 @@
 
 #include <memory>
 
-#include "mmrl/compressed_source.hpp"
 #include "mmrl/database_source.hpp"
 #include "mmrl/rules.hpp"
 #include "mmrl/target_env.hpp"
@@ -59,7 +58,7 @@ class TargetVecEnv {
   const Database& database() const { return db_; }
   const float* action_low() const { return decider_.action_low(); }
   const float* action_high() const { return decider_.action_high(); }
-  // The motion source every env plays now (the database, or a compressed controller).
+  // The motion source every env plays now (the database, or set_source's).
   const MotionSource& source() const { return *source_; }
   State& state(int i) { return envs_[i]; }
   const State& state(int i) const { return envs_[i]; }
@@ -150,40 +149,22 @@ class TargetVecEnv {
   }
   bool request_pinned(int i) const { return envs_[i].request_pinned; }
 
-  // Compressed controllers (compressed_source.hpp). With a model, every env plays it instead
-  // of the database: decisions project the query and playback steps and decodes the networks.
-  // Episode starts still draw a database frame and start from its state: frame_states holds
-  // one row of state_dim floats per database frame (both borrowed, alive while set). Requests
-  // and clip costs do not price a projection; a task filter that prices states does (the
-  // obstacles task's collision-aware search, over the projections of its rules' projections
-  // fan). nullptr: back to the database. Throws std::invalid_argument for a model of another
-  // skeleton, or a task that cannot play one (Task::kPlaysCompressed).
-  void set_compressed(const CompressedModel* model, const float* frame_states) {
-    if (model == nullptr) {
-      compressed_source_.reset();
-      use_source(database_source_);
-      return;
-    }
-    if (!Task::kPlaysCompressed)
-      throw std::invalid_argument("this task does not play compressed controllers (the plane and obstacles tasks do)");
-    auto source = std::make_unique<CompressedSource>(db_, *model, frame_states);
-    compressed_source_ = std::move(source);
-    use_source(*compressed_source_);
+  // Another motion source for every env (e.g. compressed_source.hpp's compressed controller)
+  // instead of the database, over this env's database and alive while set: decisions and
+  // playback go through it. Every env restarts its motion on its frame now; episode starts still
+  // draw database frames (the source starts from them). nullptr: back to the database.
+  void set_source(std::shared_ptr<const MotionSource> source) {
+    other_source_ = std::move(source);
+    use_source(other_source_ ? *other_source_ : database_source_);
   }
-  const CompressedModel* compressed() const { return compressed_source_ ? &compressed_source_->model() : nullptr; }
-  // Env i's compressed state buffers (compressed_source.hpp's names), for the bindings of a
-  // compressed controller.
+  // Env i's motion (the source's state buffers), for the bindings.
   const MotionState& motion(int i) const { return envs_[i]; }
   // Moves env i to the end of its last decision's playback: what a step does after deciding,
   // for a caller that only decides (the engine runtime, whose character plays).
   void end_playback(int i) { source_->end_playback(envs_[i], envs_[i].decision, config_.frames_per_step); }
-  // Sets env i's compressed state (state_dim floats, finite; std::invalid_argument otherwise).
-  void set_compressed_state(int i, const float* state) {
-    if (compressed_source_ == nullptr) throw std::invalid_argument("set_compressed_state: no compressed controller is set");
-    for (size_t k = 0; k < envs_[i].cstate.size(); ++k)
-      if (!std::isfinite(state[k])) throw std::invalid_argument("set_compressed_state: the state is not finite");
-    std::copy(state, state + envs_[i].cstate.size(), envs_[i].cstate.begin());
-  }
+  // Sets what env i shows from the source's state (MotionSource::set_state; source().state_dim()
+  // floats, finite; std::invalid_argument otherwise).
+  void set_motion_state(int i, const float* state) { source_->set_state(envs_[i], state); }
   // Replaces the action box (12 + 12 normalized floats, low <= high): a controller file whose
   // database holds only its start frames carries the training database's box.
   void set_action_box(const float* low, const float* high) { decider_.set_action_box(low, high); }
@@ -199,7 +180,7 @@ class TargetVecEnv {
   // keeping its target, step count, return and RNG: e.g. to go on from where a full-path
   // character stands. The task refreshes what depends on the root (on_state_set). Throws
   // std::invalid_argument for a frame outside the database or a non-finite root.
-  // With a compressed controller, frame -1 keeps env i's compressed state (a database frame
+  // With a source that has states (MotionSource::state_dim), frame -1 keeps env i's state (a database frame
   // starts from that frame's state).
   void set_state(int i, int64_t frame, float x, float z, float yaw) {
     if (!source_->starts_at(frame)) throw std::invalid_argument("frame is outside the database");
@@ -215,9 +196,9 @@ class TargetVecEnv {
 
   // The decision of env i now for `action` (12 normalized floats, finite): the Decider with
   // the task's rules (decision_rules: its transition cost, candidate filters and shortlists).
-  // Records it as env i's decision (with the playback a compressed source prepares); changes
+  // Records it as env i's decision (with the playback its source prepares); changes
   // nothing else. A step calls it first; the engine runtime calls it on a one-env env to decide
-  // as training did. Returns the database frame to play from (-1 for a compressed state).
+  // as training did. Returns the database frame to play from (-1 for a candidate without a row).
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
     s.decision = decider_.decide(*source_, s, action, decision_rules(i));
@@ -229,7 +210,7 @@ class TargetVecEnv {
     rules.transition_cost = task().decision_transition_cost(i);
     rules.filter = task().candidate_filter(i);
     rules.shortlist = task().candidate_shortlist();
-    rules.projections = task().compressed_shortlist();
+    rules.projections = task().projection_shortlist();
     return rules;
   }
 
@@ -278,7 +259,6 @@ class TargetVecEnv {
     database_source_ = DatabaseSource(db, matcher);
     source_ = &database_source_;
     decider_ = Decider(db, config.action_limit_std);
-    clip_filter_ = ClipCostFilter(db, config.clip_costs);
     rules_.resize(envs_.size());
     for (auto& env_rules : rules_)
       for (const CandidateRuleType& type : candidate_rule_types())
@@ -364,7 +344,7 @@ class TargetVecEnv {
 
   // Hook of set_state for tasks whose state depends on the root (a task hides it).
   void on_state_set(int) {}
-  // Hook of set_compressed (a task hides it): after the source changed.
+  // Hook of set_source (a task hides it): after the source changed.
   void on_source_set() {}
 
   // The transition cost of env i's next match (a task hides it to make the bias depend on
@@ -372,29 +352,23 @@ class TargetVecEnv {
   float decision_transition_cost(int) const { return config_.transition_cost; }
 
   // The candidate filter of env i's next match (a task hides it to add its own on top of
-  // rule_chain): the registered rules over env i's request over the clip costs, or none.
-  const CandidateFilter* candidate_filter(int i) { return rule_chain(i, request_filter(i)); }
-  // Env i's registered rules (rules.hpp) chained over `below` and prepared for its state now;
-  // `below` itself when no rule is on.
-  const CandidateFilter* rule_chain(int i, const CandidateFilter* below) {
+  // rule_chain): the rules that price it (rules.hpp), chained.
+  const CandidateFilter* candidate_filter(int i) { return rule_chain(i); }
+  // Env i's rules (rules.hpp: the clip costs, its request, the registered ones) prepared for its
+  // state now, each that prices this decision chained over the ones before it; null when none does.
+  const CandidateFilter* rule_chain(int i) {
+    const RuleContext context{*source_, envs_[i], request(i)};
+    const CandidateFilter* below = nullptr;
     for (const auto& rule : rules_[static_cast<size_t>(i)]) {
+      if (!rule->prepare(context)) continue;
       rule->set_below(below);
-      rule->prepare(*source_, envs_[i]);
       below = rule.get();
     }
     return below;
   }
-  // The queries a compressed controller projects (shortlist_queries' fan; k is unused): the
+  // The queries a source of rowless candidates projects (shortlist_queries' fan; k is unused): the
   // query alone, unless a task's filter prices projections and wants its turned copies too.
-  Shortlist compressed_shortlist() const { return {}; }
-  // The base every task's filter builds on: env i's request (if it restricts the clips) over
-  // the clip costs (if any).
-  const CandidateFilter* request_filter(int i) {
-    const RequestSelection& r = request(i);
-    if (!r.restricts()) return clip_filter_.get();
-    envs_[i].request_filter.set(db_, r.clip_mask.data(), clip_filter_.get());
-    return &envs_[i].request_filter;
-  }
+  Shortlist projection_shortlist() const { return {}; }
   // The request code of env i (request_dim() floats) into out: all 0 without a request.
   void observe_request(int i, float* out) const {
     const State& s = envs_[i];
@@ -429,8 +403,6 @@ class TargetVecEnv {
   // playback (the source moves on).
   const float* played_delta(const State& s, int k) const { return source_->played_delta(s, s.decision, k); }
   void end_playback(State& s) { source_->end_playback(s, s.decision, config_.frames_per_step); }
-  // A task that plays compressed controllers says so.
-  static constexpr bool kPlaysCompressed = false;
   // Switches every env to `source` (prepared, and started on its frame) and tells the task.
   void use_source(const MotionSource& source) {
     source_ = &source;
@@ -446,10 +418,9 @@ class TargetVecEnv {
   Config config_;
   std::vector<State> envs_;
   DatabaseSource database_source_;
-  std::unique_ptr<CompressedSource> compressed_source_;
+  std::shared_ptr<const MotionSource> other_source_;  // set_source's, or null: the database
   const MotionSource* source_ = nullptr;
   Decider decider_;
-  ClipCostFilter clip_filter_;
   std::vector<std::vector<std::unique_ptr<CandidateRule>>> rules_;  // per env, rules.hpp's registered ones that are on
   RequestCode request_code_;
   RequestMix request_mix_;

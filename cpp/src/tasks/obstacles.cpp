@@ -60,11 +60,11 @@ ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int n
   pc.cost = config.path_cost;
   pc.horizon = config.path_horizon;
   path_filters_.resize(static_cast<size_t>(num_envs));
-  for (ObstaclePathFilter& f : path_filters_) f.init(db, config.num_obstacles, pc, clip_filter_.get());
+  for (ObstaclePathFilter& f : path_filters_) f.init(db, config.num_obstacles, pc, nullptr);
 }
 
 const CandidateFilter* ObstacleVecEnv::candidate_filter(int i) {
-  const CandidateFilter* base = rule_chain(i, request_filter(i));
+  const CandidateFilter* base = rule_chain(i);
   if (!config_.path_filter) return base;
   const ObstacleEnvState& s = envs_[i];
   path_filters_[i].set_base(base);
@@ -86,7 +86,8 @@ void ObstacleVecEnv::path_hits(int i, const int64_t* rows, int n, int32_t* first
 }
 
 void ObstacleVecEnv::state_path_hits(int i, const float* features, int n, int32_t* first_hit_frames) {
-  if (compressed() == nullptr) throw std::invalid_argument("state_path_hits: no compressed controller is set");
+  if (!source().rowless_candidates())
+    throw std::invalid_argument("state_path_hits: no compressed controller is set (the env plays the database)");
   for (int64_t k = 0; k < static_cast<int64_t>(n) * kFeatureDim; ++k)
     if (!std::isfinite(features[k])) throw std::invalid_argument("features must be finite");
   const ObstacleEnvState& s = envs_[i];

@@ -52,5 +52,9 @@ class ObstacleScene:
                 "scene_step": {"hit_inside": np.asarray(inside, bool), "sensor_maps": sensor_map,
                                "sensor_positions": np.asarray(sensor_positions, np.float32)}}
 
+    def sensors(self) -> Dict[str, np.ndarray]:
+        """The sensor map of the next decision and where its cells are (world)."""
+        return {"positions": self.env.sensor_positions(0), "map": self.env.sensor_map(0)}
+
     def after_step(self, shown: int) -> Dict[str, Any]:
         return {"scene_frames": {"obstacles": np.array(self._frames[:shown], np.float32)}}

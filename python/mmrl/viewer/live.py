@@ -45,6 +45,7 @@ class LiveSession:
         self.run = FullPath(task, db, config=config, stage=stage, seed=seed, record=False, continuous=True,
                             request=request, compressed=compressed)
         self.config = self.run.config
+        self._scene = task.scene(self.run.env) if task.scene is not None else None  # the task's own scene
         self.policies = {"trained": policy, "joystick": JoystickPolicy.preset(db, "joystick"),
                          "joystick-run": JoystickPolicy.preset(db, "joystick-run")}
         self.policy_name = "trained"
@@ -116,7 +117,8 @@ class LiveSession:
 
     @property
     def has_obstacles(self) -> bool:
-        return hasattr(self.run.env, "obstacles")
+        """The task has a scene of obstacles (it declares one: ``Task.scene``)."""
+        return self._scene is not None
 
     @property
     def target(self) -> np.ndarray:
@@ -260,9 +262,9 @@ class LiveSession:
         ``Database.path_samples``, world (x, z), (9, 2)) and which samples the collision-aware
         search's test finds inside an obstacle (from the first hit on); None without obstacles or
         when the clip cannot continue."""
-        env = self.run.env
-        if not hasattr(env, "path_hits"):
+        if self._scene is None:
             return None
+        env = self.run.env
         state = env.env_state(0)
         path = self.run.playback.continuation(env, 0)  # the path the motion shown now would take
         if path is None:
@@ -274,10 +276,9 @@ class LiveSession:
         return {"points": world.astype(np.float32), "inside": inside}
 
     def _sensors(self) -> Optional[Dict[str, np.ndarray]]:
-        env = self.run.env
-        if not hasattr(env, "sensor_map"):
+        if self._scene is None:
             return None
-        return {"positions": env.sensor_positions(0), "map": env.sensor_map(0)}
+        return self._scene.sensors()
 
     # ------------------------------------------------------------------ quality, trace, timing
     def quality(self) -> Dict[str, Any]:

@@ -172,9 +172,6 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   ObsLayout task_obs_layout() const { return {{"maps", 2 * kMapCells, ""}, {"pose", kPoseDim, ""}, {"goal", 2, ""}}; }
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
-  // Plays compressed controllers (TargetVecEnv::set_compressed) without the collision-aware
-  // search: a projection has no database candidates to test (docs/compressed.md).
-  static constexpr bool kPlaysCompressed = true;
 
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
   // Throws std::invalid_argument on a bad config.
@@ -219,7 +216,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   // the frames ahead of its path's first hit (kPathSampleFrames), or 0 when clear.
   void path_hits(int i, const int64_t* rows, int n, int32_t* first_hit_frames);
   // The same for n compressed states known by their features (n x kFeatureDim normalized
-  // floats, finite) of env i's compressed controller (set_compressed first): each path is
+  // floats, finite) of env i's compressed controller (set_source first): each path is
   // trajectory_path of the state's trajectory (path_filter.hpp).
   void state_path_hits(int i, const float* features, int n, int32_t* first_hit_frames);
 
@@ -263,7 +260,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   friend class TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState>;
   // After set_state: rebuild the grid and both sensor maps around the new root.
   void on_state_set(int i) { refresh(i, false, true); }
-  // After the motion source changed (set_compressed): the path filters are ready for its
+  // After the motion source changed (set_source): the path filters are ready for its
   // candidates, and the maps follow the new state.
   void on_source_set() {
     for (ObstaclePathFilter& f : path_filters_) f.set_prices_states(source().rowless_candidates());
@@ -276,7 +273,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
     if (!config_.path_filter) return {};
     return {config_.path_candidates, config_.path_fan, deg_to_rad(config_.path_fan_degrees), config_.path_fan_candidates};
   }
-  Shortlist compressed_shortlist() const {
+  Shortlist projection_shortlist() const {
     if (!config_.path_filter) return {};
     return {0, config_.compressed_path_fan, deg_to_rad(config_.path_fan_degrees), 1};
   }

@@ -32,7 +32,6 @@ class PlaneVecEnv : public TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvS
   static constexpr int kObsDim = kPoseDim + 2;
   static constexpr int kActionDim = kTrajectoryDim;
   static constexpr const char* kCoreName = "plane";  // the name a controller file gives this core
-  static constexpr bool kPlaysCompressed = true;     // TargetVecEnv::set_compressed
   int obs_dim() const { return kObsDim + request_dim(); }  // with request_groups: the request's code last
   ObsLayout task_obs_layout() const { return {{"pose", kPoseDim, ""}, {"goal", 2, ""}}; }
 
