@@ -55,6 +55,7 @@ def lib():
         "mmrl_character_destroy": ([P], None), "mmrl_character_last_error": ([P], S),
         "mmrl_character_set_target": ([P, F, F], C.c_int),
         "mmrl_character_set_stick": ([P, F, F, F], C.c_int),
+        "mmrl_character_set_facing": ([P, F], C.c_int),
         "mmrl_character_set_request": ([P, S], C.c_int),
         "mmrl_character_update": ([P, F, fp, fp, I32, fp], C.c_int),
         "mmrl_character_root": ([P, fp], C.c_int),
@@ -245,6 +246,41 @@ def test_the_c_stick_equals_the_runtimes_and_refuses_bad_values(lib, controller_
     assert lib.mmrl_character_set_stick(None, 1.0, 0.0, 1.0) == NULL and b"character is NULL" in lib.mmrl_last_error()
     lib.mmrl_character_destroy(ch)
     lib.mmrl_controller_destroy(ctl)
+
+
+def test_an_arrive_controller_takes_a_facing_in_radians_and_equals_the_runtime(lib, controller_file, tmp_path):
+    """The arrive task (a plug-in core) through the C interface: no decision before a facing
+    (MMRL_ERROR_INVALID_ARGUMENT naming it), a non-finite facing refused, a plane controller
+    refuses one; with a facing its poses and roots equal the C++ runtime's bit for bit."""
+    db = mmrl.default_database()
+    path = tmp_path / "arrive.mmrl"
+    write_controller(path, db, random_plane_policy(3, 19), "arrive", mmrl.get_task("arrive").default_config())
+    ctl = load(lib, path)
+    ch = create(lib, ctl, 0.0, 0.0, 0.0, 500)
+    rt = _core.RuntimeCharacter(_core.RuntimeController.load(str(path)), 0.0, 0.0, 0.0, 500)
+    J = db.num_joints
+    rot, tr, root = np.zeros((J, 4), np.float32), np.zeros((J, 3), np.float32), np.zeros(3, np.float32)
+    assert lib.mmrl_character_set_target(ch, 0.0, 0.0) == OK
+    rt.set_target(0.0, 0.0)
+    assert lib.mmrl_character_update(ch, 1.0 / 30.0, floats(rot), floats(tr), J, floats(root)) == INVALID
+    assert b"needs a facing" in lib.mmrl_character_last_error(ch)
+    assert lib.mmrl_character_set_facing(ch, float("nan")) == INVALID
+    assert b"facing must be finite (radians)" in lib.mmrl_character_last_error(ch)
+    assert lib.mmrl_character_set_facing(ch, 2.0) == OK
+    rt.set_facing(2.0)
+    for _ in range(60 * 6):
+        assert lib.mmrl_character_update(ch, 1.0 / 30.0, floats(rot), floats(tr), J, floats(root)) == OK
+        rt.update(1.0 / 30.0)
+        np.testing.assert_array_equal(rot, rt.local_rotations())
+        np.testing.assert_array_equal(root, np.float32(rt.root))
+    plane = load(lib, controller_file)
+    other = create(lib, plane)
+    assert lib.mmrl_character_set_facing(other, 1.0) == INVALID
+    assert b"has no target facing" in lib.mmrl_character_last_error(other)
+    for h in (ch, other):
+        lib.mmrl_character_destroy(h)
+    for h in (ctl, plane):
+        lib.mmrl_controller_destroy(h)
 
 
 def test_memory_load_and_threads(lib, controller_file):

@@ -31,8 +31,14 @@ def configs(db):
         obstacle_max_speed=1.0, clip_costs=f"{busy}=2.0", max_steps=60)
     # The collision-aware search (tasks/path_filter.hpp) on top: every rule at once.
     path = obstacles.replace(path_filter=True, path_cost=50.0, path_candidates=32)
+    # The arrive task (a plug-in core): its hold ends episodes mid-step, its facing is an input.
+    # (Its clip-cost rule is the same chain as the plane's: the plane config covers it.)
+    arrive = mmrl.get_task("arrive").default_config().replace(transition_cost=3.0,
+                                                              max_steps=40, success_radius=2.0, stop_speed=3.0,
+                                                              facing_tolerance=1.5, hold_time=0.1,
+                                                              target_half_extent=3.0)
     return {"plane": (plane, random_plane_policy(4)), "obstacles": (obstacles, random_obstacle_policy(5)),
-            "obstacles-path": (path, random_obstacle_policy(5))}
+            "obstacles-path": (path, random_obstacle_policy(5)), "arrive": (arrive, random_plane_policy(6, 19))}
 
 
 def hand_obstacles(character, env):
@@ -41,7 +47,7 @@ def hand_obstacles(character, env):
                               for k in ("centres", "half_sizes", "angles", "velocities")))
 
 
-@pytest.mark.parametrize("kind", ["plane", "obstacles", "obstacles-path"])
+@pytest.mark.parametrize("kind", ["plane", "obstacles", "obstacles-path", "arrive"])
 def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path):
     db = mmrl.default_database()
     task_name = kind.split("-")[0]
@@ -55,10 +61,12 @@ def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path
     apply_stage(task, fast, None)  # the full path's stage: the last
     fast.reset(seed=11)
     rng = np.random.default_rng(0)
-    decisions = episodes = transitions = filtered = 0
+    decisions = episodes = transitions = filtered = successes = 0
     while decisions < 1000:
         character = _core.RuntimeCharacter(controller, *fp.character.root, fp.character.frame)  # each episode's start
         character.set_target(*fp.target)
+        if character.takes_facing:
+            character.set_facing(fp.env.env_state(0)["facing"])
         episodes += 1
         while True:
             if task_name == "obstacles":
@@ -84,9 +92,11 @@ def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path
             assert character.last_decision()["match"] == match
             decisions += 1
             transitions += res.transition
-            filtered += int(db.clip_names[db.frame_clip[match]] == config.clip_costs.split("=")[0])
+            filtered += int(not config.clip_costs or db.clip_names[db.frame_clip[match]] == config.clip_costs.split("=")[0])
             if out["done"]:
+                successes += out["terminated"]
                 break
             assert fp.root_error() == (0, 0.0)
     # Not vacuous: many episodes and clip changes; the filtered clip still plays sometimes.
     assert episodes >= 10 and transitions >= 50 and filtered >= 1, (episodes, transitions, filtered)
+    assert successes >= 5 or task_name != "arrive", successes  # the hold ends episodes mid-step

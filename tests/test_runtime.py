@@ -91,13 +91,13 @@ def test_runtime_against_torch_policy_full_path(plane):
     assert same >= 0.99, same
 
 
-def random_plane_policy(seed: int) -> Policy:
+def random_plane_policy(seed: int, obs_dim: int = 17) -> Policy:
     torch.manual_seed(seed)
-    model = PlaneActorCritic(17, 12)
+    model = PlaneActorCritic(obs_dim, 12)
     with torch.no_grad():
         model.actor[-1].weight.normal_(0, 0.5)
-    norm = ObsNormalizer(17, True, None, 10.0, torch.device("cpu"))
-    norm.rms.var = np.full(17, 4.0)
+    norm = ObsNormalizer(obs_dim, True, None, 10.0, torch.device("cpu"))
+    norm.rms.var = np.full(obs_dim, 4.0)
     norm.refresh()
     return Policy(model, norm, torch.device("cpu"))
 

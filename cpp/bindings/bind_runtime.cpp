@@ -90,6 +90,10 @@ void bind_runtime(py::module_& m) {
            py::arg("controller"), py::arg("x"), py::arg("z"), py::arg("yaw"), py::arg("start_frame") = -1)
       .def("set_target", &RuntimeCharacter::set_target, py::arg("x"), py::arg("z"),
            "The target (world meters) from the next decision on; switches a stick off.")
+      .def("set_facing", &RuntimeCharacter::set_facing, py::arg("yaw"),
+           "The facing to arrive with (world yaw in radians, 0 faces +Z) from the next decision on, for a task that "
+           "reads one (takes_facing: the arrive task, which refuses to decide until it is set).")
+      .def_property_readonly("takes_facing", &RuntimeCharacter::takes_facing)
       .def("set_stick", &RuntimeCharacter::set_stick, py::arg("x"), py::arg("z"), py::arg("speed"),
            "A stick in place of the target and the policy, from the next decision on: a world direction (x, z; any "
            "length > 0) and a speed (m/s > 0); the scripted joystick's action. ValueError naming a bad argument.")

@@ -262,4 +262,32 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* ste
   bind_compressed_env(c);  // set_compressed and the compressed state's accessors (bind_compressed.hpp)
 }
 
+// The step of a task whose outputs are the shared ones (TargetStepBuffers): the plane task's,
+// the arrive task's.
+template <class Wrapper>
+void bind_shared_step(py::class_<Wrapper>& c) {
+  c.def(
+      "step",
+      [](Wrapper& s, const py::handle& actions, const py::handle& obs, const py::handle& rewards,
+         const py::handle& terminated, const py::handle& truncated, const py::handle& success,
+         const py::handle& final_obs, const py::handle& episode_return, const py::handle& episode_length,
+         const py::handle& step_frames, const py::handle& transitions, const py::handle& costs,
+         const py::handle& episode_frames) {
+        auto a = step_actions(s.env, actions);
+        const TargetStepBuffers out = step_buffers(s.env, obs, rewards, terminated, truncated, success, final_obs,
+                                                   episode_return, episode_length, step_frames, transitions, costs,
+                                                   episode_frames);
+        py::gil_scoped_release release;
+        s.env.step(a.data(), out);
+      },
+      py::arg("actions"), py::arg("obs"), py::arg("rewards"), py::arg("terminated"), py::arg("truncated"),
+      py::arg("success"), py::arg("final_obs"), py::arg("episode_return"), py::arg("episode_length"),
+      py::arg("step_frames") = py::none(), py::arg("transitions") = py::none(), py::arg("costs") = py::none(),
+      py::arg("episode_frames") = py::none(),
+      "One step of every env (actions float32 N x 12, finite), writing every buffer. step_frames (int32, N), "
+      "transitions (uint8, N) and costs (float32, N), if given, get every env's step_frames and "
+      "last_step_transitions, and episode_frames (int64, N) where an episode ended the frames it played: one call "
+      "returns all a step produced.");
+}
+
 }  // namespace mmrl

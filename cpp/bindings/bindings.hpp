@@ -20,6 +20,7 @@ void bind_search(py::module_& m);
 void bind_plane(py::module_& m);
 void bind_character(py::module_& m);
 void bind_obstacles(py::module_& m);
+void bind_arrive(py::module_& m);
 void bind_runtime(py::module_& m);
 
 template <class T>

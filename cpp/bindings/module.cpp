@@ -12,5 +12,6 @@ PYBIND11_MODULE(_core, m) {
   mmrl::bind_plane(m);
   mmrl::bind_character(m);
   mmrl::bind_obstacles(m);
+  mmrl::bind_arrive(m);
   mmrl::bind_runtime(m);
 }

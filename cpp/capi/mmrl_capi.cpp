@@ -223,6 +223,14 @@ mmrl_status mmrl_character_set_target(mmrl_character* character, float x, float 
   });
 }
 
+mmrl_status mmrl_character_set_facing(mmrl_character* character, float yaw) {
+  if (character == nullptr) return null_error("character");
+  return guarded(&character->error, [&] {
+    character->c->set_facing(yaw);
+    return MMRL_OK;
+  });
+}
+
 mmrl_status mmrl_character_set_stick(mmrl_character* character, float x, float z, float speed) {
   if (character == nullptr) return null_error("character");
   return guarded(&character->error, [&] {

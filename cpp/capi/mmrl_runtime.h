@@ -121,6 +121,12 @@ MMRL_API const char* mmrl_character_last_error(const mmrl_character* character);
 /* The target (world meters), used from the next decision on; it switches a stick off (the
  * policy decides again). */
 MMRL_API mmrl_status mmrl_character_set_target(mmrl_character* character, float x, float z);
+/* The facing to arrive with, for a controller whose task reads one (the arrive task): a world
+ * yaw in RADIANS (0 faces +Z, positive turns left), used from the next decision on. Such a
+ * controller's character refuses to decide until it is set (mmrl_character_update then returns
+ * MMRL_ERROR_INVALID_ARGUMENT naming it). A non-finite yaw, or a task without a facing, is
+ * MMRL_ERROR_INVALID_ARGUMENT. */
+MMRL_API mmrl_status mmrl_character_set_facing(mmrl_character* character, float yaw);
 /* A stick in place of the target and the policy, from the next decision on: the player's
  * direction (world x, z; any length > 0, normalized) and speed (m/s, > 0). Each decision then
  * matches the scripted joystick's trajectory (positions d * speed * t at 10, 20 and 30 frames,

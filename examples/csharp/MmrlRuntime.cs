@@ -79,6 +79,7 @@ namespace Mmrl
         [DllImport(Lib)] public static extern void mmrl_character_destroy(IntPtr character);
         [DllImport(Lib)] public static extern IntPtr mmrl_character_last_error(CharacterHandle character);
         [DllImport(Lib)] public static extern MmrlStatus mmrl_character_set_target(CharacterHandle character, float x, float z);
+        [DllImport(Lib)] public static extern MmrlStatus mmrl_character_set_facing(CharacterHandle character, float yaw);
         [DllImport(Lib)] public static extern MmrlStatus mmrl_character_set_stick(CharacterHandle character, float x, float z, float speed);
         [DllImport(Lib)] public static extern MmrlStatus mmrl_character_set_request(
             CharacterHandle character, [MarshalAs(UnmanagedType.LPUTF8Str)] string request);
@@ -199,6 +200,11 @@ namespace Mmrl
 
         /// <summary>The target, world meters (mmrl's frame), from the next decision on; ends a stick.</summary>
         public void SetTarget(float x, float z) => Check(Native.mmrl_character_set_target(handle, x, z));
+
+        /// <summary>The facing to arrive with (arrive controllers): a world yaw in RADIANS, mmrl's frame
+        /// (0 faces +Z), from the next decision on. MmrlException (InvalidArgument) when not finite or when
+        /// the controller's task reads no facing.</summary>
+        public void SetFacing(float yaw) => Check(Native.mmrl_character_set_facing(handle, yaw));
 
         /// <summary>A stick in place of the target and the policy, from the next decision on: a world
         /// direction (x, z in mmrl's frame; any length > 0) and a speed in m/s (> 0). SetTarget ends it.

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BVHError', 'Character', 'CharacterOptions', 'CompressedModel', 'ControllerFileError', 'Database', 'Decider', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'mlp_kernel', 'motion_from_pose', 'parse_request', 'runtime_task_cores', 'select_request', 'tags_available', 'trajectory_path']
+__all__: list[str] = ['ArriveTaskConfig', 'ArriveVecEnv', 'BVHError', 'Character', 'CharacterOptions', 'CompressedModel', 'ControllerFileError', 'Database', 'Decider', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'mlp_kernel', 'motion_from_pose', 'parse_request', 'runtime_task_cores', 'select_request', 'tags_available', 'trajectory_path']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -1175,6 +1175,297 @@ class ObstacleVecEnv:
     @property
     def stage(self) -> tuple[float, float]:
         ...
+class ArriveTaskConfig:
+    """
+    Numbers of the arrive task (see tasks/arrive.hpp).
+    """
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight')
+    options: typing.ClassVar[tuple]
+    def __init__(self) -> None:
+        ...
+    @property
+    def action_limit_std(self) -> float:
+        """
+        Half-width of the action box in standard deviations of each normalized trajectory feature.
+        """
+    @action_limit_std.setter
+    def action_limit_std(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def clip_costs(self) -> list[float]:
+        """
+        Costs added to the match cost of chosen clips: 'PATTERN=COST;...', each PATTERN an fnmatch pattern of clip names, each COST >= 0 or inf (never play them); costs of patterns matching one clip add up.
+        """
+    @clip_costs.setter
+    def clip_costs(self, arg0: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> None:
+        ...
+    @property
+    def facing_tolerance(self) -> float:
+        """
+        Success: the root's yaw within this (radians; 0.2618 = 15 degrees) of the target facing.
+        """
+    @facing_tolerance.setter
+    def facing_tolerance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def facing_weight(self) -> float:
+        """
+        Reward term: this times exp(-distance / success_radius) times (1 + cos(facing error)) / 2.
+        """
+    @facing_weight.setter
+    def facing_weight(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def frames_per_step(self) -> int:
+        """
+        Frames played per RL step (6 = 0.2 s at 30 fps).
+        """
+    @frames_per_step.setter
+    def frames_per_step(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def hold_time(self) -> float:
+        """
+        Success: seconds the character stays within the tolerances, at rest, before the episode succeeds.
+        """
+    @hold_time.setter
+    def hold_time(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def max_steps(self) -> int:
+        """
+        Steps before truncation (100 steps = 20 s at 6 frames per step).
+        """
+    @max_steps.setter
+    def max_steps(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def min_target_distance(self) -> float:
+        """
+        Targets closer than this (meters) to the start are redrawn, so no episode starts solved.
+        """
+    @min_target_distance.setter
+    def min_target_distance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def random_heading(self) -> bool:
+        """
+        Start with a uniformly random heading (else facing +Z).
+        """
+    @random_heading.setter
+    def random_heading(self, arg0: bool) -> None:
+        ...
+    @property
+    def request_any(self) -> float:
+        """
+        Per conditioned group, the probability that an episode's request leaves it free.
+        """
+    @request_any.setter
+    def request_any(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def request_groups(self) -> list[str]:
+        """
+        Tag groups the policy is conditioned on, comma-separated ('style,gait'; docs/styles.md): each episode draws a request over them and the observation ends with its code.
+        """
+    @request_groups.setter
+    def request_groups(self, arg0: collections.abc.Sequence[str]) -> None:
+        ...
+    @property
+    def stop_speed(self) -> float:
+        """
+        Success: the root moves slower than this (m/s) on every frame of the hold.
+        """
+    @stop_speed.setter
+    def stop_speed(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def success_bonus(self) -> float:
+        """
+        Reward added on success.
+        """
+    @success_bonus.setter
+    def success_bonus(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def success_radius(self) -> float:
+        """
+        Reaching within this distance (meters) of the target is success.
+        """
+    @success_radius.setter
+    def success_radius(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def target_half_extent(self) -> float:
+        """
+        Targets are uniform in a square of side 2 * this (meters) around the start (a stage's, with a curriculum).
+        """
+    @target_half_extent.setter
+    def target_half_extent(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def transition_cost(self) -> float:
+        """
+        Squared normalized feature distance by which another frame must beat the playing clip's continuation to replace it; 0 is the paper's rule.
+        """
+    @transition_cost.setter
+    def transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def transition_penalty(self) -> float:
+        """
+        Reward term: minus this at every transition, in the reward's own units; 0 is the paper's reward.
+        """
+    @transition_penalty.setter
+    def transition_penalty(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def transition_pose_weight(self) -> float:
+        """
+        Reward term: minus this times the squared normalized pose-feature distance a transition asks the blend to hide; 0 is the paper's reward.
+        """
+    @transition_pose_weight.setter
+    def transition_pose_weight(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+class ArriveVecEnv:
+    """
+    Batched arrive-task environments (C++ core of mmrl.tasks.arrive).
+    """
+    action_dim: typing.ClassVar[int] = 12
+    core_name: typing.ClassVar[str] = 'arrive'
+    plays_compressed: typing.ClassVar[bool] = True
+    def __init__(self, db: Database, matcher: Matcher, num_envs: typing.SupportsInt | typing.SupportsIndex, config: ArriveTaskConfig, num_threads: typing.SupportsInt | typing.SupportsIndex = 0) -> None:
+        ...
+    def compressed_chosen(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The state env i's last decision chose (the projection or the continuation; state_dim).
+        """
+    def compressed_played(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        The state at the end of env i's last playback (kept through the autoreset).
+        """
+    def compressed_rows(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        Env i's last decision's pose rows (frames_per_step + 1, pose_dim): row 0 the chosen state.
+        """
+    def compressed_state(self, index: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.float32]:
+        """
+        Env i's compressed state shown now (state_dim).
+        """
+    def current_frames(self, out: typing.Any) -> None:
+        """
+        Writes each environment's current database frame into out (int64, N).
+        """
+    def draw_target_around_root(self, index: typing.SupportsInt | typing.SupportsIndex, half_extent: typing.SupportsFloat | typing.SupportsIndex) -> tuple[float, float]:
+        """
+        Draws env i a new target by the episode start's rule around where it stands now (its own RNG); returns it (world x, z).
+        """
+    def last_step_decision(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[int, float]:
+        """
+        (match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.
+        """
+    def last_step_transition_cost(self, index: typing.SupportsInt | typing.SupportsIndex) -> float:
+        """
+        The transition cost env i's last step matched with (the config's transition_cost, or what the task made of it for that decision). Kept through the autoreset; 0 after reset.
+        """
+    def last_step_transitions(self, transitions: typing.Any, costs: typing.Any) -> None:
+        """
+        Writes each environment's last step's decision: transitions (uint8, N) 1 where the match was not the current clip's continuation, costs (float32, N) the match's squared distance to the query (normalized, weighted feature space). Kept through the autoreset; 0 after reset.
+        """
+    def observe(self, index: typing.SupportsInt | typing.SupportsIndex, out: typing.Any) -> None:
+        """
+        Writes environment i's current observation into out (float32, obs_dim).
+        """
+    def pop_match_stats(self) -> dict:
+        """
+        Every env's decisions since the last call, summed, then zeroed: decisions (steps that matched), transitions, cost_sum (their matched costs) and frames (played, each step up to its ending frame).
+        """
+    def request(self, index: typing.SupportsInt | typing.SupportsIndex) -> str:
+        """
+        Env i's request now, as canonical text ('' = every clip).
+        """
+    def request_mix(self) -> list:
+        """
+        The requests training draws per episode: (text, probability) pairs ([] without request_groups).
+        """
+    def reset(self, seed: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
+        ...
+    def reset_env(self, index: typing.SupportsInt | typing.SupportsIndex, obs: typing.Any) -> None:
+        ...
+    def set_compressed(self, model: CompressedModel) -> None:
+        """
+        Plays a compressed controller (CompressedModel with the database's frame states) instead of the database, from the next episode start (every env restarts its state from its frame now); None: the database again.
+        """
+    def set_compressed_state(self, index: typing.SupportsInt | typing.SupportsIndex, state: typing.Any) -> None:
+        """
+        Sets env i's compressed state (state_dim, finite).
+        """
+    def set_facing(self, index: typing.SupportsInt | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        Sets env i's target facing (world yaw in radians, finite).
+        """
+    def set_request(self, index: typing.SupportsInt | typing.SupportsIndex, request: str) -> None:
+        """
+        Pins env i's request ('style=elderly & gait=walk'; '' unpins): its matches and episode starts keep to the clips carrying it from the next decision on. ValueError naming an unknown tag, or when it selects no valid frame (listing the tags available).
+        """
+    def set_state(self, index: typing.SupportsInt | typing.SupportsIndex, frame: typing.SupportsInt | typing.SupportsIndex, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        Puts env i on database frame `frame` at world (x, z) facing yaw; keeps its target and episode.
+        """
+    def set_target(self, index: typing.SupportsInt | typing.SupportsIndex, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        Moves env i's target (world meters).
+        """
+    def state(self, index: typing.SupportsInt | typing.SupportsIndex) -> dict:
+        """
+        The world-space state of environment i (root, frame, target and the task's own).
+        """
+    def step(self, actions: typing.Any, obs: typing.Any, rewards: typing.Any, terminated: typing.Any, truncated: typing.Any, success: typing.Any, final_obs: typing.Any, episode_return: typing.Any, episode_length: typing.Any, step_frames: typing.Any = None, transitions: typing.Any = None, costs: typing.Any = None, episode_frames: typing.Any = None) -> None:
+        """
+        One step of every env (actions float32 N x 12, finite), writing every buffer. step_frames (int32, N), transitions (uint8, N) and costs (float32, N), if given, get every env's step_frames and last_step_transitions, and episode_frames (int64, N) where an episode ended the frames it played: one call returns all a step produced.
+        """
+    def step_frames(self, out: typing.Any) -> None:
+        """
+        Writes into out (int32, N) how many frames of the last step each environment played before its episode ended: the index of the frame that completed the hold + 1, else frames_per_step (0 after reset).
+        """
+    @property
+    def action_high(self) -> numpy.typing.NDArray[numpy.float32]:
+        ...
+    @property
+    def action_low(self) -> numpy.typing.NDArray[numpy.float32]:
+        ...
+    @property
+    def autoreset_next_step(self) -> bool:
+        """
+        Autoreset mode: False = SAME_STEP (an ended episode's env is reset in the same step, its last observation in final_obs), True = NEXT_STEP (the ending step returns the last observation; the next step ignores the env's action, resets it and returns its first observation with reward 0).
+        """
+    @autoreset_next_step.setter
+    def autoreset_next_step(self, arg1: bool) -> None:
+        ...
+    @property
+    def hold_frames(self) -> int:
+        """
+        Frames a hold lasts (hold_time at the database's frame rate, at least 1).
+        """
+    @property
+    def num_envs(self) -> int:
+        ...
+    @property
+    def obs_dim(self) -> int:
+        ...
+    @property
+    def obs_layout(self) -> tuple:
+        """
+        This env's observation, segment by segment: a tuple of (name, size) in order (the task's own, then 'request' with request_groups).
+        """
+    @property
+    def request_dim(self) -> int:
+        """
+        Floats of the request code at the end of each observation (0 without request_groups).
+        """
+    @property
+    def request_groups(self) -> list[str]:
+        ...
 class ControllerFileError(ValueError):
     pass
 class RuntimeController:
@@ -1244,6 +1535,10 @@ class RuntimeCharacter:
         ...
     def observe(self) -> numpy.ndarray:
         ...
+    def set_facing(self, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        The facing to arrive with (world yaw in radians, 0 faces +Z) from the next decision on, for a task that reads one (takes_facing: the arrive task, which refuses to decide until it is set).
+        """
     def set_obstacles(self, centres: typing.Any, half_sizes: typing.Any, angles: typing.Any, velocities: typing.Any = None) -> None:
         """
         The obstacles now (world meters, radians; float32) and, optionally, their velocities (m/s; None: standing still), read at the next decision.
@@ -1280,6 +1575,9 @@ class RuntimeCharacter:
         ...
     @property
     def stick(self) -> bool:
+        ...
+    @property
+    def takes_facing(self) -> bool:
         ...
 def bvh_load(path: str, scale: typing.SupportsFloat | typing.SupportsIndex = 0.0, up: str = 'auto', fps: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> Motion:
     """

@@ -135,6 +135,12 @@ class RuntimeCharacter {
   // The target, world meters; used from the next decision on. Switches a stick off: the
   // policy decides again.
   void set_target(float x, float z);
+  // The facing to arrive with, for a task that reads one (the arrive task: takes_facing()): a
+  // world yaw in radians (0 faces +Z), used from the next decision on; such a task refuses to
+  // decide until it is set. Throws std::invalid_argument when not finite, or for a task that
+  // reads no facing.
+  void set_facing(float yaw) { env_->set_facing(yaw); }
+  bool takes_facing() const { return env_->takes_facing(); }
   // A stick in place of the target and the policy, from the next decision on: the player's
   // direction (world x, z; any length > 0, normalized) and speed (m/s, > 0). Each decision's
   // action is then the scripted joystick's (mmrl.rl.policies.JoystickPolicy, arrive off): the

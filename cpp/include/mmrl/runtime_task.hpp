@@ -6,8 +6,9 @@
 // registered task the same way (the observation, the rules and the decision stay the
 // training env's own).
 //
-// Adding a task to the runtime: a file under cpp/runtime/tasks/ with its RuntimeTaskType (most
-// of it from RuntimeTaskEnvOf<Env>), and one line in runtime_task.cpp's builtin list.
+// Adding a task to the runtime: a file under cpp/runtime/tasks/ with its RuntimeTaskType
+// (runtime_task_of<Env>() when the env and its option table are all it needs; a subclass of
+// RuntimeTaskEnvOf<Env> for the inputs it takes), and one line in runtime_task.cpp's builtin list.
 #pragma once
 
 #include <cmath>
@@ -63,6 +64,12 @@ class RuntimeTaskEnv {
   // Puts the env's character on database frame `frame` (-1 keeps a compressed state) facing yaw.
   virtual void start(int64_t frame, float yaw) = 0;
   virtual void set_request(const std::string& request) = 0;
+  // Whether the task reads a target facing (the arrive task), set by set_facing (world yaw,
+  // radians; std::invalid_argument when not finite, or when the task reads none).
+  virtual bool takes_facing() const { return false; }
+  virtual void set_facing(float /*yaw*/) {
+    throw std::invalid_argument("this controller's task has no target facing");
+  }
   virtual const std::string& request() const = 0;
   // Checks obstacles the engine hands in (std::invalid_argument naming what is wrong); a task
   // without obstacles refuses any.
@@ -121,6 +128,11 @@ Config runtime_task_config(const ControllerFile& f, const RuntimeTask& t, int64_
   return c;
 }
 
+// A core whose runtime needs nothing but its env and its option table: its registration
+// (Env: a TargetVecEnv task with kCoreName and a Config with visit).
+template <class Env>
+RuntimeTaskType runtime_task_of();
+
 // What every core's RuntimeTaskEnv does with its env (Env: a TargetVecEnv task with N = 1); a
 // core adds its scene (sync, check_obstacles) in a subclass.
 template <class Env>
@@ -155,5 +167,19 @@ class RuntimeTaskEnvOf : public RuntimeTaskEnv {
  protected:
   Env env_;
 };
+
+template <class Env>
+RuntimeTaskType runtime_task_of() {
+  using Config = typename RuntimeTaskEnvOf<Env>::Config;
+  RuntimeTaskType t;
+  t.core = Env::kCoreName;
+  t.read_config = [](const ControllerFile& f, RuntimeTask& task, const Database& db) {
+    task.config = std::make_shared<Config>(runtime_task_config<Config>(f, task, db.num_clips()));
+  };
+  t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
+    return std::make_unique<RuntimeTaskEnvOf<Env>>(db, matcher, task);
+  };
+  return t;
+}
 
 }  // namespace mmrl

@@ -5,16 +5,6 @@
 
 namespace mmrl {
 
-RuntimeTaskType plane_runtime_task() {
-  RuntimeTaskType t;
-  t.core = PlaneVecEnv::kCoreName;
-  t.read_config = [](const ControllerFile& f, RuntimeTask& task, const Database& db) {
-    task.config = std::make_shared<PlaneTaskConfig>(runtime_task_config<PlaneTaskConfig>(f, task, db.num_clips()));
-  };
-  t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
-    return std::make_unique<RuntimeTaskEnvOf<PlaneVecEnv>>(db, matcher, task);
-  };
-  return t;
-}
+RuntimeTaskType plane_runtime_task() { return runtime_task_of<PlaneVecEnv>(); }
 
 }  // namespace mmrl

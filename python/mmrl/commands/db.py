@@ -10,6 +10,7 @@ from .. import _core
 
 from ..motion.database import DEFAULT_FPS
 from ..errors import InputError
+from ..motion.kinds import kinds_line
 from ..motion.sources import load_any
 from .common import read_number, deprecated_alias, output_path, positive_float, warn
 
@@ -196,6 +197,7 @@ def cmd_info(args: argparse.Namespace) -> int:
     print(f"speed +1 s   median {np.median(speed):.2f} m/s, 5-95% {np.percentile(speed, 5):.2f}-"
           f"{np.percentile(speed, 95):.2f} m/s")
     print(f"turn +1 s    5-95% {np.percentile(turn, 5):.0f} to {np.percentile(turn, 95):.0f} deg")
+    print(kinds_line(db))
     print("features     block                  weight  scale   columns: mean/std")
     scale = db.feature_scale
     w = db.weights

@@ -186,6 +186,11 @@ def cmd_train(args: argparse.Namespace) -> int:
     from ..motion.sources import database_from_spec
 
     db = database_from_spec(data)
+    if task.check_data is not None:
+        try:
+            task.check_data(db)
+        except ValueError as e:
+            raise InputError(f"mmrl train {task.name}: {e}") from None
     try:  # the options are the user's: a value the env refuses is bad input
         # The training envs: a task may train with other options than it evaluates with
         # (Task.training_config); config.json records the run's own.

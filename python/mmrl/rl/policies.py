@@ -68,6 +68,9 @@ class JoystickPolicy:
             target's distance away (a player easing the stick at the target). Off for the
             ``joystick`` baselines (as measured in the docs); on for the equal-speed line
             (:mod:`mmrl.eval.reference`), whose fast joysticks would otherwise circle the target.
+            On a task whose observation has a "facing" segment (the arrive task), the
+            trajectory's directions turn to that facing from the sample that reaches the target
+            on: the arrive joystick (docs/arrive.md), which slows down and turns at the end.
     """
 
     def __init__(self, db: Database, speed: Optional[float] = None, arrive: bool = False):
@@ -81,6 +84,7 @@ class JoystickPolicy:
         self._scale = np.asarray(db.feature_scale[POSE_DIM:], np.float32)
         self._times = np.array(TRAJECTORY_FRAMES, np.float32) / db.fps
         self._goal: Optional[int] = None  # where g_t starts, from bind_layout
+        self._facing: Optional[int] = None  # where the target facing starts, if the layout has one
 
     def bind_layout(self, layout) -> "JoystickPolicy":
         """Read g_t where the env's ``observation_layout`` ((name, size), ...) puts the "goal"
@@ -89,6 +93,8 @@ class JoystickPolicy:
             self._goal = obs_segment(layout, "goal").start
         except KeyError as e:
             raise ValueError(f"layout: the joystick reads the goal, but {e.args[0]}") from None
+        names = [name for name, _ in layout]
+        self._facing = obs_segment(layout, "facing").start if "facing" in names else None
         return self
 
     @classmethod
@@ -108,10 +114,12 @@ class JoystickPolicy:
         dist = np.linalg.norm(g, axis=1, keepdims=True)
         d = np.where(dist > 1e-6, g / np.maximum(dist, 1e-6), np.array([[0.0, 1.0]]))
         out = np.empty((obs.shape[0], TRAJECTORY_DIM), np.float32)
+        facing = None if self._facing is None or not self.arrive else obs[:, self._facing:self._facing + 2]
         for k, t in enumerate(self._times):
             reach = np.minimum(self.speed * t, dist) if self.arrive else self.speed * t
             out[:, 4 * k:4 * k + 2] = d * reach
-            out[:, 4 * k + 2:4 * k + 4] = d
+            # (sin, cos) of the facing's yaw in the character frame is its forward vector there
+            out[:, 4 * k + 2:4 * k + 4] = d if facing is None else np.where(self.speed * t >= dist, facing, d)
         return out
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:

@@ -52,9 +52,11 @@ def task_names() -> List[str]:
 
 from .plane import TASK as _PLANE  # noqa: E402
 from .obstacles import TASK as _OBSTACLES  # noqa: E402
+from .arrive import TASK as _ARRIVE  # noqa: E402
 
 register_task(_PLANE)
 register_task(_OBSTACLES)
+register_task(_ARRIVE)
 
 __all__ = ["Task", "TaskConfig", "TaskFlag", "TargetVectorEnv", "SingleEnv", "check_actions", "make_config",
            "register_task", "unregister_task", "get_task", "task_names"]

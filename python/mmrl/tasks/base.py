@@ -436,6 +436,10 @@ class Task:
     """``scene(env)`` -> a recorder of what the full path draws besides the character (see
     ``mmrl.rollout.SceneRecorder``); None draws the character and targets only."""
 
+    check_data: Optional[Callable[[Any], None]] = None
+    """``check_data(db)`` raises ValueError saying what the data lacks for this task, before
+    ``mmrl train`` starts (the arrive task: data that can stop)."""
+
     training_config: Optional[Callable[[Any], Any]] = None
     """``training_config(config)`` -> the config the training envs run with, when it differs from
     the run's own (which evaluation, rendering, play and export use): e.g. the obstacles task

@@ -1,0 +1,82 @@
+// The arrive task (issue 38, docs/arrive.md): reach a target position *and* a facing, and come
+// to rest there. A plug-in of the batched target env (vecenv.hpp) like the plane task:
+//   observation  [c_t (15): normalized pose features of the current frame,
+//                 g_t (2): target (x, z) in the character frame, meters,
+//                 f_t (2): the target facing in the character frame, a unit (x, z) vector
+//                          (forward = (sin yaw, cos yaw), math.hpp),
+//                 with request_groups: the request's code]
+//   action       12-d trajectory feature, as the plane task's
+//   reward       exp(-|g_t|) + facing_weight * exp(-|g_t| / success_radius) * (1 + cos(facing error)) / 2
+//                after the step, + success_bonus on success
+//   terminated   success: on hold_time seconds of consecutive played frames the root stood
+//                within success_radius of the target, faced its facing within
+//                facing_tolerance and moved slower than stop_speed (step_frames counts up
+//                to the frame that completed the hold)
+//   truncated    max_steps steps without success
+// Angles are radians everywhere (the facing, its tolerance); a facing is a world yaw about +Y.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+
+#include "mmrl/vecenv.hpp"
+
+namespace mmrl {
+
+struct ArriveTaskConfig : TaskConfig {
+  float facing_tolerance = 0.2618f;  // 15 degrees
+  float stop_speed = 0.15f;
+  float hold_time = 0.5f;
+  float facing_weight = 1.0f;
+  ArriveTaskConfig() {
+    success_radius = 0.25f;
+    max_steps = 150;
+  }
+  template <class Visit>
+  static void visit(Visit&& v) {
+    visit_task_config_fields(v);
+    v("facing_tolerance", &ArriveTaskConfig::facing_tolerance, closed_range(0, 3.1416),
+      "Success: the root's yaw within this (radians; 0.2618 = 15 degrees) of the target facing.");
+    v("stop_speed", &ArriveTaskConfig::stop_speed, kPositive,
+      "Success: the root moves slower than this (m/s) on every frame of the hold.");
+    v("hold_time", &ArriveTaskConfig::hold_time, closed_range(0, 10),
+      "Success: seconds the character stays within the tolerances, at rest, before the episode succeeds.");
+    v("facing_weight", &ArriveTaskConfig::facing_weight, kNonNegative,
+      "Reward term: this times exp(-distance / success_radius) times (1 + cos(facing error)) / 2.");
+  }
+};
+
+struct ArriveEnvState : TargetEnvState {
+  float target_yaw = 0;  // the facing to arrive with (world yaw, radians)
+  int hold = 0;          // consecutive played frames within the tolerances, at rest
+};
+
+class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveEnvState> {
+ public:
+  static constexpr int kObsDim = kPoseDim + 4;
+  static constexpr int kActionDim = kTrajectoryDim;
+  static constexpr const char* kCoreName = "arrive";  // the name a controller file gives this core
+  int obs_dim() const { return kObsDim + request_dim(); }
+  ObsLayout task_obs_layout() const { return {{"pose", kPoseDim, ""}, {"goal", 2, ""}, {"facing", 2, ""}}; }
+
+  // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
+  // Throws std::invalid_argument on a bad config.
+  ArriveVecEnv(const Database& db, const Matcher& matcher, int num_envs, const ArriveTaskConfig& config,
+               int num_threads = 0);
+
+  void step(const float* actions, const TargetStepBuffers& out);
+  void observe(int i, float* obs_row) const;
+  // Sets env i's target facing (world yaw, radians; finite, else std::invalid_argument).
+  void set_facing(int i, float yaw);
+  // The frames a hold lasts: hold_time in frames (at least 1).
+  int hold_frames() const { return hold_frames_; }
+
+ private:
+  friend class TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveEnvState>;
+  void begin_episode(int i);
+  TaskStep advance(int i, const float* action);
+  void on_state_set(int i) { envs_[i].hold = 0; }
+  int hold_frames_ = 1;
+};
+
+}  // namespace mmrl

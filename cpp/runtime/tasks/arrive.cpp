@@ -1,0 +1,43 @@
+// The arrive task in the engine runtime (runtime_task.hpp): the env's own observation and
+// decision; the character's target and its facing (set_facing, radians), relative to it.
+#include <cmath>
+#include <stdexcept>
+
+#include "mmrl/runtime_task.hpp"
+#include "mmrl/tasks/arrive.hpp"
+
+namespace mmrl {
+
+namespace {
+
+class ArriveRuntimeEnv final : public RuntimeTaskEnvOf<ArriveVecEnv> {
+ public:
+  using RuntimeTaskEnvOf::RuntimeTaskEnvOf;
+  bool takes_facing() const override { return true; }
+  void set_facing(float yaw) override {
+    if (!std::isfinite(yaw)) throw std::invalid_argument("facing must be finite (radians)");
+    facing_ = yaw;
+  }
+  void sync(const RootState& root, int64_t frame, float target_x, float target_z, const RuntimeObstacles& o,
+            int64_t decision) override {
+    if (!std::isfinite(facing_))
+      throw std::invalid_argument("this controller's task (arrive) needs a facing: set it with set_facing (radians)");
+    RuntimeTaskEnvOf::sync(root, frame, target_x, target_z, o, decision);
+    env_.set_facing(0, facing_);  // the env's frame is the world's turned by nothing: a world yaw
+  }
+
+ private:
+  float facing_ = NAN;
+};
+
+}  // namespace
+
+RuntimeTaskType arrive_runtime_task() {
+  RuntimeTaskType t = runtime_task_of<ArriveVecEnv>();
+  t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
+    return std::make_unique<ArriveRuntimeEnv>(db, matcher, task);
+  };
+  return t;
+}
+
+}  // namespace mmrl

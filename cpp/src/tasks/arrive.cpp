@@ -1,0 +1,67 @@
+#include "mmrl/tasks/arrive.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+namespace mmrl {
+
+ArriveVecEnv::ArriveVecEnv(const Database& db, const Matcher& matcher, int num_envs, const ArriveTaskConfig& config,
+                           int num_threads)
+    : TargetVecEnv(db, matcher, num_envs, config, num_threads),
+      hold_frames_(std::max(1, static_cast<int>(std::lround(config.hold_time * db.fps)))) {}
+
+void ArriveVecEnv::observe(int i, float* obs) const {
+  const ArriveEnvState& s = envs_[i];
+  observe_pose(s, obs);
+  observe_goal(s, obs + kPoseDim);
+  const float d = s.target_yaw - s.root.yaw;  // the facing in the character frame: (sin, cos) of its yaw there
+  obs[kPoseDim + 2] = std::sin(d);
+  obs[kPoseDim + 3] = std::cos(d);
+  observe_request(i, obs + kObsDim);
+}
+
+void ArriveVecEnv::set_facing(int i, float yaw) {
+  if (!std::isfinite(yaw)) throw std::invalid_argument("facing must be finite (radians)");
+  envs_[i].target_yaw = wrap_angle(yaw);
+  envs_[i].hold = 0;
+}
+
+void ArriveVecEnv::begin_episode(int i) {
+  ArriveEnvState& s = envs_[i];
+  draw_start(i, config_.target_half_extent);
+  s.target_yaw = s.rng.uniform(-kPi, kPi);
+  s.hold = 0;
+}
+
+TaskStep ArriveVecEnv::advance(int i, const float* action) {
+  ArriveEnvState& s = envs_[i];
+  decide(i, action);
+  const float r2 = config_.success_radius * config_.success_radius;
+  const float fps = db_.fps;
+  TaskStep out;
+  out.step_frames = config_.frames_per_step;
+  for (int k = 0; k < config_.frames_per_step && !out.success; ++k) {
+    const float* delta = played_delta(s, k);
+    root_advance(s.root, delta);
+    const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
+    const bool at_rest = std::hypot(delta[0], delta[1]) * fps < config_.stop_speed;
+    const bool facing = std::abs(wrap_angle(s.target_yaw - s.root.yaw)) <= config_.facing_tolerance;
+    s.hold = dx * dx + dz * dz <= r2 && facing && at_rest ? s.hold + 1 : 0;
+    if (s.hold >= hold_frames_) {
+      out.success = true;
+      out.step_frames = k + 1;
+    }
+  }
+  end_playback(s);  // the root stops where the hold completed (the episode ends there)
+  const float d = target_distance(s);
+  const float facing = 0.5f * (1.0f + std::cos(wrap_angle(s.target_yaw - s.root.yaw)));
+  out.reward = std::exp(-d) + config_.facing_weight * std::exp(-d / config_.success_radius) * facing +
+               (out.success ? config_.success_bonus : 0.0f);
+  out.terminated = out.success;
+  return out;
+}
+
+void ArriveVecEnv::step(const float* actions, const TargetStepBuffers& out) { step_envs(actions, out, 4, [](int) {}); }
+
+}  // namespace mmrl

@@ -1,0 +1,75 @@
+"""The arrive task, ``mmrl/Arrive-v0`` (issue 38, docs/arrive.md): reach a target position *and*
+a facing, and come to rest there, as a game character walks to a spot and faces the door.
+
+- observation: ``[c_t (15), g_t (2), f_t (2)]``: the plane task's pose features and target, and
+  the target facing in the character frame as ``(sin, cos)`` of its yaw there;
+- action: the plane task's (12 normalized trajectory features, clipped to the action box);
+- reward: ``exp(-|g_t|) + facing_weight * exp(-|g_t| / success_radius) * (1 + cos e) / 2``
+  per step (``e`` the facing error) plus ``success_bonus`` on success;
+- success (terminates): ``hold_time`` seconds of consecutive frames within ``success_radius``
+  (0.25 m) of the target, within ``facing_tolerance`` (0.2618 rad = 15 degrees) of its facing,
+  and slower than ``stop_speed`` (0.15 m/s). ``max_steps`` (150 = 30 s) truncates.
+
+Angles are radians at every interface (a facing is a world yaw about +Y: forward is
+``(sin yaw, cos yaw)``). Data that never stops cannot succeed here (docs/arrive.md).
+
+The vector env steps all N characters in one C++ call (``_core.ArriveVecEnv``,
+cpp/include/mmrl/tasks/arrive.hpp) with the GIL released.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import _core
+from ..motion.kinds import check_can_stop
+from .base import SingleEnv, TargetVectorEnv, Task, TaskConfig
+from .drawing import drawing
+from .options import task_options
+
+
+@task_options(_core.ArriveTaskConfig)
+class ArriveConfig(TaskConfig):
+    """Numbers of the arrive task: the shared ones of :class:`~mmrl.tasks.base.TaskConfig`
+    (``success_radius`` 0.25 m, ``max_steps`` 150 here) and the tolerances of a rest."""
+
+    task_label = "arrive-task"
+
+
+class ArriveVectorEnv(TargetVectorEnv):
+    """N arrive-task characters stepped together in C++ (see the module docstring)."""
+
+    metadata = dict(TargetVectorEnv.metadata, render_modes=["rgb_array"])
+    core_type = _core.ArriveVecEnv
+    core_config_type = _core.ArriveTaskConfig
+    config_type = ArriveConfig
+
+    def set_facing(self, i: int, yaw: float) -> np.ndarray:
+        """Set env i's target facing (world yaw, radians); returns its new observation."""
+        self._core.set_facing(int(i), float(yaw))
+        return self.observe(i)
+
+    def render(self):
+        return drawing("topdown")([self.env_state(i) for i in range(self.num_envs)])
+
+
+class ArriveEnv(SingleEnv):
+    """A single arrive-task character (the same C++ core with one environment)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+    vector_type = ArriveVectorEnv
+
+    def render(self):
+        return drawing("state")(self.db, self._vec.env_state(0))
+
+
+TASK = Task(
+    name="arrive",
+    summary="reach a target and stop there facing a given direction (issue 38)",
+    config_type=ArriveConfig,
+    vector_env=ArriveVectorEnv,
+    env=ArriveEnv,
+    gym_id="mmrl/Arrive-v0",
+    presets={"paper": {}, "quality": {"transition_cost": 60.0, "gamma": 0.97}},
+    default_preset="quality",
+    check_data=check_can_stop,
+)
