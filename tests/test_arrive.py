@@ -34,7 +34,7 @@ def test_success_is_a_hold_at_rest_facing_the_target_frame_by_frame():
     db = mmrl.default_database()
     config = ARRIVE.default_config().replace(success_radius=1.5, stop_speed=1.0, facing_tolerance=1.2,
                                              hold_time=0.2, target_half_extent=2.5, min_target_distance=1.6,
-                                             max_steps=30)
+                                             max_steps=30, precision_weight=2.0, facing_weight=0.5)
     fp = FullPath(ARRIVE, db, config=config, seed=3, record=False)
     H = fp.env._core.hold_frames
     assert H == round(0.2 * db.fps)
@@ -71,6 +71,15 @@ def test_success_is_a_hold_at_rest_facing_the_target_frame_by_frame():
             successes += 1
         else:
             assert not out["terminated"]
+        # The reward where the step's played frames end (the hold's last frame on success).
+        r = roots[out["step_frames"] - 1]
+        d = math.hypot(st["target"][0] - r[0], st["target"][1] - r[1])
+        e = abs(wrap(facing - r[2]))
+        reward = math.exp(-d) + 0.5 * math.exp(-d / config.success_radius) * (1 + math.cos(e)) / 2
+        if expected_end is not None:
+            precision = (max(0.0, 1 - d / config.success_radius) + max(0.0, 1 - e / config.facing_tolerance)) / 2
+            reward += config.success_bonus * (1 + 2.0 * precision)
+        assert out["reward"] == pytest.approx(reward, rel=1e-4, abs=1e-4)
         if out["done"]:
             hold = 0
     assert successes >= 5  # not vacuous
@@ -139,6 +148,11 @@ def test_train_eval_render_and_export_through_the_cli(tmp_path, capsys):
     assert main(["eval", str(run), "--episodes", "4", "--json", "--no-peer"]) == 0
     res = json.loads(capsys.readouterr().out)
     assert res["env"] == "arrive" and res["episodes"] == 4
+    for e in res["episode_results"]:  # the final errors, as the final observation tells them
+        assert e["final_position_error_cm"] >= 0 and 0 <= e["final_facing_error_deg"] <= 180
+        if e["success"]:
+            assert e["final_position_error_cm"] <= 25.0 + 1e-3 and e["final_facing_error_deg"] <= 15.0 + 1e-3
+    assert "final_position_error_cm_median" in res and "final_facing_error_deg_p95" in res
     assert main(["render", str(run), "--length", "0.4", "--size", "96x64", "-o", str(tmp_path / "a.gif")]) == 0
     assert (tmp_path / "a.gif").stat().st_size > 0
     assert main(["export", str(run), "-o", str(tmp_path / "a.mmrl")]) == 0
@@ -152,3 +166,30 @@ def test_train_eval_render_and_export_through_the_cli(tmp_path, capsys):
     obs = np.random.default_rng(0).normal(0, 1, (1, 19)).astype(np.float32)
     out = session.run(None, {session.get_inputs()[0].name: obs})[0]
     np.testing.assert_allclose(out[0], c.act(obs[0]), atol=1e-4)  # the same policy as the runtime file
+
+
+def test_play_sets_the_facing_keeps_it_across_episodes_and_draws_its_arrow():
+    from mmrl.rl.policies import JoystickPolicy
+    from mmrl.viewer.draw import LIFT, arrow
+    from mmrl.viewer.live import LiveSession
+
+    db = mmrl.default_database()
+    s = LiveSession(ARRIVE, db, JoystickPolicy.preset(db, "joystick"))
+    assert s.takes_facing and s.step()["facing"] == pytest.approx(s.run.env.env_state(0)["facing"])
+    s.set_facing(1.0)
+    for _ in range(12):
+        shown = s.step()
+    assert s.run.env.env_state(0)["facing"] == pytest.approx(1.0) and shown["facing"] == 1.0
+    s.run.continue_from_character(s.run.target)  # what an ended episode does: the user's facing stays
+    assert s.run.env.env_state(0)["facing"] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="finite"):
+        s.set_facing(float("nan"))
+    plane = LiveSession(mmrl.get_task("plane"), db, JoystickPolicy.preset(db, "joystick"))
+    assert not plane.takes_facing
+    with pytest.raises(ValueError, match="reads none"):
+        plane.set_facing(0.5)
+    # The arrow: from the target along (sin yaw, cos yaw); yaw pi/2 points along +X.
+    a = arrow((1.0, 2.0), math.pi / 2, 1.0)
+    np.testing.assert_allclose(a[0], [[1.0, LIFT, 2.0], [2.0, LIFT, 2.0]], atol=1e-12)
+    np.testing.assert_allclose(a[1:, 0], [[2.0, LIFT, 2.0]] * 2, atol=1e-12)
+    assert np.all(a[1:, 1, 0] < 2.0)  # the barbs point back from the tip

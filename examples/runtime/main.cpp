@@ -120,6 +120,7 @@ int run(const Options& o) {
     chars.push_back(std::make_unique<mmrl::RuntimeCharacter>(controller, origin[i].first, origin[i].second, 0.0f,
                                                              valid[(static_cast<size_t>(i) * 97) % valid.size()]));
     chars[i]->set_target(origin[i].first + o.targets[0].first, origin[i].second + o.targets[0].second);
+    if (chars[i]->takes_facing()) chars[i]->set_facing(0.0f);  // an arrive controller: face +Z at each target
     if (!o.request.empty()) chars[i]->set_request(o.request);
   }
   std::unique_ptr<FILE, int (*)(FILE*)> trace(o.trace.empty() ? nullptr : std::fopen(o.trace.c_str(), "w"),

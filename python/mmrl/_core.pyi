@@ -1179,7 +1179,7 @@ class ArriveTaskConfig:
     """
     Numbers of the arrive task (see tasks/arrive.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -1246,6 +1246,14 @@ class ArriveTaskConfig:
         """
     @min_target_distance.setter
     def min_target_distance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def precision_weight(self) -> float:
+        """
+        Reward on success: success_bonus times this times the precision of the rest (1 at the target and its facing, 0 at the tolerances: the mean of 1 - distance / success_radius and 1 - facing error / facing_tolerance).
+        """
+    @precision_weight.setter
+    def precision_weight(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def random_heading(self) -> bool:

@@ -179,6 +179,7 @@ class FullPath:
         if request:
             self.playback.check_request(request)
         self.playback.attach(self.env)
+        self.facing: Optional[float] = None  # a facing set by set_facing (None: each episode's own)
         self.request = ""
         self.request_clips: Optional[np.ndarray] = None  # (C,) bool of the request's clips; None: every clip
         if request:
@@ -224,6 +225,19 @@ class FullPath:
         self.obs = self.env.set_target(0, x, z)
         self.target = np.array([x, z], np.float64)
 
+    @property
+    def takes_facing(self) -> bool:
+        """The task reads a target facing (its observation has a "facing" segment: the arrive task)."""
+        return any(name == "facing" for name, _ in self.env.observation_layout)
+
+    def set_facing(self, yaw: float) -> None:
+        """The target facing (world yaw, radians) from the next decision on, kept by
+        :meth:`continue_from_character`; ValueError for a task that reads none."""
+        if not self.takes_facing:
+            raise ValueError(f"the {self.task.name} task reads no facing")
+        self.obs = self.env.set_facing(0, yaw)
+        self.facing = float(yaw)
+
     def continue_from_character(self, target=None) -> None:
         """Start the next episode where the character stands (same frame and root) with a new
         world ``target``, instead of the env's fresh start: one continuous motion. Without a
@@ -236,6 +250,8 @@ class FullPath:
         if target is None:
             target = self.env._core.draw_target_around_root(0, float(self.config.target_half_extent))
         self.set_target(float(target[0]), float(target[1]))
+        if self.facing is not None:
+            self.set_facing(self.facing)
         self.episode_steps = 0
 
     def step(self, action: np.ndarray) -> Dict[str, Any]:
@@ -265,6 +281,8 @@ class FullPath:
             # The env's last goal vector, read at the ending frame, against the controller's root there.
             g = obs_segment(self.env.observation_layout, "goal")
             out["goal_error"] = self._goal_error(info["final_obs"][0, g], res.roots[shown - 1])
+            if self.task.final_values is not None:
+                out.update(self.task.final_values(self.env.observation_layout, info["final_obs"][0]))
             self.obs = obs[0]
             if not self.continuous:
                 if self.character._record:
@@ -329,6 +347,12 @@ class EpisodeSummary:
         self.costs.append(rec["costs"])
         self.results.append(ep)
 
+    def _final_keys(self) -> List[str]:
+        """The keys of the task's final values (Task.final_values: named ``final_...``)."""
+        if self.task.final_values is None:
+            return []
+        return sorted({k for e in self.results for k in e if k.startswith("final_")})
+
     def summary(self) -> Dict[str, Any]:
         results = self.results
         times = [e["time_to_target_s"] for e in results if e["success"]]
@@ -337,6 +361,10 @@ class EpisodeSummary:
                                       {k: np.array([e.get(k, False) for e in results]) for k in self.task.outcomes}))
         out.pop("success_stderr")
         out["mean_time_to_target_s"] = float(np.mean(times)) if times else None
+        for key in self._final_keys():  # the task's final values over the successful episodes
+            values = [e[key] for e in results if e["success"] and key in e]
+            out[f"{key}_median"] = float(np.median(values)) if values else None
+            out[f"{key}_p95"] = float(np.percentile(values, 95)) if values else None
         out.update(self.quality.result())
         out["transitions_per_s"] = metrics.rate_per_second(self.transitions, self.frames, self.db.fps)
         out["mean_speed_m_per_s"] = metrics.rate_per_second(self.distance, self.frames, self.db.fps)
@@ -395,6 +423,7 @@ def evaluate_full_path(task: Task, db: Database, policy, *, episodes: int = 20, 
               "steps": int(out["episode_length"]), "distance_m": distance, "truncated": out["truncated"]}
         for key in task.outcomes:
             ep.setdefault(key, bool(out.get(key, False)))
+        ep.update({k: v for k, v in out.items() if k.startswith("final_")})  # the task's final values
         summary.add(ep, run.last_recording, frames)
     out = summary.summary()
     if run.request:

@@ -55,9 +55,15 @@ TaskStep ArriveVecEnv::advance(int i, const float* action) {
   }
   end_playback(s);  // the root stops where the hold completed (the episode ends there)
   const float d = target_distance(s);
-  const float facing = 0.5f * (1.0f + std::cos(wrap_angle(s.target_yaw - s.root.yaw)));
-  out.reward = std::exp(-d) + config_.facing_weight * std::exp(-d / config_.success_radius) * facing +
-               (out.success ? config_.success_bonus : 0.0f);
+  const float error = std::abs(wrap_angle(s.target_yaw - s.root.yaw));
+  const float facing = 0.5f * (1.0f + std::cos(error));
+  out.reward = std::exp(-d) + config_.facing_weight * std::exp(-d / config_.success_radius) * facing;
+  if (out.success) {
+    const float tolerance = std::max(config_.facing_tolerance, 1e-6f);
+    const float precision = 0.5f * (std::max(0.0f, 1.0f - d / config_.success_radius) +
+                                    std::max(0.0f, 1.0f - error / tolerance));
+    out.reward += config_.success_bonus * (1.0f + config_.precision_weight * precision);
+  }
   out.terminated = out.success;
   return out;
 }

@@ -228,6 +228,10 @@ def print_evaluation(res, s: "Setup", episodes: int) -> None:
     print(f"  success             {100 * res['success_rate']:.1f}%")
     for k in (k for k in res if k.endswith("_rate") and k != "success_rate"):
         print(f"  {k.replace('_rate', ''):<19} {100 * res[k]:.1f}%")
+    for k in (k for k in res if k.startswith("final_") and k.endswith("_median")):
+        name, unit = k[len("final_"):-len("_median")].rsplit("_", 1)
+        print(f"  {name.replace('_', ' '):<19} median {_f(res[k])} {unit}, p95 {_f(res[k[:-6] + 'p95'])} "
+              f"(over successes)")
     t = res.get("mean_time_to_target_s")
     print("  time to target      " + ("n/a (no episode succeeded)" if t is None else f"{t:.2f} s (mean over successes)"))
     print(f"  mean speed          {_f(res.get('mean_speed_m_per_s'))} m/s")

@@ -24,6 +24,7 @@ from .. import _core
 from ..motion.kinds import check_can_stop
 from .base import SingleEnv, TargetVectorEnv, Task, TaskConfig
 from .drawing import drawing
+from .layout import obs_segment
 from .options import task_options
 
 
@@ -62,6 +63,13 @@ class ArriveEnv(SingleEnv):
         return drawing("state")(self.db, self._vec.env_state(0))
 
 
+def final_errors(layout, final_obs: np.ndarray) -> dict:
+    """The position error (cm) and the facing error (degrees) where an episode ended."""
+    goal, facing = final_obs[obs_segment(layout, "goal")], final_obs[obs_segment(layout, "facing")]
+    return {"final_position_error_cm": float(100 * np.hypot(goal[0], goal[1])),
+            "final_facing_error_deg": float(np.degrees(abs(np.arctan2(facing[0], facing[1]))))}
+
+
 TASK = Task(
     name="arrive",
     summary="reach a target and stop there facing a given direction (issue 38)",
@@ -72,4 +80,5 @@ TASK = Task(
     presets={"paper": {}, "quality": {"transition_cost": 60.0, "gamma": 0.97}},
     default_preset="quality",
     check_data=check_can_stop,
+    final_values=final_errors,
 )

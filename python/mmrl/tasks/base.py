@@ -436,6 +436,10 @@ class Task:
     """``scene(env)`` -> a recorder of what the full path draws besides the character (see
     ``mmrl.rollout.SceneRecorder``); None draws the character and targets only."""
 
+    final_values: Optional[Callable[[Any, np.ndarray], Dict[str, float]]] = None
+    """``final_values(layout, final_obs)``: per-episode numbers named ``final_...``, read from an
+    episode's last observation (the arrive task's position and facing errors); ``mmrl eval``
+    reports their median and p95 over the successful episodes."""
     check_data: Optional[Callable[[Any], None]] = None
     """``check_data(db)`` raises ValueError saying what the data lacks for this task, before
     ``mmrl train`` starts (the arrive task: data that can stop)."""

@@ -44,6 +44,17 @@ def ring(center_xz, radius: float, n: int = 32) -> np.ndarray:
     return np.stack([p[:-1], p[1:]], 1)
 
 
+def arrow(start_xz, yaw: float, length: float) -> np.ndarray:
+    """(3, 2, 3) segments of an arrow on the ground from ``start_xz`` along world yaw ``yaw``
+    (forward = (sin yaw, cos yaw)): its shaft and two barbs."""
+    f = np.array([np.sin(yaw), np.cos(yaw)])
+    tip = np.asarray(start_xz, np.float64) + length * f
+    side = np.array([f[1], -f[0]])
+    barbs = [tip - 0.2 * length * f + s * 0.12 * length * side for s in (1.0, -1.0)]
+    pts = _flat(np.array([start_xz, tip, barbs[0], barbs[1]], np.float64))
+    return np.stack([pts[[0, 1, 1]], pts[[1, 2, 3]]], 1)
+
+
 def capsule_mesh(length: float, radius: float, sides: int = 10, cap_rings: int = 3):
     """Vertices (V, 3) and faces (F, 3) of a capsule along +Z from 0 to ``length`` meters: a
     cylinder of ``radius`` closed by half spheres around both ends."""
@@ -163,12 +174,14 @@ class Painter:
         ankles = np.asarray(positions, np.float64)[self.feet][planted]
         self.scene.points(self.root + "/figure/contacts", _flat(ankles[:, [0, 2]], 0.05), CONTACT, size=0.1)
 
-    def target(self, target) -> None:
+    def target(self, target, facing: Optional[float] = None) -> None:
+        """The target's ring, and an arrow along its facing (world yaw, radians) when it has one."""
         if target is None:
             self.scene.visible(self.root + "/target", False)
             return
         t = np.asarray(target, np.float64).reshape(-1, 2)[0]
-        marks = np.concatenate([ring(t, self.success_radius), ring(t, 0.05, 8)])
+        marks = np.concatenate([ring(t, self.success_radius), ring(t, 0.05, 8)]
+                               + ([arrow(t, float(facing), 0.8)] if facing is not None else []))
         self.scene.lines(self.root + "/target", marks, TARGET, thickness=0.04)
         self.scene.visible(self.root + "/target", True)
 
@@ -229,7 +242,7 @@ class Painter:
             self.figure(shown["positions"])
             self.contacts(shown["positions"], shown.get("contacts"))
             if "targets" in shown:
-                self.target(shown["targets"])
+                self.target(shown["targets"], shown.get("facing"))
             self.obstacles(shown.get("obstacles"))
             self.sensors(shown.get("sensors"))
             if "query_points" in shown:

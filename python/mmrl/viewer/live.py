@@ -46,6 +46,9 @@ class LiveSession:
                             request=request, compressed=compressed)
         self.config = self.run.config
         self._scene = task.scene(self.run.env) if task.scene is not None else None  # the task's own scene
+        self.takes_facing = self.run.takes_facing
+        if self.takes_facing:  # the first episode's facing stays until the user sets another
+            self.run.set_facing(self.run.env.env_state(0)["facing"])
         self.policies = {"trained": policy, "joystick": JoystickPolicy.preset(db, "joystick"),
                          "joystick-run": JoystickPolicy.preset(db, "joystick-run")}
         self.policy_name = "trained"
@@ -92,6 +95,15 @@ class LiveSession:
         with self._lock:
             self._pending["options"] = (self.ik if ik is None else bool(ik),
                                         self.inertialization if inertialization is None else bool(inertialization))
+
+    def set_facing(self, yaw: float) -> None:
+        """The facing to arrive with (world yaw, radians), from the next decision on (tasks that
+        read one: ``takes_facing``)."""
+        if not self.takes_facing or not np.isfinite(yaw):
+            raise ValueError(f"facing: the {self.task.name} task reads none" if not self.takes_facing else
+                             f"facing must be finite (radians), got {yaw}")
+        with self._lock:
+            self._pending["facing"] = float(yaw)
 
     def set_request(self, request: str) -> None:
         """A request over the database's tags ("" for every clip): checked now (ValueError listing
@@ -143,6 +155,8 @@ class LiveSession:
     def _frame_values(self, positions, contacts) -> Dict[str, Any]:
         out = dict(self.shown)
         out.update(positions=positions, contacts=contacts, targets=self.run.target.copy())
+        if self.takes_facing:
+            out["facing"] = self.run.facing
         if self.has_obstacles:
             out["obstacles"] = self._obstacle_corners()
         return out
@@ -159,6 +173,8 @@ class LiveSession:
             self._edit_obstacles(pending.get("moves", {}), pending.get("pause"))
         if "request" in pending:
             self.run.set_request(pending["request"])
+        if "facing" in pending:
+            self.run.set_facing(pending["facing"])
         if "target" in pending:
             self.run.set_target(*pending["target"])
             self.timing["click_to_decision"].append(time.perf_counter() - pending["target_set_at"])

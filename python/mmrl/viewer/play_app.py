@@ -40,6 +40,8 @@ class PlayApp:
         scene.on_ground_click(self.click)
         if session.has_obstacles:
             scene.on_ground_click(self.pick_obstacle, shift=True)
+        if session.takes_facing:
+            scene.on_ground_click(self.face, shift=True)
         self.painter.show(session.shown)
 
     def _controls(self) -> None:
@@ -47,6 +49,8 @@ class PlayApp:
         help_text = "**click the ground** to place the target"
         if sess.has_obstacles:
             help_text += "; **shift+click** picks an obstacle to drag"
+        if sess.takes_facing:
+            help_text += "; **shift+click** turns the facing toward the click (the arrow)"
         s.text(f"**{sess.task.name}** · {help_text}")
         self.policy_menu = s.dropdown("policy", list(sess.policies), sess.policy_name)
         if sess.db.tag_names:  # a request switches the character at its next decision (docs/styles.md)
@@ -69,6 +73,12 @@ class PlayApp:
     # ------------------------------------------------------------------ input
     def click(self, x: float, z: float) -> None:
         self.session.set_target(x, z)
+
+    def face(self, x: float, z: float) -> None:
+        """The facing to arrive with: from the target toward the click (forward = (sin yaw, cos yaw))."""
+        tx, tz = self.session.target
+        if np.hypot(x - tx, z - tz) > 1e-3:
+            self.session.set_facing(float(np.arctan2(x - tx, z - tz)))
 
     def pick_obstacle(self, x: float, z: float) -> None:
         centres = self.session.obstacle_centres()

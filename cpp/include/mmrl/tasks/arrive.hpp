@@ -7,7 +7,8 @@
 //                 with request_groups: the request's code]
 //   action       12-d trajectory feature, as the plane task's
 //   reward       exp(-|g_t|) + facing_weight * exp(-|g_t| / success_radius) * (1 + cos(facing error)) / 2
-//                after the step, + success_bonus on success
+//                after the step, + success_bonus * (1 + precision_weight * precision) on success
+//                (precision: 1 at the target and its facing, 0 at the tolerances)
 //   terminated   success: on hold_time seconds of consecutive played frames the root stood
 //                within success_radius of the target, faced its facing within
 //                facing_tolerance and moved slower than stop_speed (step_frames counts up
@@ -28,6 +29,7 @@ struct ArriveTaskConfig : TaskConfig {
   float stop_speed = 0.15f;
   float hold_time = 0.5f;
   float facing_weight = 1.0f;
+  float precision_weight = 1.0f;
   ArriveTaskConfig() {
     success_radius = 0.25f;
     max_steps = 150;
@@ -43,6 +45,10 @@ struct ArriveTaskConfig : TaskConfig {
       "Success: seconds the character stays within the tolerances, at rest, before the episode succeeds.");
     v("facing_weight", &ArriveTaskConfig::facing_weight, kNonNegative,
       "Reward term: this times exp(-distance / success_radius) times (1 + cos(facing error)) / 2.");
+    v("precision_weight", &ArriveTaskConfig::precision_weight, kNonNegative,
+      "Reward on success: success_bonus times this times the precision of the rest (1 at the target and its "
+      "facing, 0 at the tolerances: the mean of 1 - distance / success_radius and 1 - facing error / "
+      "facing_tolerance).");
   }
 };
 
