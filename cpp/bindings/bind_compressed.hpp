@@ -28,6 +28,14 @@ const CompressedSource& compressed_of(const Wrapper& s, const char* method) {
   return *source;
 }
 
+// One of env i's compressed states (a MotionState buffer of state_dim floats) as a numpy view.
+template <class Wrapper>
+auto state_view(std::vector<float> MotionState::*buffer, const char* method) {
+  return [buffer, method](const Wrapper& s, int i) {
+    return py::array_t<float>(compressed_of(s, method).state_dim(), (s.env.motion(checked_env_index(s, i)).*buffer).data());
+  };
+}
+
 // set_compressed and the compressed state's accessors of a task env's class c.
 // long: a binding table, one .def per method; each lambda only converts, checks and forwards.
 template <class Wrapper>
@@ -56,27 +64,12 @@ void bind_compressed_env(py::class_<Wrapper>& c) {
             return py::array_t<float>({F, P}, s.env.motion(checked_env_index(s, i)).crows.data());
           },
           py::arg("index"), "Env i's last decision's pose rows (frames_per_step + 1, pose_dim): row 0 the chosen state.")
-      .def(
-          "compressed_state",
-          [](const Wrapper& s, int i) {
-            return py::array_t<float>(compressed_of(s, "compressed_state").state_dim(),
-                                      s.env.motion(checked_env_index(s, i)).cstate.data());
-          },
-          py::arg("index"), "Env i's compressed state shown now (state_dim).")
-      .def(
-          "compressed_played",
-          [](const Wrapper& s, int i) {
-            return py::array_t<float>(compressed_of(s, "compressed_played").state_dim(),
-                                      s.env.motion(checked_env_index(s, i)).cnext.data());
-          },
-          py::arg("index"), "The state at the end of env i's last playback (kept through the autoreset).")
-      .def(
-          "compressed_chosen",
-          [](const Wrapper& s, int i) {
-            return py::array_t<float>(compressed_of(s, "compressed_chosen").state_dim(),
-                                      s.env.motion(checked_env_index(s, i)).cchosen.data());
-          },
-          py::arg("index"), "The state env i's last decision chose (the projection or the continuation; state_dim).")
+      .def("compressed_state", state_view<Wrapper>(&MotionState::cstate, "compressed_state"), py::arg("index"),
+           "Env i's compressed state shown now (state_dim).")
+      .def("compressed_played", state_view<Wrapper>(&MotionState::cnext, "compressed_played"), py::arg("index"),
+           "The state at the end of env i's last playback (kept through the autoreset).")
+      .def("compressed_chosen", state_view<Wrapper>(&MotionState::cchosen, "compressed_chosen"), py::arg("index"),
+           "The state env i's last decision chose (the projection or the continuation; state_dim).")
       .def(
           "set_compressed_state",
           [](Wrapper& s, int i, const py::handle& state) {

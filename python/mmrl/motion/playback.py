@@ -33,7 +33,7 @@ class DatabasePlayback:
 
     def start(self, character, env, i: int, root) -> None:
         """Shows env i's episode start on ``character`` at ``root``."""
-        character.reset(int(env.env_state(i)["frame"]), (float(root[0]), float(root[1])), float(root[2]))
+        self.restart(character, env, i, int(env.env_state(i)["frame"]), root)
 
     def restart(self, character, env, i: int, frame: int, root) -> None:
         """Shows what a previous character showed (its database ``frame``) on a new one."""

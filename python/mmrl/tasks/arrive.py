@@ -22,10 +22,10 @@ import numpy as np
 
 from .. import _core
 from ..motion.kinds import check_can_stop
-from .base import SingleEnv, TargetVectorEnv, Task, TaskConfig
-from .drawing import drawing
+from .base import Task, TaskConfig
 from .layout import obs_segment
 from .options import task_options
+from .plane import PlaneEnv, PlaneVectorEnv
 
 
 @task_options(_core.ArriveTaskConfig)
@@ -36,10 +36,10 @@ class ArriveConfig(TaskConfig):
     task_label = "arrive-task"
 
 
-class ArriveVectorEnv(TargetVectorEnv):
-    """N arrive-task characters stepped together in C++ (see the module docstring)."""
+class ArriveVectorEnv(PlaneVectorEnv):
+    """N arrive-task characters stepped together in C++ (see the module docstring); drawn as the
+    plane task's."""
 
-    metadata = dict(TargetVectorEnv.metadata, render_modes=["rgb_array"])
     core_type = _core.ArriveVecEnv
     core_config_type = _core.ArriveTaskConfig
     config_type = ArriveConfig
@@ -49,18 +49,11 @@ class ArriveVectorEnv(TargetVectorEnv):
         self._core.set_facing(int(i), float(yaw))
         return self.observe(i)
 
-    def render(self):
-        return drawing("topdown")([self.env_state(i) for i in range(self.num_envs)])
 
-
-class ArriveEnv(SingleEnv):
+class ArriveEnv(PlaneEnv):
     """A single arrive-task character (the same C++ core with one environment)."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
     vector_type = ArriveVectorEnv
-
-    def render(self):
-        return drawing("state")(self.db, self._vec.env_state(0))
 
 
 def final_errors(layout, final_obs: np.ndarray) -> dict:
