@@ -143,16 +143,19 @@ def test_manifest_lists_every_clip_with_commands(dataset):
     assert sorted(p.name for p in out.glob("*.bvh")) == sorted(e["file"] for e in manifest["clips"])
     kinds = {e["kind"] for e in manifest["clips"]}
     for needed in ("walk", "run", "walk-turn-left", "walk-turn-right", "run-turn-left", "run-turn-right",
-                   "speed-up", "slow-down", "stand", "start", "stop"):
+                   "speed-up", "slow-down", "stand", "start", "stop", "step-left", "step-right", "walk-back",
+                   "back-stop"):
         assert needed in kinds
     speeds = [e["speed"] for e in manifest["clips"]]
     assert min(s for s in speeds if s > 0) < 0.6 and max(speeds) > 3.8
     for e in manifest["clips"]:
         assert e["frames"] == 6 * FPS
-        if "left" in e["kind"]:
+        if "turn" in e["kind"] and "left" in e["kind"]:
             assert e["turn_rate"] > 0
-        if "right" in e["kind"]:
+        if "turn" in e["kind"] and "right" in e["kind"]:
             assert e["turn_rate"] < 0
+        expected_direction = {"step-left": np.pi / 2, "step-right": -np.pi / 2, "walk-back": np.pi, "back-stop": np.pi}
+        assert e["direction"] == expected_direction.get(e["kind"], 0.0)
     total_minutes = sum(e["frames"] for e in manifest["clips"]) / FPS / 60
     assert 2.0 < total_minutes < 4.0
 
@@ -315,6 +318,9 @@ def test_database_features_match_commanded_speed_and_turn_rate(dataset):
             assert length < 0.05, entry
         else:
             assert length == pytest.approx(expected, rel=0.05), entry
+        if v > 0 and w == 0:  # where it goes, in the character frame (x = left, z = forward): its direction
+            heading = np.arctan2(traj30[:, 0], traj30[:, 1])
+            assert np.abs(np.angle(np.exp(1j * (heading - entry["direction"])))).max() < 0.1, entry
         # facing at +30 frames (x = left, z = forward): its angle is the turn over one second
         angle = np.arctan2(dir30[:, 0], dir30[:, 1]).mean()
         assert angle == pytest.approx(w * 1.0, abs=0.05 + 0.05 * abs(w)), entry

@@ -194,6 +194,40 @@ def test_play_click_moves_the_target_and_the_character_follows(browser, plane_ru
         print(server.stop())
 
 
+def test_play_shift_drag_places_the_target_and_turns_the_facing_along_the_drag(browser, tmp_path):
+    from mmrl.cli import main
+
+    run = tmp_path / "arrive"
+    assert main(["train", "arrive", "--steps", "1024", "--envs", "8", "--out", str(run), "--no-progress"]) == 0
+    """Arrive task: a shift+drag puts the target where it began and the facing along it; the
+    same drag reversed on screen turns the facing around (the camera only translates)."""
+    trace = tmp_path / "trace.jsonl"
+    server = Server("play", run, "--policy", "joystick", "--trace", trace)
+    try:
+        page = open_page(browser, server.url)
+        wait_for(lambda: len(read_trace(trace)) >= 10)
+        facings = []
+        for direction in (1, -1):
+            old = read_trace(trace)[-1]
+            x0, y0 = 0.3 * VIEWPORT["width"], 0.65 * VIEWPORT["height"]
+            page.keyboard.down("Shift")
+            page.mouse.move(x0, y0)
+            page.mouse.down()
+            page.mouse.move(x0 + direction * 120, y0, steps=8)
+            page.mouse.up()
+            page.keyboard.up("Shift")
+            changed = wait_for(lambda: [line for line in read_trace(trace)
+                                        if line["t"] > old["t"] and line["target"] != old["target"]
+                                        and abs(line["facing"] - old["facing"]) > 1e-4], every=0.05)
+            time.sleep(0.5)  # the drag's last updates
+            facings.append(read_trace(trace)[-1]["facing"])
+            assert np.hypot(*(np.array(changed[-1]["target"]) - changed[-1]["root"][:2])) < 15.0
+        turn = abs((facings[1] - facings[0] + np.pi) % (2 * np.pi) - np.pi)
+        assert turn > np.pi - 0.6, facings
+    finally:
+        print(server.stop())
+
+
 def test_html_export_opens_offline(browser, tmp_path):
     from mmrl.cli import main
 

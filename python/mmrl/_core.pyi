@@ -1179,7 +1179,7 @@ class ArriveTaskConfig:
     """
     Numbers of the arrive task (see tasks/arrive.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'rest_transition_cost')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -1278,6 +1278,14 @@ class ArriveTaskConfig:
         """
     @request_groups.setter
     def request_groups(self, arg0: collections.abc.Sequence[str]) -> None:
+        ...
+    @property
+    def rest_transition_cost(self) -> float:
+        """
+        Added to transition_cost for a decision made at rest within the tolerances (the last played frame slower than stop_speed): a character that has arrived keeps its standing clip rather than fidget.
+        """
+    @rest_transition_cost.setter
+    def rest_transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def stop_speed(self) -> float:

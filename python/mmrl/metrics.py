@@ -320,16 +320,22 @@ _FLOOR_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _FLOOR_CHUNK_FRAMES = 1 << 15  # FK of this many frames at a time: bounded memory on any database
 
 
-def raw_mocap_floor(db) -> Dict[str, float]:
+def raw_mocap_floor(db, only: Optional[np.ndarray] = None) -> Dict[str, float]:
     """Foot sliding and pose jump of the database's clips played straight (no matching, no IK).
 
     Every pair of consecutive frames inside a clip is one step of playback: the same contact
     rule, foot sliding and pose-jump excess as generated motion (module docstring), over all
     clips of the database (mirrored copies included). Computed once per database object.
     Returns ``foot_sliding_cm_per_s``, ``foot_sliding_p95_cm_per_s``, ``pose_jump_p99_cm``
-    (0: a clip played straight is its own reference) and ``frames``.
+    (0: a clip played straight is its own reference) and ``frames`` (the pairs measured).
+    ``only``: (num_frames,) bool, measure just the pairs (t - 1, t) whose frame t it selects
+    (the idle frames: :func:`mmrl.eval.standing.raw_idle_floor`); not cached.
     """
-    cached = _FLOOR_CACHE.get(db)
+    if only is not None:
+        only = np.asarray(only)
+        if only.shape != (db.num_frames,) or only.dtype != bool:
+            raise ValueError(f"only: expected ({db.num_frames},) bool, got {only.dtype} {only.shape}")
+    cached = _FLOOR_CACHE.get(db) if only is None else None
     if cached is not None:
         return dict(cached)
     ranges = np.asarray(db.clip_ranges, np.int64)
@@ -338,6 +344,7 @@ def raw_mocap_floor(db) -> Dict[str, float]:
     roots = np.column_stack([np.asarray(db.root_positions, np.float64)[:, [0, 2]],
                              np.asarray(db.root_yaws, np.float64)])
     speeds, jumps = [], []
+    pairs = 0
     a = 0
     while a < len(ranges):  # chunks of whole clips
         b = a + 1
@@ -350,7 +357,10 @@ def raw_mocap_floor(db) -> Dict[str, float]:
         starts = ranges[a:b, 0] - lo
         now = np.ones(hi - lo, bool)
         now[starts] = False
+        if only is not None:
+            now &= only[lo:hi]
         t = np.flatnonzero(now)
+        pairs += t.size
         for side, j in enumerate(feet_idx):
             both = contacts[lo + t, side] & contacts[lo + t - 1, side]
             d = p[t[both], j] - p[t[both] - 1, j]
@@ -361,6 +371,7 @@ def raw_mocap_floor(db) -> Dict[str, float]:
     out = {"foot_sliding_cm_per_s": float(s.mean()) if s.size else 0.0,
            "foot_sliding_p95_cm_per_s": _percentile(s, SLIDING_PERCENTILE) or 0.0,
            "pose_jump_p99_cm": _percentile(jp, JUMP_PERCENTILE) or 0.0,
-           "frames": int(db.num_frames)}
-    _FLOOR_CACHE[db] = dict(out)
+           "frames": int(db.num_frames) if only is None else int(pairs)}
+    if only is None:
+        _FLOOR_CACHE[db] = dict(out)
     return out

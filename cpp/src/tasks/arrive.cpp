@@ -1,6 +1,7 @@
 #include "mmrl/tasks/arrive.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <stdexcept>
 
@@ -9,7 +10,8 @@ namespace mmrl {
 ArriveVecEnv::ArriveVecEnv(const Database& db, const Matcher& matcher, int num_envs, const ArriveTaskConfig& config,
                            int num_threads)
     : TargetVecEnv(db, matcher, num_envs, config, num_threads),
-      hold_frames_(std::max(1, static_cast<int>(std::lround(config.hold_time * db.fps)))) {}
+      hold_frames_(std::max(1, static_cast<int>(std::lround(config.hold_time * db.fps)))),
+      rest_smoothing_(1.0f - std::exp(-1.0f / (kRestSmoothingSeconds * db.fps))) {}
 
 void ArriveVecEnv::observe(int i, float* obs) const {
   const ArriveEnvState& s = envs_[i];
@@ -27,27 +29,50 @@ void ArriveVecEnv::set_facing(int i, float yaw) {
   envs_[i].hold = 0;
 }
 
+bool ArriveVecEnv::within_tolerances(const ArriveEnvState& s) const {
+  const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
+  return dx * dx + dz * dz <= config_.success_radius * config_.success_radius &&
+         std::abs(wrap_angle(s.target_yaw - s.root.yaw)) <= config_.facing_tolerance;
+}
+
+bool ArriveVecEnv::stands(const ArriveEnvState& s) const {
+  // The +1 s trajectory sample of what plays now, in meters (the normalization undone).
+  const float* f = source().current(s).features;
+  const int c = trajectory_position_column(2);
+  const auto& n = db_.normalization;
+  const std::array<float, kFeatureDim> scale = n.column_scale();
+  return std::hypot(f[c] * scale[c] + n.mean[c], f[c + 1] * scale[c + 1] + n.mean[c + 1]) < kStandMeters;
+}
+
+float ArriveVecEnv::decision_transition_cost(int i) const {
+  const ArriveEnvState& s = envs_[i];
+  const bool rest = config_.rest_transition_cost > 0 && within_tolerances(s) && stands(s);
+  return config_.transition_cost + (rest ? config_.rest_transition_cost : 0.0f);
+}
+
 void ArriveVecEnv::begin_episode(int i) {
   ArriveEnvState& s = envs_[i];
   draw_start(i, config_.target_half_extent);
   s.target_yaw = s.rng.uniform(-kPi, kPi);
   s.hold = 0;
+  s.resting = false;
+  s.vx = s.vz = 0;
 }
 
 TaskStep ArriveVecEnv::advance(int i, const float* action) {
   ArriveEnvState& s = envs_[i];
+  const bool arrived = within_tolerances(s);  // a transition from here on fidgets
   decide(i, action);
-  const float r2 = config_.success_radius * config_.success_radius;
   const float fps = db_.fps;
   TaskStep out;
   out.step_frames = config_.frames_per_step;
   for (int k = 0; k < config_.frames_per_step && !out.success; ++k) {
-    const float* delta = played_delta(s, k);
-    root_advance(s.root, delta);
-    const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
-    const bool at_rest = std::hypot(delta[0], delta[1]) * fps < config_.stop_speed;
-    const bool facing = std::abs(wrap_angle(s.target_yaw - s.root.yaw)) <= config_.facing_tolerance;
-    s.hold = dx * dx + dz * dz <= r2 && facing && at_rest ? s.hold + 1 : 0;
+    const float x0 = s.root.x, z0 = s.root.z;
+    root_advance(s.root, played_delta(s, k));
+    s.vx += rest_smoothing_ * ((s.root.x - x0) * fps - s.vx);
+    s.vz += rest_smoothing_ * ((s.root.z - z0) * fps - s.vz);
+    s.resting = std::hypot(s.vx, s.vz) < config_.stop_speed;
+    s.hold = s.resting && within_tolerances(s) ? s.hold + 1 : 0;
     if (s.hold >= hold_frames_) {
       out.success = true;
       out.step_frames = k + 1;
@@ -58,6 +83,7 @@ TaskStep ArriveVecEnv::advance(int i, const float* action) {
   const float error = std::abs(wrap_angle(s.target_yaw - s.root.yaw));
   const float facing = 0.5f * (1.0f + std::cos(error));
   out.reward = std::exp(-d) + config_.facing_weight * std::exp(-d / config_.success_radius) * facing;
+  if (arrived && s.decision.transition) out.reward -= config_.rest_transition_penalty;
   if (out.success) {
     const float tolerance = std::max(config_.facing_tolerance, 1e-6f);
     const float precision = 0.5f * (std::max(0.0f, 1.0f - d / config_.success_radius) +

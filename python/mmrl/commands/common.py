@@ -68,6 +68,14 @@ def positive_float(text: str, high: float = 1e7) -> float:
     return v
 
 
+def nonnegative_float(text: str, high: float = 1e7) -> float:
+    """argparse type: a finite number in [0, ``high``] (0 switches a measurement off)."""
+    v = read_number(text, float, "a number >= 0")
+    if not 0 <= v <= high:
+        raise argparse.ArgumentTypeError(f"expected a number from 0 to {high:g}, got {text!r}")
+    return v
+
+
 def port(text: str) -> int:
     """argparse type: a TCP port, 0 (any free one) to 65535."""
     v = read_number(text, int, "a port number 0-65535")

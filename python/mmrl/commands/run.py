@@ -20,12 +20,13 @@ import numpy as np
 from ..errors import InputError
 from ..tasks import get_task, task_names
 from .db import fps_text
-from .common import (add_data_options, bounded_int, count, database_from_args, deprecated_alias, output_path,
-                     positive_float, seed)
+from .common import (add_data_options, bounded_int, count, database_from_args, deprecated_alias, nonnegative_float,
+                     output_path, positive_float, seed)
 
 #: Episodes of the joystick that ``mmrl eval`` runs at the policy's speed by default (the first
 #: ones of the same seed): enough for its sliding, a fifth of a 100-episode evaluation.
 PEER_EPISODES = 20
+STANDING_EPISODES = 50  # mmrl eval --standing: episodes of the standing report (the first of the same episodes)
 
 POLICIES = ("trained", "joystick", "joystick-run")
 
@@ -76,6 +77,11 @@ def register_cli(sub) -> None:
                    help="also run N joysticks at speeds from the data's slowest walk to its fastest run on all the "
                    "same episodes, and report the policy's IK-off foot sliding against that line at its own time "
                    "to target (0: none)")
+    e.add_argument("--standing", type=lambda t: nonnegative_float(t, 60), default=3.0, metavar="SECONDS",
+                   help="tasks that end at rest (arrive): after each success play on this long at the same target "
+                        f"and facing, on {STANDING_EPISODES} episodes (the same for the policy and its joystick), and "
+                        "report the motion while standing "
+                        "next to the raw mocap's idle frames (0: skip; default: 3)")
     e.add_argument("--per-request", nargs="?", const="", default=None, metavar="GROUPS",
                    help="evaluate once per value of these tag groups (comma-separated; default: the run's "
                         "request groups, else every group of the database) and print a table by request")
@@ -195,6 +201,8 @@ def cmd_eval(args: argparse.Namespace) -> int:
                                   episodes=min(args.episodes, PEER_EPISODES), **episodes)
         peer.pop("episode_results", None)
         res["joystick_at_speed"] = {"speed_m_per_s": speed, "episodes": min(args.episodes, PEER_EPISODES), **peer}
+    if s.task.rests and args.standing > 0:
+        _standing(res, s, args)
     if args.line:
         from ..eval.reference import against_line, joystick_line, joystick_speeds
 
@@ -213,6 +221,21 @@ def cmd_eval(args: argparse.Namespace) -> int:
         return 0
     print_evaluation(res, s, args.episodes)
     return 0
+
+
+def _standing(res, s: "Setup", args) -> None:
+    """The standing report (mmrl.eval.standing) of the policy and of its peer, on the same episodes."""
+    from ..eval.standing import evaluate_standing
+
+    options = dict(episodes=min(args.episodes, STANDING_EPISODES), seconds=args.standing, seed=args.seed,
+                   config=s.config, request=s.request, **s.options)
+    res["standing"] = evaluate_standing(s.task, s.db, s.policy, compressed=s.compressed, **options)
+    if "joystick_at_speed" in res:
+        from ..rl.policies import JoystickPolicy
+
+        peer = JoystickPolicy(s.db, res["joystick_at_speed"]["speed_m_per_s"], arrive=True)
+        res["joystick_at_speed"]["standing"] = evaluate_standing(s.task, s.db, peer, **options)
+        res["joystick_at_speed"]["standing"].pop("episode_results")
 
 
 def _f(v, digits: int = 2) -> str:
@@ -251,6 +274,11 @@ def print_evaluation(res, s: "Setup", episodes: int) -> None:
               f"episodes: success {100 * peer['success_rate']:.0f}%, time {_f(peer.get('mean_time_to_target_s'))} s, "
               f"sliding {_f(peer.get('foot_sliding_cm_per_s'), 1)} / {_f(peer.get('foot_sliding_ik_off_cm_per_s'), 1)}"
               f" cm/s (IK on / off)")
+    for who, r in (("policy", res.get("standing")), ("joystick", (peer or {}).get("standing"))):
+        if r is not None:
+            from ..eval.standing import standing_line
+
+            print(f"  standing, {who + ':':<9} {standing_line(r) or 'no episode succeeded'}")
     if res.get("joystick_line"):
         print("  joysticks on the same episodes (the equal-speed line):")
         print(f"    {'speed m/s':>9} {'success':>8} {'time s':>7} {'sliding IK off':>15} {'transitions/s':>14}")

@@ -40,6 +40,14 @@ def motion_kinds(db: Database) -> Dict[str, float]:
             "backwards": float(np.mean(moving & (z < -np.abs(x))))}
 
 
+def idle_frames(db: Database) -> np.ndarray:
+    """(num_frames,) bool: the valid frames that stand (move less than ``IDLE_METERS`` over the
+    next second)."""
+    f = np.asarray(db.features, np.float64)
+    p = _core.TRAJECTORY_POSITION_COLUMNS[2]
+    return np.asarray(db.valid_mask, bool) & (np.hypot(f[:, p], f[:, p + 1]) < IDLE_METERS)
+
+
 def kinds_line(db: Database) -> str:
     """``mmrl db info``'s line of motion kinds."""
     k = motion_kinds(db)
@@ -58,4 +66,4 @@ def check_can_stop(db: Database) -> None:
             "Add clips with stops, idles and turns in place (LAFAN1's walks have them; docs/arrive.md)")
 
 
-__all__ = ["IDLE_METERS", "MIN_IDLE_SHARE", "check_can_stop", "kinds_line", "motion_kinds"]
+__all__ = ["IDLE_METERS", "MIN_IDLE_SHARE", "check_can_stop", "idle_frames", "kinds_line", "motion_kinds"]

@@ -1,7 +1,7 @@
 """Procedural biped locomotion written as BVH files: the test data and the default database.
 
-A small generator of walking, running, turning, starting, stopping and standing clips at speeds
-from 0 to 4 m/s, in pure numpy and deterministic from a seed. Nothing is downloaded, so the unit
+A small generator of walking, running, turning, starting, stopping, standing, side-stepping and
+backward-walking clips at speeds from 0 to 4 m/s, in pure numpy and deterministic from a seed. Nothing is downloaded, so the unit
 tests need no data and a user without motion capture still gets a working motion-matching
 database (``default_dataset_dir()``).
 
@@ -21,7 +21,7 @@ Xrotation``, i.e. local rotation = Rz * Ry * Rx, angles in degrees. Chains end i
 
 Public API
 ----------
-- ``write_clip(path, *, speed, turn_rate=0.0, speed_end=None, seconds=8.0, fps=30, seed=0)``
+- ``write_clip(path, *, speed, turn_rate=0.0, speed_end=None, direction=0.0, seconds=8.0, fps=30, seed=0)``
 - ``write_dataset(out_dir, *, num_clips=None, seconds_per_clip=8.0, fps=30, seed=0)``
 - ``default_dataset_dir()``
 - ``JOINT_NAMES``, ``JOINT_PARENTS``, ``JOINT_OFFSETS_CM``, ``SYNTH_VERSION``
@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 # Bump when the generated motion changes, so cached default datasets are regenerated.
-SYNTH_VERSION = 1
+SYNTH_VERSION = 2  # 2: side steps and backward walks
 
 _ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Yrotation", "Xrotation", "Zrotation")
 _JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")  # local rotation = Rz * Ry * Rx
@@ -145,15 +145,17 @@ def _check_args(seconds: float, fps: float) -> None:
         raise ValueError(f"synth: fps must be in [1, 1000], got {fps!r}")
 
 
-def _check_command(speed: float, speed_end: float, turn_rate: float) -> None:
+def _check_command(speed: float, speed_end: float, turn_rate: float, direction: float = 0.0) -> None:
     for name, value in (("speed", speed), ("speed_end", speed_end)):
         if not (np.isfinite(value) and 0.0 <= value <= 4.5):
             raise ValueError(f"synth: {name} must be in [0, 4.5] m/s, got {value!r}")
     if not (np.isfinite(turn_rate) and abs(turn_rate) <= 3.0):
         raise ValueError(f"synth: turn_rate must be in [-3, 3] rad/s, got {turn_rate!r}")
+    if not (np.isfinite(direction) and abs(direction) <= np.pi):
+        raise ValueError(f"synth: direction must be in [-pi, pi] rad, got {direction!r}")
 
 
-def _synthesize(speed: float, speed_end: float, turn_rate: float, seconds: float, fps: float,
+def _synthesize(speed: float, speed_end: float, turn_rate: float, direction: float, seconds: float, fps: float,
                 rng: np.random.Generator) -> Tuple[_Clip, int]:
     num_frames = int(round(seconds * fps))
     pad = int(round(3.0 * fps))  # 3 s of lead-in and lead-out so the first and last steps are whole
@@ -164,17 +166,19 @@ def _synthesize(speed: float, speed_end: float, turn_rate: float, seconds: float
     style = _draw_style(rng)
     yaw0 = float(rng.uniform(-np.pi, np.pi))
     origin = rng.uniform(-5.0, 5.0, size=2)
-    return _animate(v, w, float(fps), pad, yaw0, origin, style), num_frames
+    return _animate(v, w, float(fps), pad, yaw0, origin, style, direction), num_frames
 
 
 def write_clip(path, *, speed: float, turn_rate: float = 0.0, speed_end: Optional[float] = None,
-               seconds: float = 8.0, fps: float = 30, seed: int = 0) -> dict:
+               direction: float = 0.0, seconds: float = 8.0, fps: float = 30, seed: int = 0) -> dict:
     """Write one synthetic clip to the BVH file `path` and return its description.
 
     speed: commanded ground speed in m/s (0 = standing or turning in place; up to 4.5).
     turn_rate: commanded yaw rate in rad/s, positive = turning left (counter-clockwise from above).
     speed_end: if given, the speed ramps linearly from `speed` to `speed_end` between 30% and 70%
         of the clip (a start, stop or speed change); otherwise the speed is constant.
+    direction: the direction of travel from the facing in rad, + = left: 0 walks forward, pi/2
+        steps sideways to the left, pi walks backwards (in [-pi, pi]).
     seconds, fps: clip length and frame rate. seed: gait style, start position and start heading.
 
     Returns a dict with the commanded values, the frame count, and the stance intervals of each
@@ -183,9 +187,10 @@ def write_clip(path, *, speed: float, turn_rate: float = 0.0, speed_end: Optiona
     """
     speed_end = float(speed if speed_end is None else speed_end)
     _check_args(seconds, fps)
-    _check_command(float(speed), speed_end, float(turn_rate))
+    _check_command(float(speed), speed_end, float(turn_rate), float(direction))
     rng = np.random.default_rng(seed)
-    clip, num_frames = _synthesize(float(speed), speed_end, float(turn_rate), float(seconds), float(fps), rng)
+    clip, num_frames = _synthesize(float(speed), speed_end, float(turn_rate), float(direction), float(seconds),
+                                   float(fps), rng)
     path = Path(path)
     atomic_write_text(path, _bvh_text(clip, fps))
     return {
@@ -193,6 +198,7 @@ def write_clip(path, *, speed: float, turn_rate: float = 0.0, speed_end: Optiona
         "speed": float(speed),
         "speed_end": speed_end,
         "turn_rate": float(turn_rate),
+        "direction": float(direction),
         "ramp_seconds": [r * (num_frames - 1) / fps for r in _RAMP] if speed_end != speed else None,
         "frames": num_frames,
         "fps": fps,
@@ -230,7 +236,13 @@ _PLAN: Tuple[Tuple[str, float, float, float], ...] = (
     ("run-turn-right", 2.4, 2.4, -1.0),
     ("speed-up", 0.5, 2.0, 0.0),
     ("slow-down", 4.0, 2.0, 0.0),
+    ("step-left", 0.25, 0.25, 0.0),
+    ("step-right", 0.25, 0.25, 0.0),
+    ("walk-back", 0.7, 0.7, 0.0),
+    ("back-stop", 0.7, 0.0, 0.0),
 )
+#: The direction of travel from the facing (rad, + = left) of the plan's kinds that do not walk forward.
+_DIRECTIONS = {"step-left": np.pi / 2, "step-right": -np.pi / 2, "walk-back": np.pi, "back-stop": np.pi}
 
 DEFAULT_NUM_CLIPS = len(_PLAN)
 
@@ -258,12 +270,14 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
     The set (in this order, repeating nothing): straight walk and run, left and right turns at walk
     and run, speed-ups and slow-downs, standing, walks at 0.5 to 1.8 m/s, runs at 2.4 to 4 m/s,
     sharp walking turns, turns in place, starting and stopping, gentle and sharp turns at other
-    speeds. Speeds and turn rates get a small seeded jitter. `num_clips` takes the first clips of
-    that list (default: all 27, 3.6 minutes at 8 s each); more clips than that add random constant
+    speeds, side steps to both sides, a backward walk and a backward walk that stops. Speeds and
+    turn rates get a small seeded jitter. `num_clips` takes the first clips of that list
+    (default: all 31, 4.1 minutes at 8 s each); more clips than that add random constant
     (speed, turn rate) clips.
 
     ``manifest.json``: {"generator": "mmrl.synth", "version", "seed", "fps", "clips": [{"file",
     "kind", "speed" (m/s, at the start), "speed_end" (m/s), "turn_rate" (rad/s, + = left),
+    "direction" (rad, of travel from the facing, + = left),
     "ramp_seconds" ([start, end] of a linear speed ramp, or null), "frames", "fps",
     "contacts" (stance intervals per foot, [start, stop) frames)}]}.
 
@@ -283,8 +297,8 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
     paths, entries = [], []
     for i, ((kind, v0, v1, w), clip_seed) in enumerate(zip(plan, clip_seeds)):
         path = out_dir / f"synth_{i:03d}_{kind}.bvh"
-        info = write_clip(path, speed=v0, speed_end=v1, turn_rate=w, seconds=seconds_per_clip,
-                          fps=fps, seed=int(clip_seed.generate_state(1)[0]))
+        info = write_clip(path, speed=v0, speed_end=v1, turn_rate=w, direction=_DIRECTIONS.get(kind, 0.0),
+                          seconds=seconds_per_clip, fps=fps, seed=int(clip_seed.generate_state(1)[0]))
         info["kind"] = kind
         entries.append(info)
         paths.append(path)
@@ -305,7 +319,7 @@ def default_dataset_dir() -> Path:
 
     Location: ``<cache>/synth-v<SYNTH_VERSION>`` where <cache> is ``$MMRL_CACHE`` if set, else
     ``$XDG_CACHE_HOME/mmrl``, else ``~/.cache/mmrl``. It holds ``write_dataset(dir)`` with the
-    default arguments (27 clips, 3.6 minutes at 30 fps). Generation writes into a temporary
+    default arguments (31 clips, 4.1 minutes at 30 fps). Generation writes into a temporary
     sibling directory and renames it into place, so a crash never leaves a half-written dataset
     and concurrent first uses are safe (the loser of the race discards its copy).
     """

@@ -306,12 +306,13 @@ class _Pelvis:
 
 
 def _root_path(speed: np.ndarray, turn_rate: np.ndarray, dt: float, pad: int, yaw0: float,
-               origin_xz: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
+               origin_xz: np.ndarray, direction: float = 0.0) -> Tuple[np.ndarray, np.ndarray]:
     """Step 1: the commands integrated into yaw (F,) rad and ground positions (F, 2) m (x, z),
-    placed so that the first kept frame (index `pad`) is at `origin_xz` facing `yaw0`."""
+    placed so that the first kept frame (index `pad`) is at `origin_xz` facing `yaw0`; the body
+    travels at `direction` rad from its facing (+pi/2 steps to its left, pi backwards)."""
     yaw = _cumtrapz(turn_rate, dt)
     yaw += yaw0 - yaw[pad]
-    vel = speed[:, None] * _forward(yaw)[:, [0, 2]]
+    vel = speed[:, None] * _forward(yaw + direction)[:, [0, 2]]
     path_xz = _cumtrapz(vel, dt)
     path_xz += origin_xz - path_xz[pad]
     return yaw, path_xz
@@ -448,13 +449,13 @@ def _crop(pelvis: _Pelvis, local: np.ndarray, gait: _Gait, pad: int) -> _Clip:
 
 
 def _animate(speed: np.ndarray, turn_rate: np.ndarray, fps: float, pad: int, yaw0: float,
-             origin_xz: np.ndarray, style: _Style) -> _Clip:
-    """Animate commanded speed (F,) m/s and turn rate (F,) rad/s sampled on padded frames; the
-    clip is frames [pad, F - pad)."""
+             origin_xz: np.ndarray, style: _Style, direction: float = 0.0) -> _Clip:
+    """Animate commanded speed (F,) m/s and turn rate (F,) rad/s sampled on padded frames, the
+    body travelling at `direction` rad from its facing; the clip is frames [pad, F - pad)."""
     n = len(speed)
     dt = 1.0 / fps
     t = (np.arange(n) - pad) * dt
-    yaw, path_xz = _root_path(speed, turn_rate, dt, pad, yaw0, origin_xz)
+    yaw, path_xz = _root_path(speed, turn_rate, dt, pad, yaw0, origin_xz, direction)
     gait = _gait_timing(speed, turn_rate, dt, style)
     feet = {"L": _foot_track(gait.stance_l, +1.0, path_xz, yaw, gait.w_run, style),
             "R": _foot_track(gait.stance_r, -1.0, path_xz, yaw, gait.w_run, style)}

@@ -440,6 +440,9 @@ class Task:
     """``final_values(layout, final_obs)``: per-episode numbers named ``final_...``, read from an
     episode's last observation (the arrive task's position and facing errors); ``mmrl eval``
     reports their median and p95 over the successful episodes."""
+    rests: bool = False
+    """Success is a rest (the arrive task; its config has ``hold_time``): ``mmrl eval`` also
+    measures the motion while standing after each success (:mod:`mmrl.eval.standing`)."""
     check_data: Optional[Callable[[Any], None]] = None
     """``check_data(db)`` raises ValueError saying what the data lacks for this task, before
     ``mmrl train`` starts (the arrive task: data that can stop)."""

@@ -12,7 +12,7 @@ character goes on where it stands with the user's target (``continue_from_charac
 and an obstacles scene keeps its obstacles where they were.
 
 Live quality numbers are :func:`mmrl.metrics.quality` over the last ``window_steps``
-decisions. ``trace``: one JSON line per decision, ``{"t", "root": [x, z, yaw], "target":
+decisions. ``trace``: one JSON line per decision (with ``"facing"`` on a task that reads one), ``{"t", "root": [x, z, yaw], "target":
 [x, z], "frame", "transition"}``, written and flushed line by line.
 """
 from __future__ import annotations
@@ -322,6 +322,8 @@ class LiveSession:
         line = {"t": round(t, 4), "root": [round(float(v), 5) for v in root],
                 "target": [round(float(v), 5) for v in self.run.target], "frame": int(res.match),
                 "transition": bool(res.transition)}
+        if self.takes_facing:
+            line["facing"] = round(float(self.run.env.env_state(0)["facing"]), 5)
         self._trace.write(json.dumps(line) + "\n")  # one write per line: a reader never sees half a line
         self._trace.flush()
 

@@ -1,6 +1,7 @@
 """``mmrl play``: a :class:`~mmrl.viewer.live.LiveSession` on a Scene, at 30 frames per second.
 
-Click the ground to place the target. On an obstacles run, shift+click picks the nearest
+Click the ground to place the target; on an arrive run, shift+drag places it where the drag
+begins, facing along the drag (shift+click turns the facing toward the click). On an obstacles run, shift+click picks the nearest
 obstacle and puts a drag gizmo on it; a checkbox pauses the obstacles' motion. Toggles
 switch IK (with foot locking) and inertialization; a menu switches between the trained
 policy and the joystick baseline (which follows the same clicks). A panel shows the live
@@ -34,6 +35,7 @@ class PlayApp:
         self.frame_ms: Dict[str, Deque[float]] = {k: deque(maxlen=TIMING_SAMPLES)
                                                   for k in ("session", "scene", "quality", "frame")}
         self.picked: Optional[int] = None
+        self.dragging = False  # a shift+drag is setting the facing: the camera holds still
         self.started = self.frames = 0
         scene.ground()
         self._controls()
@@ -42,6 +44,7 @@ class PlayApp:
             scene.on_ground_click(self.pick_obstacle, shift=True)
         if session.takes_facing:
             scene.on_ground_click(self.face, shift=True)
+            scene.on_ground_drag(self.drag_facing)
         self.painter.show(session.shown)
 
     def _controls(self) -> None:
@@ -50,7 +53,8 @@ class PlayApp:
         if sess.has_obstacles:
             help_text += "; **shift+click** picks an obstacle to drag"
         if sess.takes_facing:
-            help_text += "; **shift+click** turns the facing toward the click (the arrow)"
+            help_text += ("; **shift+drag** from a spot places the target there facing along the drag (the "
+                          "arrow); **shift+click** turns the facing toward the click")
         s.text(f"**{sess.task.name}** · {help_text}")
         self.policy_menu = s.dropdown("policy", list(sess.policies), sess.policy_name)
         if sess.db.tag_names:  # a request switches the character at its next decision (docs/styles.md)
@@ -80,6 +84,16 @@ class PlayApp:
         if np.hypot(x - tx, z - tz) > 1e-3:
             self.session.set_facing(float(np.arctan2(x - tx, z - tz)))
 
+    def drag_facing(self, phase: str, start: tuple, end: tuple) -> None:
+        """A shift+drag: the target where it began, the facing along it once it is 10 cm long.
+        The camera holds still during a drag (the ground point under the pointer is read from it)."""
+        self.dragging = phase != "end"
+        if phase == "start":
+            self.session.set_target(*start)
+        dx, dz = end[0] - start[0], end[1] - start[1]
+        if np.hypot(dx, dz) > 0.1:
+            self.session.set_facing(float(np.arctan2(dx, dz)))
+
     def pick_obstacle(self, x: float, z: float) -> None:
         centres = self.session.obstacle_centres()
         if len(centres) == 0:
@@ -96,7 +110,7 @@ class PlayApp:
         shown = self.session.step()
         t1 = time.perf_counter()
         self.painter.show(shown)
-        if self.follow_box.value:
+        if self.follow_box.value and not self.dragging:
             root = self.session.root
             offset = CAMERA_OFFSET_OBSTACLES if self.session.has_obstacles else CAMERA_OFFSET
             self.scene.follow((root[0], 0.9, root[1]), offset)

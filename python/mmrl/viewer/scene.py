@@ -115,6 +115,7 @@ class Scene:
         self.server.gui.configure_theme(control_width="medium", show_share_button=False)
         self._nodes = {}
         self._placed = set()  # clients whose camera was placed
+        self._ground_pick = None  # the quad ground drags start on (on_ground_drag)
 
     @property
     def url(self) -> str:
@@ -266,6 +267,29 @@ class Scene:
             hit = ground_hit(event.ray_origin, event.ray_direction)
             if hit is not None:
                 fn(*hit)
+
+    def on_ground_drag(self, fn: Callable[[str, tuple, tuple], None], *, shift: bool = True) -> None:
+        """``fn(phase, start, end)`` while the user drags over the ground (``shift``: with shift
+        held, so a plain drag still orbits the camera): ``phase`` "start", "update" or "end",
+        ``start`` the world (x, z) where the drag began, ``end`` where the pointer's ray meets
+        the ground now (updates whose ray misses the ground are ignored; a start or an end that
+        misses it comes with ``end`` = ``start``)."""
+        if self._ground_pick is None:  # an invisible quad the drags start on (a grid takes no pointer)
+            h = 500.0
+            v = np.array([[-h, -1e-3, -h], [h, -1e-3, -h], [h, -1e-3, h], [-h, -1e-3, h]], np.float32)
+            f = np.array([[0, 2, 1], [0, 3, 2]], np.uint32)
+            self._ground_pick = self.server.scene.add_mesh_simple("/ground_pick", v, f, opacity=0.0,
+                                                                  side="double")
+
+        @self._ground_pick.on_drag("left", modifier="shift" if shift else None)
+        def _(event) -> None:
+            # end_position lies on the pointer's ray (on a plane facing the camera): the ray is
+            # the camera's position toward it.
+            cam = np.asarray(event.client.camera.position, np.float64)
+            end = ground_hit(cam, np.asarray(event.end_position, np.float64) - cam)
+            if end is not None or event.phase != "update":
+                fn(event.phase, (float(event.start_position[0]), float(event.start_position[2])),
+                   end if end is not None else (float(event.start_position[0]), float(event.start_position[2])))
 
     # ------------------------------------------------------------------ GUI
     def folder(self, label: str):

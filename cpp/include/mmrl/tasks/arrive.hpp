@@ -7,12 +7,13 @@
 //                 with request_groups: the request's code]
 //   action       12-d trajectory feature, as the plane task's
 //   reward       exp(-|g_t|) + facing_weight * exp(-|g_t| / success_radius) * (1 + cos(facing error)) / 2
-//                after the step, + success_bonus * (1 + precision_weight * precision) on success
+//                after the step, - rest_transition_penalty for a transition decided within the
+//                tolerances, + success_bonus * (1 + precision_weight * precision) on success
 //                (precision: 1 at the target and its facing, 0 at the tolerances)
 //   terminated   success: on hold_time seconds of consecutive played frames the root stood
 //                within success_radius of the target, faced its facing within
-//                facing_tolerance and moved slower than stop_speed (step_frames counts up
-//                to the frame that completed the hold)
+//                facing_tolerance and its smoothed speed (kRestSmoothingSeconds) stayed below
+//                stop_speed (step_frames counts up to the frame that completed the hold)
 //   truncated    max_steps steps without success
 // Angles are radians everywhere (the facing, its tolerance); a facing is a world yaw about +Y.
 #pragma once
@@ -30,6 +31,8 @@ struct ArriveTaskConfig : TaskConfig {
   float hold_time = 0.5f;
   float facing_weight = 1.0f;
   float precision_weight = 1.0f;
+  float rest_transition_cost = 0.0f;
+  float rest_transition_penalty = 0.0f;
   ArriveTaskConfig() {
     success_radius = 0.25f;
     max_steps = 150;
@@ -40,7 +43,8 @@ struct ArriveTaskConfig : TaskConfig {
     v("facing_tolerance", &ArriveTaskConfig::facing_tolerance, closed_range(0, 3.1416),
       "Success: the root's yaw within this (radians; 0.2618 = 15 degrees) of the target facing.");
     v("stop_speed", &ArriveTaskConfig::stop_speed, kPositive,
-      "Success: the root moves slower than this (m/s) on every frame of the hold.");
+      "Success: the root's speed, smoothed over a quarter second, stays below this (m/s) on every frame of the "
+      "hold.");
     v("hold_time", &ArriveTaskConfig::hold_time, closed_range(0, 10),
       "Success: seconds the character stays within the tolerances, at rest, before the episode succeeds.");
     v("facing_weight", &ArriveTaskConfig::facing_weight, kNonNegative,
@@ -49,13 +53,28 @@ struct ArriveTaskConfig : TaskConfig {
       "Reward on success: success_bonus times this times the precision of the rest (1 at the target and its "
       "facing, 0 at the tolerances: the mean of 1 - distance / success_radius and 1 - facing error / "
       "facing_tolerance).");
+    v("rest_transition_cost", &ArriveTaskConfig::rest_transition_cost, kNonNegative,
+      "Added to transition_cost for a decision made within the tolerances while what plays stands (moves less "
+      "than 0.15 m over its next second): a character that has arrived keeps its standing clip rather than "
+      "fidget.");
+    v("rest_transition_penalty", &ArriveTaskConfig::rest_transition_penalty, kNonNegative,
+      "Reward: minus this for a transition decided within the tolerances: a policy learns to pick a standing "
+      "clip and keep it once it has arrived.");
   }
 };
 
 struct ArriveEnvState : TargetEnvState {
   float target_yaw = 0;  // the facing to arrive with (world yaw, radians)
   int hold = 0;          // consecutive played frames within the tolerances, at rest
+  float vx = 0, vz = 0;   // the root's world velocity (m/s), exponentially smoothed over kRestSmoothingSeconds
+  bool resting = false;  // the smoothed speed is below stop_speed (the rest a success holds)
 };
+
+// The time constant (s) of the smoothed root velocity a rest is read from: a mocap root jitters
+// (44% of LAFAN1's idle frames move faster than 0.15 m/s from one frame to the next).
+constexpr float kRestSmoothingSeconds = 0.25f;
+// A frame stands when it moves less than this over its next second (mmrl.motion.kinds' idle rule).
+constexpr float kStandMeters = 0.15f;
 
 class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveEnvState> {
  public:
@@ -82,7 +101,15 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   void on_state_set(int i) { envs_[i].hold = 0; }
+  // The task's transition cost: plus rest_transition_cost within the tolerances while what
+  // plays stands.
+  float decision_transition_cost(int i) const;
+  bool within_tolerances(const ArriveEnvState& s) const;
+  // What plays now moves less than kStandMeters over its next second (its +30-frame trajectory
+  // sample; both motion sources carry it in their features).
+  bool stands(const ArriveEnvState& s) const;
   int hold_frames_ = 1;
+  float rest_smoothing_ = 1;  // each played frame's weight in the smoothed velocity
 };
 
 }  // namespace mmrl
