@@ -91,48 +91,42 @@ def test_standing_runs_the_same_episodes_for_every_controller_and_reports_agains
         evaluate_standing(ARRIVE, db, JoystickPolicy(db, speeds[0]), episodes=1, seconds=0)
 
 
-def _stands_and_within(db, st, config) -> bool:
-    """The rest rules by hand: (within the tolerances while the frame shown moves less than
-    0.15 m over its next second (its raw +30-frame trajectory sample), within the tolerances)."""
-    d = math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"])
-    e = abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi)
-    p = mmrl._core.TRAJECTORY_POSITION_COLUMNS[2]
-    f = np.asarray(db.features)[st["frame"]]
-    within = d <= config.success_radius and e <= config.facing_tolerance
-    return within and math.hypot(f[p], f[p + 1]) < 0.15, within
+def _stand_query(db, st) -> np.ndarray:
+    """The stand by hand: every trajectory sample at the root, facing the target facing in the
+    character frame, normalized as the database normalizes its features."""
+    d = st["facing"] - st["yaw"]
+    raw = np.zeros(27)
+    for k in range(3):
+        p = mmrl._core.TRAJECTORY_POSITION_COLUMNS[k]
+        raw[p + 2:p + 4] = [math.sin(d), math.cos(d)]
+    return db.normalize(raw)[15:]
 
 
-def test_the_rest_rules_price_each_decision_made_standing_within_the_tolerances():
-    """Every step: the transition cost the env's decision used is transition_cost, plus
-    rest_transition_cost when, as the step began, the character was within success_radius and
-    facing_tolerance of the goal and its frame stood (the rule by hand); and the reward of an
-    env with rest_transition_penalty is the reward without it minus the penalty for each
-    transition decided within the tolerances, on the same actions (the penalty changes no motion)."""
+def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance():
+    """Step by step against an env with stand_radius 0 driven by the same actions, except that
+    within stand_radius and facing_tolerance (by hand) it gets the stand by hand: the same
+    matches, roots and rewards for 300 steps."""
     db = mmrl.default_database()
-    config = ARRIVE.default_config().replace(success_radius=1.0, facing_tolerance=1.5, transition_cost=3.0,
-                                             rest_transition_cost=40.0, target_half_extent=2.0,
-                                             min_target_distance=0.8, hold_time=2.0)
-    env = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
-    plain = ARRIVE.make_vector_env(1, db=db, config=config.replace(rest_transition_penalty=0.0), num_threads=1)
-    penalized = ARRIVE.make_vector_env(1, db=db, config=config.replace(rest_transition_penalty=0.7), num_threads=1)
-    obs, _ = env.reset(seed=2)
-    for e in (plain, penalized):
-        e.reset(seed=2)
+    config = ARRIVE.default_config().replace(success_radius=1.0, stand_radius=0.7, facing_tolerance=1.2,
+                                             target_half_extent=2.0, min_target_distance=0.8, hold_time=1.0)
+    standing = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
+    plain = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
+    obs, _ = standing.reset(seed=2)
+    plain.reset(seed=2)
     policy = JoystickPolicy(db, database_speeds(db)[0], arrive=True)
-    policy.bind_layout(env.observation_layout)
+    policy.bind_layout(standing.observation_layout)
     rng = np.random.default_rng(0)
-    rests = penalties = 0
-    transitions, costs = np.zeros(1, np.uint8), np.zeros(1, np.float32)
+    stands = 0
     for _ in range(300):
-        at_rest, within = _stands_and_within(db, env.env_state(0), config)
-        rests += at_rest
-        action = policy.act(obs) if rng.random() < 0.8 else rng.normal(0, 1, (1, 12)).astype(np.float32)
-        obs, _, term, trunc, _ = env.step(action)
-        assert env.env_state(0)["last_step_transition_cost"] == pytest.approx(3.0 + (40.0 if at_rest else 0.0))
-        _, r0, *_ = plain.step(action)
-        _, r1, *_ = penalized.step(action)
-        plain._core.last_step_transitions(transitions, costs)
-        penalty = 0.7 if within and transitions[0] else 0.0
-        penalties += penalty > 0
-        assert r1[0] == pytest.approx(r0[0] - penalty, abs=1e-5)
-    assert rests >= 5 and penalties >= 1  # not vacuous
+        st = standing.env_state(0)
+        within = (math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"]) <= config.stand_radius
+                  and abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi) <= config.facing_tolerance)
+        stands += within
+        action = rng.normal(0, 1, (1, 12)).astype(np.float32) if rng.random() < 0.5 else policy.act(obs)
+        obs, r1, *_ = standing.step(action)
+        _, r0, *_ = plain.step(_stand_query(db, st)[None].astype(np.float32) if within else action)
+        a, b = standing.env_state(0), plain.env_state(0)
+        assert a["last_step_match"] == b["last_step_match"]
+        assert (a["x"], a["z"], a["yaw"]) == pytest.approx((b["x"], b["z"], b["yaw"]), abs=1e-5)
+        assert r1[0] == pytest.approx(r0[0], abs=1e-5)
+    assert stands >= 10  # not vacuous

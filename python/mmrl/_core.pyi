@@ -1179,7 +1179,7 @@ class ArriveTaskConfig:
     """
     Numbers of the arrive task (see tasks/arrive.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'rest_transition_cost')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -1280,17 +1280,17 @@ class ArriveTaskConfig:
     def request_groups(self, arg0: collections.abc.Sequence[str]) -> None:
         ...
     @property
-    def rest_transition_cost(self) -> float:
+    def stand_radius(self) -> float:
         """
-        Added to transition_cost for a decision made at rest within the tolerances (the last played frame slower than stop_speed): a character that has arrived keeps its standing clip rather than fidget.
+        Within this distance (m) of the target and facing_tolerance of its facing, the match asks for a stand facing the target facing instead of the policy's trajectory (the arrive joystick's query at the target): an arrived character stands. 0: never.
         """
-    @rest_transition_cost.setter
-    def rest_transition_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+    @stand_radius.setter
+    def stand_radius(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def stop_speed(self) -> float:
         """
-        Success: the root moves slower than this (m/s) on every frame of the hold.
+        Success: the root's speed, smoothed over a quarter second, stays below this (m/s) on every frame of the hold.
         """
     @stop_speed.setter
     def stop_speed(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:

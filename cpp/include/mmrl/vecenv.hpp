@@ -201,7 +201,8 @@ class TargetVecEnv {
   // as training did. Returns the database frame to play from (-1 for a candidate without a row).
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
-    s.decision = decider_.decide(*source_, s, action, decision_rules(i));
+    float query[kTrajectoryDim];
+    s.decision = decider_.decide(*source_, s, task().decision_action(i, action, query), decision_rules(i));
     return s.decision.match;
   }
   // Env i's rules for its next decision (what decide uses).
@@ -347,6 +348,9 @@ class TargetVecEnv {
   // Hook of set_source (a task hides it): after the source changed.
   void on_source_set() {}
 
+  // The trajectory env i's next match asks for (a task hides it to take over the action in
+  // some state, writing its own into `scratch`, kTrajectoryDim floats): the action.
+  const float* decision_action(int, const float* action, float*) const { return action; }
   // The transition cost of env i's next match (a task hides it to make the bias depend on
   // its state): the config's transition_cost.
   float decision_transition_cost(int) const { return config_.transition_cost; }

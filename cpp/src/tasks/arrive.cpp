@@ -35,19 +35,24 @@ bool ArriveVecEnv::within_tolerances(const ArriveEnvState& s) const {
          std::abs(wrap_angle(s.target_yaw - s.root.yaw)) <= config_.facing_tolerance;
 }
 
-bool ArriveVecEnv::stands(const ArriveEnvState& s) const {
-  // The +1 s trajectory sample of what plays now, in meters (the normalization undone).
-  const float* f = source().current(s).features;
-  const int c = trajectory_position_column(2);
+const float* ArriveVecEnv::decision_action(int i, const float* action, float* scratch) const {
+  const ArriveEnvState& s = envs_[i];
+  const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
+  if (dx * dx + dz * dz > config_.stand_radius * config_.stand_radius ||
+      std::abs(wrap_angle(s.target_yaw - s.root.yaw)) > config_.facing_tolerance)
+    return action;
+  // Every sample at the root, facing the target facing in the character frame: (sin d, cos d).
+  const float d = s.target_yaw - s.root.yaw;
   const auto& n = db_.normalization;
   const std::array<float, kFeatureDim> scale = n.column_scale();
-  return std::hypot(f[c] * scale[c] + n.mean[c], f[c + 1] * scale[c + 1] + n.mean[c + 1]) < kStandMeters;
-}
-
-float ArriveVecEnv::decision_transition_cost(int i) const {
-  const ArriveEnvState& s = envs_[i];
-  const bool rest = config_.rest_transition_cost > 0 && within_tolerances(s) && stands(s);
-  return config_.transition_cost + (rest ? config_.rest_transition_cost : 0.0f);
+  for (int k = 0; k < 3; ++k) {
+    const float raw[4] = {0.0f, 0.0f, std::sin(d), std::cos(d)};
+    for (int j = 0; j < 4; ++j) {
+      const int c = trajectory_position_column(k) + j;
+      scratch[c - kPoseDim] = (raw[j] - n.mean[c]) / scale[c];
+    }
+  }
+  return scratch;
 }
 
 void ArriveVecEnv::begin_episode(int i) {
@@ -61,7 +66,6 @@ void ArriveVecEnv::begin_episode(int i) {
 
 TaskStep ArriveVecEnv::advance(int i, const float* action) {
   ArriveEnvState& s = envs_[i];
-  const bool arrived = within_tolerances(s);  // a transition from here on fidgets
   decide(i, action);
   const float fps = db_.fps;
   TaskStep out;
@@ -83,7 +87,6 @@ TaskStep ArriveVecEnv::advance(int i, const float* action) {
   const float error = std::abs(wrap_angle(s.target_yaw - s.root.yaw));
   const float facing = 0.5f * (1.0f + std::cos(error));
   out.reward = std::exp(-d) + config_.facing_weight * std::exp(-d / config_.success_radius) * facing;
-  if (arrived && s.decision.transition) out.reward -= config_.rest_transition_penalty;
   if (out.success) {
     const float tolerance = std::max(config_.facing_tolerance, 1e-6f);
     const float precision = 0.5f * (std::max(0.0f, 1.0f - d / config_.success_radius) +

@@ -20,8 +20,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from dataclasses import field
-
 from .. import _core
 from ..motion.kinds import check_can_stop
 from .base import Task, TaskConfig
@@ -36,12 +34,6 @@ class ArriveConfig(TaskConfig):
     (``success_radius`` 0.25 m, ``max_steps`` 150 here) and the tolerances of a rest."""
 
     task_label = "arrive-task"
-    training_only = ("train_hold_time",)
-
-    train_hold_time: float = field(default=2.0, metadata={"doc": (
-        "Seconds of rest the training envs ask for before a success (hold_time everywhere after training: eval, "
-        "render, play, export): a policy that learned to hold longer keeps standing once it has arrived. The C++ "
-        "core never sees it.")})
 
 
 class ArriveVectorEnv(PlaneVectorEnv):
@@ -83,5 +75,4 @@ TASK = Task(
     check_data=check_can_stop,
     final_values=final_errors,
     rests=True,
-    training_config=lambda config: config.replace(hold_time=config.train_hold_time),
 )

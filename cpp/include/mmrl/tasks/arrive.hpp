@@ -7,8 +7,7 @@
 //                 with request_groups: the request's code]
 //   action       12-d trajectory feature, as the plane task's
 //   reward       exp(-|g_t|) + facing_weight * exp(-|g_t| / success_radius) * (1 + cos(facing error)) / 2
-//                after the step, - rest_transition_penalty for a transition decided within the
-//                tolerances, + success_bonus * (1 + precision_weight * precision) on success
+//                after the step, + success_bonus * (1 + precision_weight * precision) on success
 //                (precision: 1 at the target and its facing, 0 at the tolerances)
 //   terminated   success: on hold_time seconds of consecutive played frames the root stood
 //                within success_radius of the target, faced its facing within
@@ -31,8 +30,7 @@ struct ArriveTaskConfig : TaskConfig {
   float hold_time = 0.5f;
   float facing_weight = 1.0f;
   float precision_weight = 1.0f;
-  float rest_transition_cost = 0.0f;
-  float rest_transition_penalty = 0.0f;
+  float stand_radius = 0.25f;
   ArriveTaskConfig() {
     success_radius = 0.25f;
     max_steps = 150;
@@ -53,13 +51,10 @@ struct ArriveTaskConfig : TaskConfig {
       "Reward on success: success_bonus times this times the precision of the rest (1 at the target and its "
       "facing, 0 at the tolerances: the mean of 1 - distance / success_radius and 1 - facing error / "
       "facing_tolerance).");
-    v("rest_transition_cost", &ArriveTaskConfig::rest_transition_cost, kNonNegative,
-      "Added to transition_cost for a decision made within the tolerances while what plays stands (moves less "
-      "than 0.15 m over its next second): a character that has arrived keeps its standing clip rather than "
-      "fidget.");
-    v("rest_transition_penalty", &ArriveTaskConfig::rest_transition_penalty, kNonNegative,
-      "Reward: minus this for a transition decided within the tolerances: a policy learns to pick a standing "
-      "clip and keep it once it has arrived.");
+    v("stand_radius", &ArriveTaskConfig::stand_radius, kNonNegative,
+      "Within this distance (m) of the target and facing_tolerance of its facing, the match asks for a stand "
+      "facing the target facing instead of the policy's trajectory (the arrive joystick's query at the "
+      "target): an arrived character stands. 0: never.");
   }
 };
 
@@ -73,8 +68,6 @@ struct ArriveEnvState : TargetEnvState {
 // The time constant (s) of the smoothed root velocity a rest is read from: a mocap root jitters
 // (44% of LAFAN1's idle frames move faster than 0.15 m/s from one frame to the next).
 constexpr float kRestSmoothingSeconds = 0.25f;
-// A frame stands when it moves less than this over its next second (mmrl.motion.kinds' idle rule).
-constexpr float kStandMeters = 0.15f;
 
 class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveEnvState> {
  public:
@@ -101,13 +94,10 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   void on_state_set(int i) { envs_[i].hold = 0; }
-  // The task's transition cost: plus rest_transition_cost within the tolerances while what
-  // plays stands.
-  float decision_transition_cost(int i) const;
+  // Within stand_radius and facing_tolerance: the stand facing the target facing, normalized.
+  const float* decision_action(int i, const float* action, float* scratch) const;
+  // Within success_radius of the target and facing_tolerance of its facing.
   bool within_tolerances(const ArriveEnvState& s) const;
-  // What plays now moves less than kStandMeters over its next second (its +30-frame trajectory
-  // sample; both motion sources carry it in their features).
-  bool stands(const ArriveEnvState& s) const;
   int hold_frames_ = 1;
   float rest_smoothing_ = 1;  // each played frame's weight in the smoothed velocity
 };
