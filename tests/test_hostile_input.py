@@ -19,6 +19,8 @@ from mmrl import _core
 
 ERRORS = (TypeError, ValueError, IndexError, MemoryError, OverflowError)
 HUGE = 2**31 + 3
+#: The default (synthetic) database's frames: 8 s at 30 fps per clip; the first frame past its end.
+FRAMES = mmrl.motion.synth.DEFAULT_NUM_CLIPS * 240
 EXAMPLES = settings(max_examples=60, deadline=None, derandomize=True, database=None,
                     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 DTYPES = [np.float64, np.float16, np.int32, np.int64, np.uint8, np.uint64, np.bool_, np.complex64, object, "U3"]
@@ -90,7 +92,9 @@ def _clean(a, dtype):
 
 @pytest.fixture(scope="module")
 def db():
-    return mmrl.default_database()
+    d = mmrl.default_database()
+    assert d.num_frames == FRAMES  # the boundary the cases below draw
+    return d
 
 
 # ----------------------------------------------------------------------------- database and search
@@ -145,7 +149,7 @@ def test_database_normalize_and_denormalize(db, case):
 
 
 @EXAMPLES
-@given(case=hostile(np.array([0, 5, 1000, 6000], np.int64), values=[-1, -(2**63), 2**62, 6480]))
+@given(case=hostile(np.array([0, 5, 1000, 6000], np.int64), values=[-1, -(2**63), 2**62, FRAMES]))
 def test_database_controller_windows(db, case):
     kind, frames = case
     ref = None
@@ -197,7 +201,7 @@ def test_matcher_valid_mask(case):
 
 
 @EXAMPLES
-@given(case=hostile(np.array([0, 7, 6479], np.int64), values=[-1, 6480, -(2**63), 2**63 - 1]))
+@given(case=hostile(np.array([0, 7, FRAMES - 1], np.int64), values=[-1, FRAMES, -(2**63), 2**63 - 1]))
 def test_database_global_positions_frames(db, case):
     _, frames = case
     refused_or_equal(lambda f: _core.database_global_positions(db._db, f), "frames", (frames,))
@@ -276,7 +280,7 @@ def test_core_env_frame_and_match_buffers(vector_env, data):
 
 @EXAMPLES
 @given(index=st.sampled_from([-1, 3, 2**31 - 1, -(2**31)]),
-       frame=st.sampled_from([-1, 6480, 2**40]), x=st.sampled_from([np.nan, np.inf, 1e30, 0.0]))
+       frame=st.sampled_from([-1, FRAMES, 2**40]), x=st.sampled_from([np.nan, np.inf, 1e30, 0.0]))
 def test_core_env_indices_frames_and_roots(vector_env, index, frame, x):
     _, env = vector_env
     core = env.unwrapped._core
@@ -329,7 +333,7 @@ def test_controller_step_observation_reset(db, query, target, position):
 
 @EXAMPLES
 @given(positions=hostile(np.random.default_rng(0).random((6, 21, 3))),
-       contacts=hostile(np.ones((6, 2), bool)), frames=hostile(np.arange(100, 106), values=[-1, 6480]),
+       contacts=hostile(np.ones((6, 2), bool)), frames=hostile(np.arange(100, 106), values=[-1, FRAMES]),
        roots=hostile(np.zeros((6, 3))))
 def test_metrics(db, positions, contacts, frames, roots):
     from mmrl import metrics

@@ -23,12 +23,13 @@ from test_runtime import random_obstacle_policy, random_plane_policy
 
 
 def configs(db):
-    busy = db.clip_names[int(np.argmax(np.diff(db.clip_ranges, axis=1)))]
-    plane = mmrl.get_task("plane").default_config().replace(transition_cost=3.0, clip_costs=f"{busy}=2.0",
+    # A clip the random policies below pick often (a stop: walk to stand), made dearer.
+    busy = next(name for name in db.clip_names if name.endswith("_stop.bvh"))
+    plane = mmrl.get_task("plane").default_config().replace(transition_cost=3.0, clip_costs=f"{busy}=0.5",
                                                             max_steps=40)
     obstacles = mmrl.get_task("obstacles").default_config().replace(
         transition_cost=5.0, hit_lookahead=True, hit_radius=0.3, num_obstacles=40,
-        obstacle_max_speed=1.0, clip_costs=f"{busy}=2.0", max_steps=60)
+        obstacle_max_speed=1.0, clip_costs=f"{busy}=0.5", max_steps=60)
     # The collision-aware search (tasks/path_filter.hpp) on top: every rule at once.
     path = obstacles.replace(path_filter=True, path_cost=50.0, path_candidates=32)
     # The arrive task (a plug-in core): its hold ends episodes mid-step, its facing is an input.
