@@ -92,13 +92,16 @@ def test_standing_runs_the_same_episodes_for_every_controller_and_reports_agains
 
 
 def _stand_query(db, st) -> np.ndarray:
-    """The stand by hand: every trajectory sample at the root, facing the target facing in the
-    character frame, normalized as the database normalizes its features."""
+    """The stand by hand: every trajectory sample at the target, facing the target facing, in
+    the character frame (x left, z forward), normalized as the database normalizes features."""
     d = st["facing"] - st["yaw"]
+    dx, dz = st["target"][0] - st["x"], st["target"][1] - st["z"]
+    c, s = math.cos(st["yaw"]), math.sin(st["yaw"])
+    goal = [c * dx - s * dz, s * dx + c * dz]  # forward is (sin yaw, cos yaw), left (cos yaw, -sin yaw)
     raw = np.zeros(27)
     for k in range(3):
         p = mmrl._core.TRAJECTORY_POSITION_COLUMNS[k]
-        raw[p + 2:p + 4] = [math.sin(d), math.cos(d)]
+        raw[p:p + 4] = [goal[0], goal[1], math.sin(d), math.cos(d)]
     return db.normalize(raw)[15:]
 
 

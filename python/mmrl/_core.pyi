@@ -1282,7 +1282,7 @@ class ArriveTaskConfig:
     @property
     def stand_radius(self) -> float:
         """
-        Within this distance (m) of the target and facing_tolerance of its facing, the match asks for a stand facing the target facing instead of the policy's trajectory (the arrive joystick's query at the target): an arrived character stands. 0: never.
+        Within this distance (m) of the target and facing_tolerance of its facing, the match asks to stand at the target facing its facing (every trajectory sample there) instead of the policy's trajectory: an arrived character stands. 0: never.
         """
     @stand_radius.setter
     def stand_radius(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:

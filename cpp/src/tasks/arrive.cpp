@@ -41,12 +41,14 @@ const float* ArriveVecEnv::decision_action(int i, const float* action, float* sc
   if (dx * dx + dz * dz > config_.stand_radius * config_.stand_radius ||
       std::abs(wrap_angle(s.target_yaw - s.root.yaw)) > config_.facing_tolerance)
     return action;
-  // Every sample at the root, facing the target facing in the character frame: (sin d, cos d).
+  // Every sample at the target, facing the target facing, in the character frame: (sin d, cos d).
   const float d = s.target_yaw - s.root.yaw;
+  float goal[2];
+  observe_goal(s, goal);
   const auto& n = db_.normalization;
   const std::array<float, kFeatureDim> scale = n.column_scale();
   for (int k = 0; k < 3; ++k) {
-    const float raw[4] = {0.0f, 0.0f, std::sin(d), std::cos(d)};
+    const float raw[4] = {goal[0], goal[1], std::sin(d), std::cos(d)};
     for (int j = 0; j < 4; ++j) {
       const int c = trajectory_position_column(k) + j;
       scratch[c - kPoseDim] = (raw[j] - n.mean[c]) / scale[c];

@@ -52,9 +52,9 @@ struct ArriveTaskConfig : TaskConfig {
       "facing, 0 at the tolerances: the mean of 1 - distance / success_radius and 1 - facing error / "
       "facing_tolerance).");
     v("stand_radius", &ArriveTaskConfig::stand_radius, kNonNegative,
-      "Within this distance (m) of the target and facing_tolerance of its facing, the match asks for a stand "
-      "facing the target facing instead of the policy's trajectory (the arrive joystick's query at the "
-      "target): an arrived character stands. 0: never.");
+      "Within this distance (m) of the target and facing_tolerance of its facing, the match asks to stand at "
+      "the target facing its facing (every trajectory sample there) instead of the policy's trajectory: an "
+      "arrived character stands. 0: never.");
   }
 };
 
@@ -94,7 +94,7 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   void on_state_set(int i) { envs_[i].hold = 0; }
-  // Within stand_radius and facing_tolerance: the stand facing the target facing, normalized.
+  // Within stand_radius and facing_tolerance: stand at the target facing its facing, normalized.
   const float* decision_action(int i, const float* action, float* scratch) const;
   // Within success_radius of the target and facing_tolerance of its facing.
   bool within_tolerances(const ArriveEnvState& s) const;
