@@ -15,7 +15,6 @@ py::dict arrive_state_dict(const ArriveVecEnv& env, int i) {
   py::dict d = target_state_dict(env.state(i));
   d["facing"] = env.state(i).target_yaw;
   d["hold"] = env.state(i).hold;
-  d["resting"] = env.state(i).resting;
   return d;
 }
 

@@ -11,7 +11,13 @@ ArriveVecEnv::ArriveVecEnv(const Database& db, const Matcher& matcher, int num_e
                            int num_threads)
     : TargetVecEnv(db, matcher, num_envs, config, num_threads),
       hold_frames_(std::max(1, static_cast<int>(std::lround(config.hold_time * db.fps)))),
-      rest_smoothing_(1.0f - std::exp(-1.0f / (kRestSmoothingSeconds * db.fps))) {}
+      rest_smoothing_(1.0f - std::exp(-1.0f / (kRestSmoothingSeconds * db.fps))) {
+  const std::array<float, kFeatureDim> scale = db.normalization.column_scale();
+  for (int j = 0; j < kTrajectoryDim; ++j) {
+    stand_mean_[j] = db.normalization.mean[kPoseDim + j];
+    stand_scale_[j] = scale[kPoseDim + j];
+  }
+}
 
 void ArriveVecEnv::observe(int i, float* obs) const {
   const ArriveEnvState& s = envs_[i];
@@ -29,31 +35,21 @@ void ArriveVecEnv::set_facing(int i, float yaw) {
   envs_[i].hold = 0;
 }
 
-bool ArriveVecEnv::within_tolerances(const ArriveEnvState& s) const {
+bool ArriveVecEnv::within(const ArriveEnvState& s, float radius) const {
   const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
-  return dx * dx + dz * dz <= config_.success_radius * config_.success_radius &&
+  return dx * dx + dz * dz <= radius * radius &&
          std::abs(wrap_angle(s.target_yaw - s.root.yaw)) <= config_.facing_tolerance;
 }
 
 const float* ArriveVecEnv::decision_action(int i, const float* action, float* scratch) const {
   const ArriveEnvState& s = envs_[i];
-  const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
-  if (dx * dx + dz * dz > config_.stand_radius * config_.stand_radius ||
-      std::abs(wrap_angle(s.target_yaw - s.root.yaw)) > config_.facing_tolerance)
-    return action;
+  if (!within(s, config_.stand_radius)) return action;
   // Every sample at the target, facing the target facing, in the character frame: (sin d, cos d).
   const float d = s.target_yaw - s.root.yaw;
   float goal[2];
   observe_goal(s, goal);
-  const auto& n = db_.normalization;
-  const std::array<float, kFeatureDim> scale = n.column_scale();
-  for (int k = 0; k < 3; ++k) {
-    const float raw[4] = {goal[0], goal[1], std::sin(d), std::cos(d)};
-    for (int j = 0; j < 4; ++j) {
-      const int c = trajectory_position_column(k) + j;
-      scratch[c - kPoseDim] = (raw[j] - n.mean[c]) / scale[c];
-    }
-  }
+  const float raw[4] = {goal[0], goal[1], std::sin(d), std::cos(d)};
+  for (int j = 0; j < kTrajectoryDim; ++j) scratch[j] = (raw[j % 4] - stand_mean_[j]) / stand_scale_[j];
   return scratch;
 }
 
@@ -62,7 +58,6 @@ void ArriveVecEnv::begin_episode(int i) {
   draw_start(i, config_.target_half_extent);
   s.target_yaw = s.rng.uniform(-kPi, kPi);
   s.hold = 0;
-  s.resting = false;
   s.vx = s.vz = 0;
 }
 
@@ -77,8 +72,8 @@ TaskStep ArriveVecEnv::advance(int i, const float* action) {
     root_advance(s.root, played_delta(s, k));
     s.vx += rest_smoothing_ * ((s.root.x - x0) * fps - s.vx);
     s.vz += rest_smoothing_ * ((s.root.z - z0) * fps - s.vz);
-    s.resting = std::hypot(s.vx, s.vz) < config_.stop_speed;
-    s.hold = s.resting && within_tolerances(s) ? s.hold + 1 : 0;
+    const bool resting = std::hypot(s.vx, s.vz) < config_.stop_speed;
+    s.hold = resting && within(s, config_.success_radius) ? s.hold + 1 : 0;
     if (s.hold >= hold_frames_) {
       out.success = true;
       out.step_frames = k + 1;

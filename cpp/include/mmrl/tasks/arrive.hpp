@@ -17,6 +17,7 @@
 // Angles are radians everywhere (the facing, its tolerance); a facing is a world yaw about +Y.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 
@@ -62,7 +63,6 @@ struct ArriveEnvState : TargetEnvState {
   float target_yaw = 0;  // the facing to arrive with (world yaw, radians)
   int hold = 0;          // consecutive played frames within the tolerances, at rest
   float vx = 0, vz = 0;   // the root's world velocity (m/s), exponentially smoothed over kRestSmoothingSeconds
-  bool resting = false;  // the smoothed speed is below stop_speed (the rest a success holds)
 };
 
 // The time constant (s) of the smoothed root velocity a rest is read from: a mocap root jitters
@@ -96,10 +96,12 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   void on_state_set(int i) { envs_[i].hold = 0; }
   // Within stand_radius and facing_tolerance: stand at the target facing its facing, normalized.
   const float* decision_action(int i, const float* action, float* scratch) const;
-  // Within success_radius of the target and facing_tolerance of its facing.
-  bool within_tolerances(const ArriveEnvState& s) const;
+  // Within radius of the target and facing_tolerance of its facing.
+  bool within(const ArriveEnvState& s, float radius) const;
   int hold_frames_ = 1;
   float rest_smoothing_ = 1;  // each played frame's weight in the smoothed velocity
+  // The trajectory columns' normalization (mean, divisor), for the stand decision_action writes.
+  std::array<float, kTrajectoryDim> stand_mean_{}, stand_scale_{};
 };
 
 }  // namespace mmrl
