@@ -26,7 +26,7 @@ from .common import (add_data_options, bounded_int, count, database_from_args, d
 #: Episodes of the joystick that ``mmrl eval`` runs at the policy's speed by default (the first
 #: ones of the same seed): enough for its sliding, a fifth of a 100-episode evaluation.
 PEER_EPISODES = 20
-STANDING_EPISODES = 50  # mmrl eval --standing: episodes of the standing report (the first of the same episodes)
+STANDING_EPISODES = 50  # mmrl eval --standing: episodes of the standing report (its own, the same for the joystick)
 
 POLICIES = ("trained", "joystick", "joystick-run")
 
