@@ -68,3 +68,41 @@ def test_database_inputs_are_refused(tmp_path, path):
     bad.write_bytes(path.read_bytes())
     with pytest.raises(mmrl.DatabaseFileError, match="bad.npz"):
         mmrl.Database.load(bad)
+
+
+def test_a_record_larger_than_the_file_is_refused_before_torch_reads_it(tmp_path, monkeypatch):
+    # The fuzzer's input declared a 4 GB record in a 5.7 kB file; torch allocated it (4.4 GB)
+    # before failing. Here: a genuine torch file whose central directory says one record holds
+    # 2 GB. torch.load must not even be called.
+    import struct
+
+    import torch
+
+    good = tmp_path / "good.pt"
+    torch.save({"w": torch.zeros(3)}, good)
+    data = bytearray(good.read_bytes())
+    entry = data.index(b"PK\x01\x02")  # the first central directory entry
+    data[entry + 24:entry + 28] = struct.pack("<I", 2**31 - 1)  # its uncompressed size
+    bad = tmp_path / "bad.pt"
+    bad.write_bytes(bytes(data))
+    monkeypatch.setattr(torch, "load", lambda *a, **k: pytest.fail("torch.load was called"))
+    with pytest.raises(CheckpointError, match=r"bad.pt: corrupt: its record '.*' declares 2147483647 bytes "
+                                              rf"in a file of {len(data)} bytes"):
+        load_policy(bad)
+
+
+def test_a_compressed_record_is_refused(tmp_path):
+    # torch.save stores records as they are; a deflated one is not its file.
+    import zipfile
+
+    import torch
+
+    good = tmp_path / "good.pt"
+    torch.save({"w": torch.zeros(3)}, good)
+    bad = tmp_path / "bad.pt"
+    with zipfile.ZipFile(good) as src, zipfile.ZipFile(bad, "w", zipfile.ZIP_DEFLATED) as dst:
+        for record in src.infolist():
+            dst.writestr(record.filename, src.read(record.filename))
+    with pytest.raises(CheckpointError, match="bad.pt: corrupt: its record '.*' is compressed"):
+        load_policy(bad)
+    assert torch.load(good, weights_only=True)["w"].shape == (3,)  # the original loads

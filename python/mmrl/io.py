@@ -153,6 +153,7 @@ def load_plain_torch_file(path: Path, error_type: type, unreadable: str, map_loc
 
     import torch
 
+    _check_torch_zip(path, error_type, unreadable)
     try:
         return torch.load(path, map_location=map_location, weights_only=True)
     except pickle.UnpicklingError as error:
@@ -164,3 +165,25 @@ def load_plain_torch_file(path: Path, error_type: type, unreadable: str, map_loc
                          f"values; mmrl never unpickles them, since loading them could run code") from None
     except Exception as error:  # torch raises several types for truncated or foreign files
         raise error_type(unreadable.format(path=path, error=error)) from error
+
+
+def _check_torch_zip(path: Path, error_type: type, unreadable: str) -> None:
+    # torch reads a record into a buffer of the size the zip directory declares, before any
+    # check: a 5.7 kB file declaring a 4 GB record took 4.4 GB (tests/fuzz/fuzz_python.py
+    # checkpoint). torch.save writes every record stored, uncompressed, so a record larger than
+    # the file itself is a corrupt file; refuse it before torch allocates anything.
+    import zipfile
+
+    size = os.path.getsize(path)
+    try:
+        with zipfile.ZipFile(path) as archive:
+            records = archive.infolist()
+    except Exception as error:  # zipfile raises BadZipFile, NotImplementedError, struct.error, ...
+        raise error_type(unreadable.format(path=path, error=f"not a torch zip file: {error}")) from None
+    for record in records:
+        if record.compress_type != zipfile.ZIP_STORED:
+            raise error_type(f"{path}: corrupt: its record {record.filename!r} is compressed; torch.save "
+                             f"stores every record as it is")
+        if record.file_size > size:
+            raise error_type(f"{path}: corrupt: its record {record.filename!r} declares {record.file_size} bytes "
+                             f"in a file of {size} bytes")
