@@ -20,6 +20,13 @@ episode that ends in a collision reports:
   collision-aware search's test (``ObstacleVecEnv.path_hits``): over the step's played frames,
   and over the whole 1 s horizon.
 
+How collisions are avoided: every step that does not end its episode is classed by the root's
+motion over it, in the character frame at the step's start, while an obstacle is within
+``NEAR_M`` of the body (edge to the body disc): *stopped* (slower than ``STOP_SPEED``), *stepped
+back* (backward faster than ``BACK_SPEED``), *stepped aside* (sideways faster than
+``ASIDE_SPEED`` and faster than forward). The summary gives the share of episodes with each, and
+the success rate of those episodes.
+
 ``--set`` changes task options for the run (e.g. ``--set path_filter=true``). Prints a table
 (docs/obstacles.md has the one for the default policy).
 """
@@ -35,6 +42,28 @@ from pathlib import Path
 import numpy as np
 
 EARLY_FRAMES = 12  # 0.4 s at 30 fps
+NEAR_M = 1.0       # an obstacle this near the body disc (m) makes a step's motion an avoidance
+STOP_SPEED = 0.15  # m/s over the step: stopped (the arrive task's rest speed)
+BACK_SPEED = 0.1   # m/s backward over the step: stepped back
+ASIDE_SPEED = 0.3  # m/s sideways over the step, and more than forward: stepped aside
+AVOIDANCE = ("stopped", "stepped back", "stepped aside")
+
+
+def avoidance_kinds(root0, root1, seconds: float) -> set:
+    """What a step's root motion was, in the character frame at its start (math.hpp: x left, z
+    forward): a subset of AVOIDANCE."""
+    x0, z0, yaw0 = root0
+    dx, dz = root1[0] - x0, root1[1] - z0
+    c, sn = math.cos(yaw0), math.sin(yaw0)
+    left, forward = (c * dx - sn * dz) / seconds, (sn * dx + c * dz) / seconds
+    kinds = set()
+    if math.hypot(left, forward) < STOP_SPEED:
+        kinds.add("stopped")
+    if forward < -BACK_SPEED:
+        kinds.add("stepped back")
+    if abs(left) > ASIDE_SPEED and abs(left) > abs(forward):
+        kinds.add("stepped aside")
+    return kinds
 
 
 def bounce_path(centres: np.ndarray, velocities: np.ndarray, frames: int, dt: float, half: float) -> np.ndarray:
@@ -139,6 +168,7 @@ def main(argv=None) -> int:
     done = np.zeros(n, bool)
     records = []
     outcome = np.zeros(n, np.int8)  # 1 success, 2 collision, 3 truncated
+    avoided = {kind: np.zeros(n, bool) for kind in AVOIDANCE}  # per episode: any step near an obstacle
     while not done.all():
         live = np.flatnonzero(~done)
         actions = policy_actions(policy, obs, True)
@@ -165,6 +195,22 @@ def main(argv=None) -> int:
                                 first_hits=first_hits, frame=f)
         obs, _, term, trunc, info = env.step(actions)
         ended = (term | trunc) & ~done
+        step_frames = env.step_frames
+        for i in live:
+            i = int(i)
+            if ended[i]:
+                continue
+            s = snap[i]
+            ob = s["obstacles"]
+            if len(ob["centres"]) == 0:
+                continue
+            edge = rect_distance(np.array([s["root"][:2]], np.float32), ob["centres"], ob["half_sizes"],
+                                 ob["angles"])[0].min() - body
+            if edge > NEAR_M:
+                continue
+            st = env.env_state(i)
+            for kind in avoidance_kinds(s["root"], (st["x"], st["z"]), max(int(step_frames[i]), 1) * dt):
+                avoided[kind][i] = True
         for i in np.flatnonzero(ended):
             i = int(i)
             if info["success"][i]:
@@ -227,6 +273,13 @@ def main(argv=None) -> int:
         f"a clear candidate among the {args.k} nearest (played frames)": share(lambda r: r["candidate_clear_played"]),
         f"a clear candidate among the {args.k} nearest (1 s)": share(lambda r: r["candidate_clear_horizon"]),
     }
+    for kind in AVOIDANCE:
+        with_it = avoided[kind]
+        summary[f"episodes that {kind} near an obstacle"] = float(with_it.mean())
+        summary[f"episodes that {kind}: success rate"] = float((outcome[with_it] == 1).mean()) if with_it.any() else float("nan")
+    any_kind = np.any([avoided[k] for k in AVOIDANCE], axis=0)
+    summary["episodes with any of them"] = float(any_kind.mean())
+    summary["episodes with any of them: success rate"] = float((outcome[any_kind] == 1).mean()) if any_kind.any() else float("nan")
     width = max(len(k) for k in summary)
     for key, value in summary.items():
         shown = f"{value:.3f}" if isinstance(value, float) else str(value)

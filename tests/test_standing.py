@@ -105,13 +105,15 @@ def _stand_query(db, st) -> np.ndarray:
     return db.normalize(raw)[15:]
 
 
-def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance():
+@pytest.mark.parametrize("stand_exit", [1.0, 2.0])
+def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance(stand_exit):
     """Step by step against an env with stand_radius 0 driven by the same actions, except that
-    within stand_radius and facing_tolerance (by hand) it gets the stand by hand: the same
-    matches, roots and rewards for 300 steps."""
+    within stand_radius and facing_tolerance (by hand; once standing, stand_exit times both) it
+    gets the stand by hand: the same matches, roots and rewards for 300 steps."""
     db = mmrl.default_database()
-    config = ARRIVE.default_config().replace(success_radius=1.0, stand_radius=0.7, facing_tolerance=1.2,
-                                             target_half_extent=2.0, min_target_distance=0.8, hold_time=1.0)
+    config = ARRIVE.default_config().replace(success_radius=0.5, stand_radius=0.5, facing_tolerance=0.5,
+                                             target_half_extent=2.0, min_target_distance=0.8, hold_time=3.0,
+                                             stand_exit=stand_exit)
     standing = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
     plain = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
     obs, _ = standing.reset(seed=2)
@@ -119,17 +121,27 @@ def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance
     policy = JoystickPolicy(db, database_speeds(db)[0], arrive=True)
     policy.bind_layout(standing.observation_layout)
     rng = np.random.default_rng(0)
-    stands = 0
+    stands = held = 0
+    within = False
     for _ in range(300):
         st = standing.env_state(0)
-        within = (math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"]) <= config.stand_radius
-                  and abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi) <= config.facing_tolerance)
+        widen = stand_exit if within else 1.0  # the last decision stood
+        stood = within
+        within = (math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"]) <= widen * config.stand_radius
+                  and abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi)
+                  <= widen * config.facing_tolerance)
         stands += within
+        held += within and stood and not (
+            math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"]) <= config.stand_radius
+            and abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi) <= config.facing_tolerance)
         action = rng.normal(0, 1, (1, 12)).astype(np.float32) if rng.random() < 0.5 else policy.act(obs)
-        obs, r1, *_ = standing.step(action)
+        obs, r1, terminated, truncated, _ = standing.step(action)
         _, r0, *_ = plain.step(_stand_query(db, st)[None].astype(np.float32) if within else action)
         a, b = standing.env_state(0), plain.env_state(0)
         assert a["last_step_match"] == b["last_step_match"]
         assert (a["x"], a["z"], a["yaw"]) == pytest.approx((b["x"], b["z"], b["yaw"]), abs=1e-5)
         assert r1[0] == pytest.approx(r0[0], abs=1e-5)
+        if terminated[0] or truncated[0]:
+            within = False  # a new episode starts without the stand
+    assert held >= (3 if stand_exit > 1 else 0)  # the wider exit mattered (not vacuous)
     assert stands >= 10  # not vacuous

@@ -1179,7 +1179,7 @@ class ArriveTaskConfig:
     """
     Numbers of the arrive task (see tasks/arrive.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -1278,6 +1278,14 @@ class ArriveTaskConfig:
         """
     @request_groups.setter
     def request_groups(self, arg0: collections.abc.Sequence[str]) -> None:
+        ...
+    @property
+    def stand_exit(self) -> float:
+        """
+        Once standing, the stand holds until the root is farther than stand_exit times stand_radius from the target or turned more than stand_exit times facing_tolerance from its facing (1: it ends where it began).
+        """
+    @stand_exit.setter
+    def stand_exit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def stand_radius(self) -> float:

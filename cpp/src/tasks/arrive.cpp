@@ -35,15 +35,17 @@ void ArriveVecEnv::set_facing(int i, float yaw) {
   envs_[i].hold = 0;
 }
 
-bool ArriveVecEnv::within(const ArriveEnvState& s, float radius) const {
+bool ArriveVecEnv::within(const ArriveEnvState& s, float radius, float tolerance) const {
   const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
-  return dx * dx + dz * dz <= radius * radius &&
-         std::abs(wrap_angle(s.target_yaw - s.root.yaw)) <= config_.facing_tolerance;
+  return dx * dx + dz * dz <= radius * radius && std::abs(wrap_angle(s.target_yaw - s.root.yaw)) <= tolerance;
 }
 
-const float* ArriveVecEnv::decision_action(int i, const float* action, float* scratch) const {
-  const ArriveEnvState& s = envs_[i];
-  if (!within(s, config_.stand_radius)) return action;
+const float* ArriveVecEnv::decision_action(int i, const float* action, float* scratch) {
+  ArriveEnvState& s = envs_[i];
+  const float widen = s.standing ? config_.stand_exit : 1.0f;
+  s.standing = config_.stand_radius > 0 &&
+               within(s, widen * config_.stand_radius, std::min(widen * config_.facing_tolerance, kPi));
+  if (!s.standing) return action;
   // Every sample at the target, facing the target facing, in the character frame: (sin d, cos d).
   const float d = s.target_yaw - s.root.yaw;
   float goal[2];
@@ -59,6 +61,7 @@ void ArriveVecEnv::begin_episode(int i) {
   s.target_yaw = s.rng.uniform(-kPi, kPi);
   s.hold = 0;
   s.vx = s.vz = 0;
+  s.standing = false;
 }
 
 TaskStep ArriveVecEnv::advance(int i, const float* action) {

@@ -32,6 +32,7 @@ struct ArriveTaskConfig : TaskConfig {
   float facing_weight = 1.0f;
   float precision_weight = 1.0f;
   float stand_radius = 0.25f;
+  float stand_exit = 1.0f;
   ArriveTaskConfig() {
     success_radius = 0.25f;
     max_steps = 150;
@@ -56,6 +57,10 @@ struct ArriveTaskConfig : TaskConfig {
       "Within this distance (m) of the target and facing_tolerance of its facing, the match asks to stand at "
       "the target facing its facing (every trajectory sample there) instead of the policy's trajectory: an "
       "arrived character stands. 0: never.");
+    v("stand_exit", &ArriveTaskConfig::stand_exit, closed_range(1, 10),
+      "Once standing, the stand holds until the root is farther than stand_exit times stand_radius from the "
+      "target or turned more than stand_exit times facing_tolerance from its facing (1: it ends where it "
+      "began).");
   }
 };
 
@@ -63,6 +68,7 @@ struct ArriveEnvState : TargetEnvState {
   float target_yaw = 0;  // the facing to arrive with (world yaw, radians)
   int hold = 0;          // consecutive played frames within the tolerances, at rest
   float vx = 0, vz = 0;   // the root's world velocity (m/s), exponentially smoothed over kRestSmoothingSeconds
+  bool standing = false;  // the last decision asked for the stand (decision_action)
 };
 
 // The time constant (s) of the smoothed root velocity a rest is read from: a mocap root jitters
@@ -94,10 +100,12 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   void on_state_set(int i) { envs_[i].hold = 0; }
-  // Within stand_radius and facing_tolerance: stand at the target facing its facing, normalized.
-  const float* decision_action(int i, const float* action, float* scratch) const;
-  // Within radius of the target and facing_tolerance of its facing.
-  bool within(const ArriveEnvState& s, float radius) const;
+  // Within stand_radius and facing_tolerance (once standing: stand_exit times both): stand at
+  // the target facing its facing, normalized. Records whether it stands in the state.
+  const float* decision_action(int i, const float* action, float* scratch);
+  // Within radius of the target and tolerance of its facing.
+  bool within(const ArriveEnvState& s, float radius, float tolerance) const;
+  bool within(const ArriveEnvState& s, float radius) const { return within(s, radius, config_.facing_tolerance); }
   int hold_frames_ = 1;
   float rest_smoothing_ = 1;  // each played frame's weight in the smoothed velocity
   // The trajectory columns' normalization (mean, divisor), for the stand decision_action writes.
