@@ -108,10 +108,13 @@ def _stand_query(db, st) -> np.ndarray:
 @pytest.mark.parametrize("stand_exit", [1.0, 2.0])
 def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance(stand_exit):
     """Step by step against an env with stand_radius 0 driven by the same actions, except that
-    within stand_radius and facing_tolerance (by hand; once standing, stand_exit times both) it
-    gets the stand by hand: the same matches, roots and rewards for 300 steps."""
+    within stand_radius and facing_tolerance (by hand), or once arrived (a decision at rest, the
+    shown frame's hips slower than stop_speed, within success_radius and facing_tolerance) within
+    stand_exit times those, it gets the stand by hand: the same matches, roots and rewards for
+    300 steps."""
     db = mmrl.default_database()
-    config = ARRIVE.default_config().replace(success_radius=0.5, stand_radius=0.5, facing_tolerance=0.5,
+    features = np.asarray(db.features)
+    config = ARRIVE.default_config().replace(success_radius=0.5, stand_radius=0.3, facing_tolerance=0.5,
                                              target_half_extent=2.0, min_target_distance=0.8, hold_time=3.0,
                                              stand_exit=stand_exit)
     standing = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
@@ -121,27 +124,75 @@ def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance
     policy = JoystickPolicy(db, database_speeds(db)[0], arrive=True)
     policy.bind_layout(standing.observation_layout)
     rng = np.random.default_rng(0)
-    stands = held = 0
-    within = False
+    stands = held = wide = 0
+    arrived = False
+
+    def within(st, radius, tolerance):
+        return (math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"]) <= radius
+                and abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi) <= tolerance)
+
     for _ in range(300):
         st = standing.env_state(0)
-        widen = stand_exit if within else 1.0  # the last decision stood
-        stood = within
-        within = (math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"]) <= widen * config.stand_radius
-                  and abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi)
-                  <= widen * config.facing_tolerance)
-        stands += within
-        held += within and stood and not (
-            math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"]) <= config.stand_radius
-            and abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi) <= config.facing_tolerance)
+        if arrived:
+            arrived = within(st, stand_exit * config.success_radius, stand_exit * config.facing_tolerance)
+        elif within(st, config.success_radius, config.facing_tolerance):
+            hips = features[st["frame"]]  # features.hpp: [12:15] the hips velocity
+            arrived = math.hypot(hips[12], hips[14]) < config.stop_speed
+        near = within(st, config.stand_radius, config.facing_tolerance)
+        stand = arrived or near
+        stands += stand
+        held += arrived and not near
+        wide += arrived and not within(st, config.success_radius, config.facing_tolerance)
         action = rng.normal(0, 1, (1, 12)).astype(np.float32) if rng.random() < 0.5 else policy.act(obs)
         obs, r1, terminated, truncated, _ = standing.step(action)
-        _, r0, *_ = plain.step(_stand_query(db, st)[None].astype(np.float32) if within else action)
+        _, r0, *_ = plain.step(_stand_query(db, st)[None].astype(np.float32) if stand else action)
         a, b = standing.env_state(0), plain.env_state(0)
         assert a["last_step_match"] == b["last_step_match"]
         assert (a["x"], a["z"], a["yaw"]) == pytest.approx((b["x"], b["z"], b["yaw"]), abs=1e-5)
         assert r1[0] == pytest.approx(r0[0], abs=1e-5)
         if terminated[0] or truncated[0]:
-            within = False  # a new episode starts without the stand
-    assert held >= (3 if stand_exit > 1 else 0)  # the wider exit mattered (not vacuous)
-    assert stands >= 10  # not vacuous
+            arrived = False  # a new episode has not arrived
+    assert stands >= 10 and held >= 3  # the stand and the arrival mattered (not vacuous)
+
+
+@pytest.mark.parametrize("stand_exit", [1.0, 2.0])
+def test_an_arrived_character_keeps_standing_within_stand_exit(stand_exit):
+    """A character at rest 0.2 m from its target (within success_radius 0.3, outside stand_radius
+    0.1) stands. With the target moved to 0.5 m (beyond success_radius, within 2x) it stands on
+    with stand_exit 2 and follows the action with 1; at 0.7 m it follows the action with either."""
+    db = mmrl.default_database()
+    features = np.asarray(db.features)
+    valid = np.asarray(db.valid_mask, bool)
+    still = np.flatnonzero(valid & (np.hypot(features[:, 12], features[:, 14]) < 0.05))
+    assert len(still) > 0
+    config = ARRIVE.default_config().replace(success_radius=0.3, stand_radius=0.1, facing_tolerance=0.5,
+                                             stand_exit=stand_exit)
+    env = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
+    plain = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
+    other = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
+    for e in (env, plain, other):
+        e.reset(seed=0)
+    walk = np.tile(np.float32([0.0, 1.0, 0.0, 1.0]), 3) * np.float32([1, 1, 1, 1, 2, 2, 1, 1, 3, 3, 1, 1])
+    walk = db.normalize(np.concatenate([np.zeros(15, np.float32), walk]))[15:][None].astype(np.float32)
+
+    def decide(distance, expect_stand):
+        st = env.env_state(0)
+        for e in (env, plain, other):  # the target `distance` ahead, facing the character's way
+            e.set_state(0, st["frame"], st["x"], st["z"], st["yaw"])
+            if e is not env:
+                e.set_facing(0, st["yaw"])
+            e.set_target(0, st["x"] + distance * math.sin(st["yaw"]), st["z"] + distance * math.cos(st["yaw"]))
+        st = env.env_state(0)
+        stand = _stand_query(db, st)[None].astype(np.float32)
+        env.step(walk)
+        plain.step(stand if expect_stand else walk)
+        other.step(walk if expect_stand else stand)  # the other choice: a different match
+        assert env.env_state(0)["last_step_match"] == plain.env_state(0)["last_step_match"]
+        assert env.env_state(0)["last_step_match"] != other.env_state(0)["last_step_match"]
+
+    env.set_state(0, int(still[0]), 0.0, 0.0, 0.0)
+    env.set_facing(0, 0.0)
+    decide(0.2, True)   # arrives: at rest within success_radius
+    decide(0.5, stand_exit >= 2.0)
+    if stand_exit >= 2.0:
+        decide(0.7, False)

@@ -1282,7 +1282,7 @@ class ArriveTaskConfig:
     @property
     def stand_exit(self) -> float:
         """
-        Once standing, the stand holds until the root is farther than stand_exit times stand_radius from the target or turned more than stand_exit times facing_tolerance from its facing (1: it ends where it began).
+        Once arrived (a decision at rest within success_radius and facing_tolerance: the hips slower than stop_speed), the stand holds until the root is farther than stand_exit times success_radius from the target or turned more than stand_exit times facing_tolerance from its facing. 1: no more than before arriving.
         """
     @stand_exit.setter
     def stand_exit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:

@@ -17,6 +17,10 @@ ArriveVecEnv::ArriveVecEnv(const Database& db, const Matcher& matcher, int num_e
     stand_mean_[j] = db.normalization.mean[kPoseDim + j];
     stand_scale_[j] = scale[kPoseDim + j];
   }
+  for (int j = 0; j < 2; ++j) {  // features.hpp: [12:15] hips velocity (x, y, z)
+    hips_mean_[j] = db.normalization.mean[12 + 2 * j];
+    hips_scale_[j] = scale[12 + 2 * j];
+  }
 }
 
 void ArriveVecEnv::observe(int i, float* obs) const {
@@ -33,6 +37,7 @@ void ArriveVecEnv::set_facing(int i, float yaw) {
   if (!std::isfinite(yaw)) throw std::invalid_argument("facing must be finite (radians)");
   envs_[i].target_yaw = wrap_angle(yaw);
   envs_[i].hold = 0;
+  envs_[i].arrived = false;
 }
 
 bool ArriveVecEnv::within(const ArriveEnvState& s, float radius, float tolerance) const {
@@ -42,10 +47,20 @@ bool ArriveVecEnv::within(const ArriveEnvState& s, float radius, float tolerance
 
 const float* ArriveVecEnv::decision_action(int i, const float* action, float* scratch) {
   ArriveEnvState& s = envs_[i];
-  const float widen = s.standing ? config_.stand_exit : 1.0f;
-  s.standing = config_.stand_radius > 0 &&
-               within(s, widen * config_.stand_radius, std::min(widen * config_.facing_tolerance, kPi));
-  if (!s.standing) return action;
+  if (config_.stand_radius <= 0) return action;
+  if (s.arrived) {
+    const float widen = config_.stand_exit;
+    s.arrived = within(s, widen * config_.success_radius, std::min(widen * config_.facing_tolerance, kPi));
+  } else if (within(s, config_.success_radius)) {
+    // At rest: the hips of what is shown now (the decision's own motion, so the env, the full
+    // path and the runtime, which moves its character's root between decisions, agree).
+    const float* pose = source_->current(s).features;
+    // (A hips weight of 0 leaves no speed in the features: position and facing alone then.)
+    const float vx = std::isfinite(hips_scale_[0]) ? pose[12] * hips_scale_[0] + hips_mean_[0] : 0.0f;
+    const float vz = std::isfinite(hips_scale_[1]) ? pose[14] * hips_scale_[1] + hips_mean_[1] : 0.0f;
+    s.arrived = vx * vx + vz * vz < config_.stop_speed * config_.stop_speed;
+  }
+  if (!s.arrived && !within(s, config_.stand_radius)) return action;
   // Every sample at the target, facing the target facing, in the character frame: (sin d, cos d).
   const float d = s.target_yaw - s.root.yaw;
   float goal[2];
@@ -61,7 +76,7 @@ void ArriveVecEnv::begin_episode(int i) {
   s.target_yaw = s.rng.uniform(-kPi, kPi);
   s.hold = 0;
   s.vx = s.vz = 0;
-  s.standing = false;
+  s.arrived = false;
 }
 
 TaskStep ArriveVecEnv::advance(int i, const float* action) {

@@ -58,9 +58,10 @@ struct ArriveTaskConfig : TaskConfig {
       "the target facing its facing (every trajectory sample there) instead of the policy's trajectory: an "
       "arrived character stands. 0: never.");
     v("stand_exit", &ArriveTaskConfig::stand_exit, closed_range(1, 10),
-      "Once standing, the stand holds until the root is farther than stand_exit times stand_radius from the "
-      "target or turned more than stand_exit times facing_tolerance from its facing (1: it ends where it "
-      "began).");
+      "Once arrived (a decision at rest within success_radius and facing_tolerance: the hips slower than "
+      "stop_speed), the stand holds until the root is farther than stand_exit times success_radius from the "
+      "target or turned more than stand_exit times facing_tolerance from its facing. 1: no more than before "
+      "arriving.");
   }
 };
 
@@ -68,7 +69,7 @@ struct ArriveEnvState : TargetEnvState {
   float target_yaw = 0;  // the facing to arrive with (world yaw, radians)
   int hold = 0;          // consecutive played frames within the tolerances, at rest
   float vx = 0, vz = 0;   // the root's world velocity (m/s), exponentially smoothed over kRestSmoothingSeconds
-  bool standing = false;  // the last decision asked for the stand (decision_action)
+  bool arrived = false;  // a decision found it at rest within the tolerances; the stand holds (stand_exit)
 };
 
 // The time constant (s) of the smoothed root velocity a rest is read from: a mocap root jitters
@@ -100,8 +101,8 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   void on_state_set(int i) { envs_[i].hold = 0; }
-  // Within stand_radius and facing_tolerance (once standing: stand_exit times both): stand at
-  // the target facing its facing, normalized. Records whether it stands in the state.
+  // Within stand_radius and facing_tolerance, or once arrived within stand_exit times the
+  // tolerances: stand at the target facing its facing, normalized. Updates s.arrived.
   const float* decision_action(int i, const float* action, float* scratch);
   // Within radius of the target and tolerance of its facing.
   bool within(const ArriveEnvState& s, float radius, float tolerance) const;
@@ -110,6 +111,8 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   float rest_smoothing_ = 1;  // each played frame's weight in the smoothed velocity
   // The trajectory columns' normalization (mean, divisor), for the stand decision_action writes.
   std::array<float, kTrajectoryDim> stand_mean_{}, stand_scale_{};
+  // The hips velocity columns' (x, z) normalization, for the rest test of an arrival.
+  float hips_mean_[2] = {}, hips_scale_[2] = {1, 1};
 };
 
 }  // namespace mmrl
