@@ -35,6 +35,7 @@ void ObstaclePathFilter::init(const Database& db, int capacity, const PathFilter
   cx_.assign(static_cast<size_t>(samples_) * capacity, 0.0f);
   cz_.assign(static_cast<size_t>(samples_) * capacity, 0.0f);
   for (auto* v : {&ocos_, &osin_, &hx_, &hz_, &bound2_}) v->assign(capacity, 0.0f);
+  near_.assign(static_cast<size_t>(samples_) * capacity, 0);
   scratch_x_.assign(kPathSampleFrames[kPathSamples - 1], 0.0f);
   scratch_z_.assign(kPathSampleFrames[kPathSamples - 1], 0.0f);
   kept_ = 0;
@@ -79,6 +80,20 @@ void ObstaclePathFilter::prepare(const ObstacleField& field, int env, const Root
     hz_[kept_] = h.y();
     bound2_[kept_] = (extent + r) * (extent + r);
     ++kept_;
+  }
+  // Per sample, the kept obstacles that one of its path points can reach there (a row's point
+  // lies within the database's path_reach of the root; a state's within kStateReach).
+  for (int s = 0; s < samples_; ++s) {
+    const float reach = states_ ? std::max(db_->path_reach[s], kStateReach) : db_->path_reach[s];
+    const float* xs = &cx_[static_cast<size_t>(s) * capacity_];
+    const float* zs = &cz_[static_cast<size_t>(s) * capacity_];
+    int32_t* near = &near_[static_cast<size_t>(s) * capacity_];
+    near_count_[s] = 0;
+    for (int k = 0; k < kept_; ++k) {
+      const float far = reach + std::sqrt(bound2_[k]) + 1e-3f;  // (a millimetre against rounding)
+      const float dx = xs[k] - root.x, dz = zs[k] - root.z;
+      if (dx * dx + dz * dz <= far * far) near[near_count_[s]++] = k;
+    }
   }
 }
 
@@ -125,7 +140,9 @@ int ObstaclePathFilter::first_hit_path(const float* p) const {
     const float wz = root_z_ - sin_yaw_ * px + cos_yaw_ * pz;
     const float* xs = &cx_[static_cast<size_t>(s) * capacity_];
     const float* zs = &cz_[static_cast<size_t>(s) * capacity_];
-    for (int k = 0; k < kept_; ++k) {
+    const int32_t* near = &near_[static_cast<size_t>(s) * capacity_];
+    for (int j = 0; j < near_count_[s]; ++j) {
+      const int k = near[j];
       const float dx = wx - xs[k], dz = wz - zs[k];
       if (dx * dx + dz * dz > bound2_[k]) continue;
       const float u = ocos_[k] * dx - osin_[k] * dz, v = osin_[k] * dx + ocos_[k] * dz;

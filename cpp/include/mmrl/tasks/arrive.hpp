@@ -32,7 +32,7 @@ struct ArriveTaskConfig : TaskConfig {
   float facing_weight = 1.0f;
   float precision_weight = 1.0f;
   float stand_radius = 0.25f;
-  float stand_exit = 1.0f;
+  float stand_exit = 2.0f;
   ArriveTaskConfig() {
     success_radius = 0.25f;
     max_steps = 150;

@@ -26,7 +26,8 @@
 // Cost: prepare() runs once per decision (the obstacles near enough to reach a path point,
 // their positions at every sample); extra_cost runs only for rows whose distance alone could
 // still win (kdtree.hpp), each a loop over samples x nearby obstacles with a bounding-circle
-// reject first. No allocation after init().
+// reject first, over only the obstacles a path point of that sample can reach (an early sample
+// reaches a few). No allocation after init().
 #pragma once
 
 #include <cstdint>
@@ -130,6 +131,8 @@ class ObstaclePathFilter final : public CandidateFilter {
   bool prepared_ = false;
   std::vector<float> cx_, cz_;  // samples_ x capacity_, sample-major: kept obstacles' centres
   std::vector<float> ocos_, osin_, hx_, hz_, bound2_;  // per kept obstacle
+  std::vector<int32_t> near_;                          // samples_ x capacity_: per sample, the kept ones it can reach
+  int near_count_[kPathSamples] = {};
   std::vector<float> scratch_x_, scratch_z_;           // one obstacle's positions per frame
 };
 
