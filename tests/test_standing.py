@@ -155,19 +155,18 @@ def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance
     assert stands >= 10 and held >= 3  # the stand and the arrival mattered (not vacuous)
 
 
-@pytest.mark.parametrize("stand_exit,in_place", [(1.0, False), (2.0, False), (2.0, True)])
-def test_an_arrived_character_keeps_standing_within_stand_exit(stand_exit, in_place):
+@pytest.mark.parametrize("stand_exit", [1.0, 2.0])
+def test_an_arrived_character_keeps_standing_within_stand_exit(stand_exit):
     """A character at rest 0.2 m from its target (within success_radius 0.3, outside stand_radius
     0.1) stands. With the target moved to 0.5 m (beyond success_radius, within 2x) it stands on
-    with stand_exit 2 and follows the action with 1; at 0.7 m it follows the action with either.
-    With stand_in_place, the stand of an arrived character asks to stay where it is."""
+    with stand_exit 2 and follows the action with 1; at 0.7 m it follows the action with either."""
     db = mmrl.default_database()
     features = np.asarray(db.features)
     valid = np.asarray(db.valid_mask, bool)
     still = np.flatnonzero(valid & (np.hypot(features[:, 12], features[:, 14]) < 0.05))
     assert len(still) > 0
     config = ARRIVE.default_config().replace(success_radius=0.3, stand_radius=0.1, facing_tolerance=0.5,
-                                             stand_exit=stand_exit, stand_in_place=in_place)
+                                             stand_exit=stand_exit)
     env = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
     plain = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
     other = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
@@ -184,8 +183,7 @@ def test_an_arrived_character_keeps_standing_within_stand_exit(stand_exit, in_pl
                 e.set_facing(0, st["yaw"])
             e.set_target(0, st["x"] + distance * math.sin(st["yaw"]), st["z"] + distance * math.cos(st["yaw"]))
         st = env.env_state(0)
-        here = dict(st, target=(st["x"], st["z"])) if in_place and expect_stand else st  # arrived: stay here
-        stand = _stand_query(db, here)[None].astype(np.float32)
+        stand = _stand_query(db, st)[None].astype(np.float32)
         env.step(walk)
         plain.step(stand if expect_stand else walk)
         other.step(walk if expect_stand else stand)  # the other choice: a different match

@@ -1179,7 +1179,7 @@ class ArriveTaskConfig:
     """
     Numbers of the arrive task (see tasks/arrive.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit', 'stand_in_place')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -1286,14 +1286,6 @@ class ArriveTaskConfig:
         """
     @stand_exit.setter
     def stand_exit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
-    @property
-    def stand_in_place(self) -> bool:
-        """
-        Once arrived, the stand asks to stay where the character is (facing the target facing) instead of at the target.
-        """
-    @stand_in_place.setter
-    def stand_in_place(self, arg0: bool) -> None:
         ...
     @property
     def stand_radius(self) -> float:

@@ -63,8 +63,8 @@ const float* ArriveVecEnv::decision_action(int i, const float* action, float* sc
   if (!s.arrived && !within(s, config_.stand_radius)) return action;
   // Every sample at the target, facing the target facing, in the character frame: (sin d, cos d).
   const float d = s.target_yaw - s.root.yaw;
-  float goal[2] = {0.0f, 0.0f};
-  if (!(s.arrived && config_.stand_in_place)) observe_goal(s, goal);
+  float goal[2];
+  observe_goal(s, goal);
   const float raw[4] = {goal[0], goal[1], std::sin(d), std::cos(d)};
   for (int j = 0; j < kTrajectoryDim; ++j) scratch[j] = (raw[j % 4] - stand_mean_[j]) / stand_scale_[j];
   return scratch;

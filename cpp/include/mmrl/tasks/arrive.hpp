@@ -33,7 +33,6 @@ struct ArriveTaskConfig : TaskConfig {
   float precision_weight = 1.0f;
   float stand_radius = 0.25f;
   float stand_exit = 2.0f;
-  bool stand_in_place = false;
   ArriveTaskConfig() {
     success_radius = 0.25f;
     max_steps = 150;
@@ -63,9 +62,6 @@ struct ArriveTaskConfig : TaskConfig {
       "stop_speed), the stand holds until the root is farther than stand_exit times success_radius from the "
       "target or turned more than stand_exit times facing_tolerance from its facing. 1: no more than before "
       "arriving.");
-    v("stand_in_place", &ArriveTaskConfig::stand_in_place, kAny,
-      "Once arrived, the stand asks to stay where the character is (facing the target facing) instead of at the "
-      "target.");
   }
 };
 
