@@ -179,8 +179,8 @@ def test_an_arrived_character_keeps_standing_within_stand_exit(stand_exit):
         st = env.env_state(0)
         for e in (env, plain, other):  # the target `distance` ahead, facing the character's way
             e.set_state(0, st["frame"], st["x"], st["z"], st["yaw"])
-            if e is not env:
-                e.set_facing(0, st["yaw"])
+            # The runtime sets the facing before every decision: the same facing keeps the arrival.
+            e.set_facing(0, st["facing"] if e is env else st["yaw"])
             e.set_target(0, st["x"] + distance * math.sin(st["yaw"]), st["z"] + distance * math.cos(st["yaw"]))
         st = env.env_state(0)
         stand = _stand_query(db, st)[None].astype(np.float32)

@@ -35,9 +35,11 @@ void ArriveVecEnv::observe(int i, float* obs) const {
 
 void ArriveVecEnv::set_facing(int i, float yaw) {
   if (!std::isfinite(yaw)) throw std::invalid_argument("facing must be finite (radians)");
-  envs_[i].target_yaw = wrap_angle(yaw);
-  envs_[i].hold = 0;
-  envs_[i].arrived = false;
+  ArriveEnvState& s = envs_[i];
+  if (wrap_angle(yaw) == s.target_yaw) return;  // the runtime sets it before every decision
+  s.target_yaw = wrap_angle(yaw);
+  s.hold = 0;
+  s.arrived = false;
 }
 
 bool ArriveVecEnv::within(const ArriveEnvState& s, float radius, float tolerance) const {

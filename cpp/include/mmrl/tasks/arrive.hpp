@@ -91,7 +91,8 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
 
   void step(const float* actions, const TargetStepBuffers& out);
   void observe(int i, float* obs_row) const;
-  // Sets env i's target facing (world yaw, radians; finite, else std::invalid_argument).
+  // Sets env i's target facing (world yaw, radians; finite, else std::invalid_argument). A new
+  // facing starts a new arrival (the hold and the arrival's stand); the same one changes nothing.
   void set_facing(int i, float yaw);
   // The frames a hold lasts: hold_time in frames (at least 1).
   int hold_frames() const { return hold_frames_; }
