@@ -57,9 +57,7 @@ const float* ArriveVecEnv::decision_action(int i, const float* action, float* sc
     // At rest: the hips of what is shown now (the decision's own motion, so the env, the full
     // path and the runtime, which moves its character's root between decisions, agree).
     const float* pose = source_->current(s).features;
-    // (A hips weight of 0 leaves no speed in the features: position and facing alone then.)
-    const float vx = std::isfinite(hips_scale_[0]) ? pose[12] * hips_scale_[0] + hips_mean_[0] : 0.0f;
-    const float vz = std::isfinite(hips_scale_[1]) ? pose[14] * hips_scale_[1] + hips_mean_[1] : 0.0f;
+    const float vx = pose[12] * hips_scale_[0] + hips_mean_[0], vz = pose[14] * hips_scale_[1] + hips_mean_[1];
     s.arrived = vx * vx + vz * vz < config_.stop_speed * config_.stop_speed;
   }
   if (!s.arrived && !within(s, config_.stand_radius)) return action;

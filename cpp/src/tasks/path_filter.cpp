@@ -54,6 +54,7 @@ void ObstaclePathFilter::prepare(const ObstacleField& field, int env, const Root
   cos_yaw_ = std::cos(root.yaw);
   sin_yaw_ = std::sin(root.yaw);
   kept_ = 0;
+  std::fill(near_count_, near_count_ + kPathSamples, 0);
   if (samples_ == 0) return;
   const int frames = kPathSampleFrames[samples_ - 1];
   const float seconds = static_cast<float>(frames) * frame_dt;
@@ -72,6 +73,12 @@ void ObstaclePathFilter::prepare(const ObstacleField& field, int env, const Root
       const size_t o = static_cast<size_t>(s) * capacity_ + kept_;
       cx_[o] = moving ? scratch_x_[kPathSampleFrames[s] - 1] : c.x();
       cz_[o] = moving ? scratch_z_[kPathSampleFrames[s] - 1] : c.y();
+      // Whether a path point of sample s can reach it there (a row's point lies within the
+      // database's path_reach of the root, a state's within kStateReach; a millimetre of slack).
+      const float reach = states_ ? std::max(db_->path_reach[s], kStateReach) : db_->path_reach[s];
+      const float near = reach + extent + r + 1e-3f;
+      const float sx = cx_[o] - root.x, sz = cz_[o] - root.z;
+      if (sx * sx + sz * sz <= near * near) near_[static_cast<size_t>(s) * capacity_ + near_count_[s]++] = kept_;
     }
     const Vec2 rot = field.rotation(env, k);
     ocos_[kept_] = rot.x();
@@ -80,20 +87,6 @@ void ObstaclePathFilter::prepare(const ObstacleField& field, int env, const Root
     hz_[kept_] = h.y();
     bound2_[kept_] = (extent + r) * (extent + r);
     ++kept_;
-  }
-  // Per sample, the kept obstacles that one of its path points can reach there (a row's point
-  // lies within the database's path_reach of the root; a state's within kStateReach).
-  for (int s = 0; s < samples_; ++s) {
-    const float reach = states_ ? std::max(db_->path_reach[s], kStateReach) : db_->path_reach[s];
-    const float* xs = &cx_[static_cast<size_t>(s) * capacity_];
-    const float* zs = &cz_[static_cast<size_t>(s) * capacity_];
-    int32_t* near = &near_[static_cast<size_t>(s) * capacity_];
-    near_count_[s] = 0;
-    for (int k = 0; k < kept_; ++k) {
-      const float far = reach + std::sqrt(bound2_[k]) + 1e-3f;  // (a millimetre against rounding)
-      const float dx = xs[k] - root.x, dz = zs[k] - root.z;
-      if (dx * dx + dz * dz <= far * far) near[near_count_[s]++] = k;
-    }
   }
 }
 
