@@ -30,8 +30,8 @@ def configs(db):
     obstacles = mmrl.get_task("obstacles").default_config().replace(
         transition_cost=5.0, hit_lookahead=True, hit_radius=0.3, num_obstacles=40,
         obstacle_max_speed=1.0, clip_costs=f"{busy}=0.5", max_steps=60)
-    # The collision-aware search (tasks/path_filter.hpp) on top: every rule at once.
-    path = obstacles.replace(path_filter=True, path_cost=50.0, path_candidates=32)
+    # The collision-aware search (tasks/path_filter.hpp) on top, and the foot-jump rule: every rule at once.
+    path = obstacles.replace(path_filter=True, path_cost=50.0, path_candidates=32, foot_jump_limit=0.3)
     # The arrive task (a plug-in core): its hold ends episodes mid-step, its facing is an input.
     # (Its clip-cost rule is the same chain as the plane's: the plane config covers it.)
     arrive = mmrl.get_task("arrive").default_config().replace(transition_cost=3.0,

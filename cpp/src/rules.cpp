@@ -1,5 +1,8 @@
 #include "mmrl/rules.hpp"
 
+#include <array>
+#include <limits>
+
 namespace mmrl {
 
 namespace {
@@ -34,6 +37,41 @@ class RequestRule final : public CandidateRule {
   RequestFilter filter_;
 };
 
+// task.foot_jump_limit: refuses candidates whose left or right foot (features [0:3], [3:6], the
+// character frame) is farther than the limit from the shown frame's.
+class FootJumpRule final : public CandidateRule {
+ public:
+  FootJumpRule(const Database& db, float limit) : limit2_(limit * limit) {
+    const std::array<float, kFeatureDim> scale = db.normalization.column_scale();
+    for (int j = 0; j < 6; ++j) {
+      mean_[j] = db.normalization.mean[j];
+      scale_[j] = scale[j];
+    }
+  }
+  bool prepare(const RuleContext& context) override {
+    const float* f = context.source.current(context.state).features;
+    for (int j = 0; j < 6; ++j) now_[j] = f[j] * scale_[j] + mean_[j];
+    return true;
+  }
+
+ protected:
+  float cost(const Candidate& c) const override {
+    for (int foot = 0; foot < 2; ++foot) {
+      float d2 = 0;
+      for (int j = 3 * foot; j < 3 * foot + 3; ++j) {
+        const float d = c.features[j] * scale_[j] + mean_[j] - now_[j];
+        d2 += d * d;
+      }
+      if (d2 > limit2_) return std::numeric_limits<float>::infinity();
+    }
+    return 0.0f;
+  }
+
+ private:
+  float limit2_;
+  float mean_[6] = {}, scale_[6] = {}, now_[6] = {};
+};
+
 std::vector<CandidateRuleType>& registry() {
   // The builtin rules, one line each, in chain order. (The obstacles' path filter is that
   // task's own, on top of the chain: obstacles.hpp.)
@@ -43,6 +81,9 @@ std::vector<CandidateRuleType>& registry() {
        }},
       {"request", [](const Database& db, const TaskConfig&) -> std::unique_ptr<CandidateRule> {
          return std::make_unique<RequestRule>(db);
+       }},
+      {"foot-jump", [](const Database& db, const TaskConfig& c) -> std::unique_ptr<CandidateRule> {
+         return c.foot_jump_limit > 0 ? std::make_unique<FootJumpRule>(db, c.foot_jump_limit) : nullptr;
        }},
   };
   return types;

@@ -283,7 +283,7 @@ class PlaneTaskConfig:
     """
     Numbers of the plane task (see tasks/plane.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -302,6 +302,14 @@ class PlaneTaskConfig:
         """
     @clip_costs.setter
     def clip_costs(self, arg0: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex]) -> None:
+        ...
+    @property
+    def foot_jump_limit(self) -> float:
+        """
+        A match refuses frames whose feet stand farther than this (meters, in the character frame) from the shown frame's, unless every frame is refused: the blend of a transition never has to slide a foot further. 0: off.
+        """
+    @foot_jump_limit.setter
+    def foot_jump_limit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def frames_per_step(self) -> int:
@@ -663,7 +671,7 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -698,6 +706,14 @@ class ObstacleTaskConfig:
         """
     @compressed_path_fan.setter
     def compressed_path_fan(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def foot_jump_limit(self) -> float:
+        """
+        A match refuses frames whose feet stand farther than this (meters, in the character frame) from the shown frame's, unless every frame is refused: the blend of a transition never has to slide a foot further. 0: off.
+        """
+    @foot_jump_limit.setter
+    def foot_jump_limit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def frames_per_step(self) -> int:
@@ -1179,7 +1195,7 @@ class ArriveTaskConfig:
     """
     Numbers of the arrive task (see tasks/arrive.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -1214,6 +1230,14 @@ class ArriveTaskConfig:
         """
     @facing_weight.setter
     def facing_weight(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def foot_jump_limit(self) -> float:
+        """
+        A match refuses frames whose feet stand farther than this (meters, in the character frame) from the shown frame's, unless every frame is refused: the blend of a transition never has to slide a foot further. 0: off.
+        """
+    @foot_jump_limit.setter
+    def foot_jump_limit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def frames_per_step(self) -> int:

@@ -202,7 +202,8 @@ class TargetVecEnv {
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
     float query[kTrajectoryDim];
-    s.decision = decider_.decide(*source_, s, task().decision_action(i, action, query), decision_rules(i));
+    const float* asked = task().decision_action(i, action, query);  // first: it may change what the rules read
+    s.decision = decider_.decide(*source_, s, asked, decision_rules(i));
     return s.decision.match;
   }
   // Env i's rules for its next decision (what decide uses).

@@ -65,6 +65,7 @@ struct TaskConfig {
   float transition_cost = 0.0f;
   float transition_pose_weight = 0.0f;
   float transition_penalty = 0.0f;
+  float foot_jump_limit = 0.0f;
   std::vector<float> clip_costs;            // one per clip (Python: a "PATTERN=COST;..." spec)
   std::vector<std::string> request_groups;  // (Python: "style,gait")
   float request_any = 0.125f;
@@ -96,6 +97,10 @@ void visit_task_config_fields(Visit&& v) {
     "to hide; 0 is the paper's reward.");
   v("transition_penalty", &TaskConfig::transition_penalty, kNonNegative,
     "Reward term: minus this at every transition, in the reward's own units; 0 is the paper's reward.");
+  v("foot_jump_limit", &TaskConfig::foot_jump_limit, kNonNegative,
+    "A match refuses frames whose feet stand farther than this (meters, in the character frame) from the "
+    "shown frame's, unless every frame is refused: the blend of a transition never has to slide a foot "
+    "further. 0: off.");
   v("clip_costs", &TaskConfig::clip_costs, kAny,
     "Costs added to the match cost of chosen clips: 'PATTERN=COST;...', each PATTERN an fnmatch pattern of "
     "clip names, each COST >= 0 or inf (never play them); costs of patterns matching one clip add up.");
