@@ -46,8 +46,10 @@ double run_variant(const mmrl::RuntimeController& c, const Variant& v, int chars
   for (int64_t f = 0; f < db.num_frames; ++f)
     if (db.valid[f]) valid.push_back(f);
   std::vector<std::unique_ptr<mmrl::Character>> cs;
-  mmrl::DatabaseDecider decider(db, c.matcher(), c.task().config->action_limit_std, c.task().config->transition_cost,
-                                {});
+  mmrl::TaskConfig plain;  // the file's task options a decision reads, without its rules
+  plain.action_limit_std = c.task().config->action_limit_std;
+  plain.transition_cost = c.task().config->transition_cost;
+  mmrl::DatabaseDecider decider(db, c.matcher(), plain);
   for (int i = 0; i < chars; ++i) {
     cs.push_back(std::make_unique<mmrl::Character>(db, o));
     cs.back()->reset(valid[(static_cast<size_t>(i) * 7919) % valid.size()], mmrl::RootState{float(i), 0.0f, 0.0f});

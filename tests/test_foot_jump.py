@@ -149,3 +149,35 @@ def test_runtime_reads_the_limit_and_agrees_with_the_full_path(db, tmp_path):
 def test_a_negative_limit_is_refused_by_name(db):
     with pytest.raises(ValueError, match="foot_jump_limit"):
         PlaneVectorEnv(2, db=db, foot_jump_limit=-0.1)
+
+
+def test_a_standalone_character_decides_with_the_rule(db):
+    """mmrl.Character.step (no env) chains the same registered rules: its decisions equal the
+    brute force, and the limit changes them."""
+    from mmrl.rl.policies import JoystickPolicy
+
+    limit = typical_jump(db, PlaneConfig(transition_cost=TRANSITION_COST))
+    env = PlaneVectorEnv(1, db=db, config=PlaneConfig(), num_threads=1)
+    low, high = env.single_action_space.low, env.single_action_space.high
+    rng = np.random.default_rng(5)
+    joy = JoystickPolicy(db)
+    characters = {lim: mmrl.Character(db, fast=True, transition_cost=TRANSITION_COST, foot_jump_limit=lim,
+                                      start_frame=int(np.flatnonzero(db.valid_mask)[50])) for lim in (0.0, limit)}
+    checked = differ = 0
+    for _ in range(300):
+        target = rng.uniform(-3, 3, 2)
+        a = (joy.act(characters[limit].observation(target)[None])[0] + rng.normal(0, 0.8, 12)).astype(np.float32)
+        frame = characters[limit].frame
+        want = brute_force(db, frame, a, low, high, limit)
+        res = characters[limit].step(a)
+        free = characters[0.0]
+        if free.frame == frame:  # the same state: the rule alone tells the two apart
+            differ += free.step(a).match != res.match
+        else:
+            free.reset(frame, characters[limit].root[:2], characters[limit].root[2])
+        if want is not None:
+            assert res.match == want[0]
+            checked += 1
+    assert checked > 200 and differ > 0
+    with pytest.raises(ValueError, match="foot_jump_limit"):
+        mmrl.Character(db, foot_jump_limit=-1.0)

@@ -42,13 +42,20 @@ void bind_character(py::module_& m) {
 
   py::class_<DatabaseDecider>(m, "Decider",
                               "One database character's decisions (decider.hpp's Decider over the database source, "
-                              "with a transition cost and clip costs): what mmrl.Character.step decides with.")
+                              "with a transition cost and the registered candidate rules: clip costs, the foot-jump "
+                              "limit): what mmrl.Character.step decides with.")
       .def(py::init([](const Database& db, PyMatcher& matcher, float action_limit_std, float transition_cost,
-                       std::vector<float> clip_costs) {
-             return new DatabaseDecider(db, matcher.matcher, action_limit_std, transition_cost, std::move(clip_costs));
+                       std::vector<float> clip_costs, float foot_jump_limit) {
+             TaskConfig c;
+             c.action_limit_std = action_limit_std;
+             c.transition_cost = transition_cost;
+             c.clip_costs = std::move(clip_costs);
+             c.foot_jump_limit = foot_jump_limit;
+             return new DatabaseDecider(db, matcher.matcher, c);
            }),
            py::arg("db"), py::arg("matcher"), py::arg("action_limit_std") = 3.0f, py::arg("transition_cost") = 0.0f,
-           py::arg("clip_costs") = std::vector<float>{}, py::keep_alive<1, 2>(), py::keep_alive<1, 3>())
+           py::arg("clip_costs") = std::vector<float>{}, py::arg("foot_jump_limit") = 0.0f, py::keep_alive<1, 2>(),
+           py::keep_alive<1, 3>())
       .def(
           "decide",
           [](DatabaseDecider& d, int64_t frame, const py::handle& trajectory) {

@@ -23,11 +23,13 @@ void DatabaseSource::show(Character& character, MotionState& s, const RootState&
   character.reset(s.frame, root);
 }
 
-DatabaseDecider::DatabaseDecider(const Database& db, const Matcher& matcher, float action_limit_std,
-                                 float transition_cost, std::vector<float> clip_costs)
-    : source_(db, matcher), decider_(db, action_limit_std), clip_filter_(db, std::move(clip_costs)) {
+DatabaseDecider::DatabaseDecider(const Database& db, const Matcher& matcher, const TaskConfig& config)
+    : source_(db, matcher), decider_(db, config.action_limit_std) {
   if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("matcher was not built over this database");
-  set_transition_cost(transition_cost);
+  check_option("foot_jump_limit", config.foot_jump_limit, kNonNegative);
+  set_transition_cost(config.transition_cost);
+  rules_ = RuleChain(db, config);
+  every_clip_ = select_request(db, TagRequest{});
 }
 
 void DatabaseDecider::set_transition_cost(float cost) {
@@ -40,7 +42,7 @@ Decision DatabaseDecider::decide(int64_t frame, const float* action) {
   source_.start(state_, frame);
   DecisionRules rules;
   rules.transition_cost = transition_cost_;
-  rules.filter = clip_filter_.get();
+  rules.filter = rules_.prepare(RuleContext{source_, state_, every_clip_});
   return decider_.decide(source_, state_, action, rules);
 }
 

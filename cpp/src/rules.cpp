@@ -93,6 +93,21 @@ std::vector<CandidateRuleType>& registry() {
 
 const std::vector<CandidateRuleType>& candidate_rule_types() { return registry(); }
 
+RuleChain::RuleChain(const Database& db, const TaskConfig& config) {
+  for (const CandidateRuleType& type : candidate_rule_types())
+    if (auto rule = type.make(db, config)) rules_.push_back(std::move(rule));
+}
+
+const CandidateFilter* RuleChain::prepare(const RuleContext& context) {
+  const CandidateFilter* below = nullptr;
+  for (const auto& rule : rules_) {
+    if (!rule->prepare(context)) continue;
+    rule->set_below(below);
+    below = rule.get();
+  }
+  return below;
+}
+
 int register_candidate_rule(CandidateRuleType type) {
   registry().push_back(std::move(type));
   return static_cast<int>(registry().size()) - 1;

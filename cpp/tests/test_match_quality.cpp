@@ -150,7 +150,7 @@ TEST(Character, AnimatedFeetAreTheAnklesOfTheSameRunWithIkOff) {
   off.ik = false;
   off.foot_locking = false;
   Character a(db, on), b(db, off);
-  DatabaseDecider decider(db, matcher(), 3.0f, 0.0f, {});
+  DatabaseDecider decider(db, matcher(), TaskConfig{});
   const int64_t start = db.clip_ranges[2 * 3] + 4;
   a.reset(start, RootState{1.0f, -2.0f, 0.4f});
   b.reset(start, RootState{1.0f, -2.0f, 0.4f});

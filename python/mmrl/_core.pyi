@@ -578,9 +578,9 @@ class CharacterOptions:
         ...
 class Decider:
     """
-    One database character's decisions (decider.hpp's Decider over the database source, with a transition cost and clip costs): what mmrl.Character.step decides with.
+    One database character's decisions (decider.hpp's Decider over the database source, with a transition cost and the registered candidate rules: clip costs, the foot-jump limit): what mmrl.Character.step decides with.
     """
-    def __init__(self, db: Database, matcher: Matcher, action_limit_std: typing.SupportsFloat | typing.SupportsIndex = 3.0, transition_cost: typing.SupportsFloat | typing.SupportsIndex = 0.0, clip_costs: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex] = []) -> None:
+    def __init__(self, db: Database, matcher: Matcher, action_limit_std: typing.SupportsFloat | typing.SupportsIndex = 3.0, transition_cost: typing.SupportsFloat | typing.SupportsIndex = 0.0, clip_costs: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex] = [], foot_jump_limit: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> None:
         ...
     def decide(self, frame: typing.SupportsInt | typing.SupportsIndex, trajectory_query: typing.Any) -> tuple[int, float]:
         """

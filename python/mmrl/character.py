@@ -76,6 +76,8 @@ class Character:
             the paper's rule), like the task option of the same name.
         clip_costs: the decision's clip-cost filter, like the task option of the same name
             (``"PATTERN=COST;..."``, see :func:`clip_cost_array`).
+        foot_jump_limit: a match refuses frames whose feet stand farther than this (meters)
+            from the shown frame's, like the task option of the same name (0: off).
         record: keep every shown frame for :meth:`recording` (metrics, video, export).
     """
 
@@ -83,7 +85,7 @@ class Character:
                  ik: bool = True, foot_locking: bool = True, start_frame: Optional[int] = None,
                  position: Sequence[float] = (0.0, 0.0), yaw: float = 0.0, fast: bool = False,
                  action_limit_std: Optional[float] = 3.0, record: bool = False, transition_cost: float = 0.0,
-                 clip_costs: str = ""):
+                 clip_costs: str = "", foot_jump_limit: float = 0.0):
         if not isinstance(db, Database):
             raise TypeError(f"db: expected an mmrl.Database, got {type(db).__name__}")
         if not isinstance(frames_per_step, (int, np.integer)) or not 1 <= frames_per_step <= _core.MAX_FRAMES_PER_STEP:
@@ -107,7 +109,7 @@ class Character:
         self.db = db
         self.fast = bool(fast)
         self.frames_per_step = int(frames_per_step)
-        self._decider = _core.Decider(db._db, db.matcher, limit, float(transition_cost), costs)
+        self._decider = _core.Decider(db._db, db.matcher, limit, float(transition_cost), costs, float(foot_jump_limit))
         self._core = _core.Character(db._db, opt)
         self._record = bool(record)
         self._rec: Dict[str, List[np.ndarray]] = {}

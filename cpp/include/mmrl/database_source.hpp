@@ -5,6 +5,7 @@
 #pragma once
 
 #include "mmrl/decider.hpp"
+#include "mmrl/rules.hpp"
 
 namespace mmrl {
 
@@ -38,13 +39,14 @@ class DatabaseSource final : public MotionSource {
 };
 
 // One database character's decisions outside an env (mmrl.Character.step): a Decider over the
-// database source with the plain rules every task starts from, a transition cost and clip
-// costs (decision.hpp's ClipCostFilter). db and matcher are borrowed.
+// database source with the registered rules (rules.hpp) that `config` turns on, as any env's
+// character has them (no request: every clip), and config's transition cost. Only the base
+// options a rule or the decision reads count (action_limit_std, transition_cost, clip_costs,
+// foot_jump_limit). db and matcher are borrowed.
 class DatabaseDecider {
  public:
-  // Throws std::invalid_argument for a negative or non-finite transition cost or bad clip costs.
-  DatabaseDecider(const Database& db, const Matcher& matcher, float action_limit_std, float transition_cost,
-                  std::vector<float> clip_costs);
+  // Throws std::invalid_argument for an option out of its range or bad clip costs.
+  DatabaseDecider(const Database& db, const Matcher& matcher, const TaskConfig& config);
   // The decision of a character showing database frame `frame` (0..num_frames-1) for a
   // trajectory action (12 normalized floats, finite).
   Decision decide(int64_t frame, const float* action);
@@ -55,7 +57,8 @@ class DatabaseDecider {
  private:
   DatabaseSource source_;
   Decider decider_;
-  ClipCostFilter clip_filter_;
+  RuleChain rules_;
+  RequestSelection every_clip_;
   float transition_cost_ = 0;
   MotionState state_;
 };

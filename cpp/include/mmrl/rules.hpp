@@ -74,6 +74,20 @@ struct CandidateRuleType {
 
 // The registered rules, in chain order (the builtin ones first).
 const std::vector<CandidateRuleType>& candidate_rule_types();
+
+// One character's instances of the registered rules its config turns on, built once; before each
+// decision prepare() chains the ones that price it, each over the ones before it, and returns the
+// top of the chain (null when none does): the filter a decision runs with. What every env of
+// every task (vecenv.hpp) and a standalone character's decider (database_source.hpp) decide with.
+class RuleChain {
+ public:
+  RuleChain() = default;
+  RuleChain(const Database& db, const TaskConfig& config);
+  const CandidateFilter* prepare(const RuleContext& context);
+
+ private:
+  std::vector<std::unique_ptr<CandidateRule>> rules_;
+};
 // Adds a rule type after the registered ones (before any env that should use it is built; not
 // thread-safe against env construction). Returns its index.
 int register_candidate_rule(CandidateRuleType type);

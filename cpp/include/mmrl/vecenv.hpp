@@ -261,10 +261,8 @@ class TargetVecEnv {
     database_source_ = DatabaseSource(db, matcher);
     source_ = &database_source_;
     decider_ = Decider(db, config.action_limit_std);
-    rules_.resize(envs_.size());
-    for (auto& env_rules : rules_)
-      for (const CandidateRuleType& type : candidate_rule_types())
-        if (auto rule = type.make(db, config)) env_rules.push_back(std::move(rule));
+    rules_.reserve(envs_.size());
+    for (size_t i = 0; i < envs_.size(); ++i) rules_.emplace_back(db, config);
     request_code_ = RequestCode(db, config.request_groups);
     request_mix_ = mmrl::request_mix(db, request_code_, config.request_any);
     every_clip_ = select_request(db, TagRequest{});
@@ -362,14 +360,7 @@ class TargetVecEnv {
   // Env i's rules (rules.hpp: the clip costs, its request, the registered ones) prepared for its
   // state now, each that prices this decision chained over the ones before it; null when none does.
   const CandidateFilter* rule_chain(int i) {
-    const RuleContext context{*source_, envs_[i], request(i)};
-    const CandidateFilter* below = nullptr;
-    for (const auto& rule : rules_[static_cast<size_t>(i)]) {
-      if (!rule->prepare(context)) continue;
-      rule->set_below(below);
-      below = rule.get();
-    }
-    return below;
+    return rules_[static_cast<size_t>(i)].prepare(RuleContext{*source_, envs_[i], request(i)});
   }
   // The queries a source of rowless candidates projects (shortlist_queries' fan; k is unused): the
   // query alone, unless a task's filter prices projections and wants its turned copies too.
@@ -426,7 +417,7 @@ class TargetVecEnv {
   std::shared_ptr<const MotionSource> other_source_;  // set_source's, or null: the database
   const MotionSource* source_ = nullptr;
   Decider decider_;
-  std::vector<std::vector<std::unique_ptr<CandidateRule>>> rules_;  // per env, rules.hpp's registered ones that are on
+  std::vector<RuleChain> rules_;  // per env, rules.hpp's registered ones that are on
   RequestCode request_code_;
   RequestMix request_mix_;
   RequestSelection every_clip_;  // the request of an env without one: every clip
