@@ -8,14 +8,14 @@
 // (CandidateRuleType::make), built once from the config. The builtin rules come first: the clip
 // costs (task.clip_costs), then the env's request (its clips only). Before each decision the env
 // prepares every rule for the character (RuleContext) and chains the ones that price this
-// decision, in registration order, each over the ones before it (vecenv.hpp's rule_chain); a
+// decision, in registration order, each over the ones before it (RuleChain below); a
 // task's own filter (the obstacles' path filter) sits on top. The search then prices
 // candidates through extra_cost, so a rule only adds cost (>= 0; +inf refuses) and the search
 // stays exact under it. When the rule refuses every candidate the decision falls back to the
 // rules below it (decision.hpp).
 //
-// (mmrl.Character.step, a character deciding outside any task, uses the clip costs only:
-// database_source.hpp's DatabaseDecider.)
+// (mmrl.Character.step, a character deciding outside any task, chains the same registered rules
+// with every clip as its request: database_source.hpp's DatabaseDecider.)
 //
 // Adding a rule: a class deriving from CandidateRule (its cost, and prepare if it needs the
 // character's state), its option in the task config's table (task_config.hpp) if it has one,
