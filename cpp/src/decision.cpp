@@ -28,7 +28,6 @@ ClipCostFilter::ClipCostFilter(const Database& db, std::vector<float> costs, con
 
 int shortlist_queries(const Database& db, const float* query, const Shortlist& shortlist, float* out) {
   std::copy(query, query + kFeatureDim, out);
-  if (shortlist.fan <= 0) return 1;
   float raw[kTrajectoryDim], turned[kTrajectoryDim];
   trajectory_denormalize(db, query + kPoseDim, raw);
   int n = 1;
@@ -45,6 +44,21 @@ int shortlist_queries(const Database& db, const float* query, const Shortlist& s
       trajectory_normalize(db, turned, q + kPoseDim);
       ++n;
     }
+  // Escapes: stand, back, left, right (X left, Z forward), facing ahead at every sample.
+  static constexpr float kDirections[kMaxEscapes][2] = {{0, 0}, {0, -1}, {1, 0}, {-1, 0}};
+  for (int e = 0; e < std::min(shortlist.escapes, kMaxEscapes); ++e) {
+    for (int h = 0; h < 3; ++h) {
+      const float d = kEscapeSpeed * static_cast<float>(kTrajectoryOffsets[h]) / db.fps;
+      turned[4 * h] = kDirections[e][0] * d;
+      turned[4 * h + 1] = kDirections[e][1] * d;
+      turned[4 * h + 2] = 0.0f;
+      turned[4 * h + 3] = 1.0f;
+    }
+    float* q = out + static_cast<size_t>(n) * kFeatureDim;
+    std::copy(query, query + kPoseDim, q);
+    trajectory_normalize(db, turned, q + kPoseDim);
+    ++n;
+  }
   return n;
 }
 

@@ -671,7 +671,7 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'path_escapes', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -844,6 +844,14 @@ class ObstacleTaskConfig:
     def path_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
+    def path_escapes(self) -> int:
+        """
+        Escape queries of the path filter's shortlist: the query's pose asking to stand (1), and to step back, left and right (2-4; 0.5 m/s), add path_fan_candidates nearest frames each, so ways to wait and give way join the shortlist.
+        """
+    @path_escapes.setter
+    def path_escapes(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
     def path_fan(self) -> int:
         """
         Turns each way of the path fan: the query's trajectory turned by +-1..n x path_fan_degrees adds path_fan_candidates nearest frames each, so turning clips join the shortlist.
@@ -854,7 +862,7 @@ class ObstacleTaskConfig:
     @property
     def path_fan_candidates(self) -> int:
         """
-        How many nearest candidates each turned query of the path fan adds.
+        How many nearest candidates each turned query of the path fan, and each escape query, adds.
         """
     @path_fan_candidates.setter
     def path_fan_candidates(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:

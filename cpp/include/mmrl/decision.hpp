@@ -71,15 +71,24 @@ constexpr int kMatchExcludeWindow = 20;
 // and with fan > 0 the fan_k nearest of the query with its trajectory turned by +-step,
 // +-2 step, ... +-fan step radians about the vertical (positions and directions; the pose part
 // stays), so the filter sees turning clips as well; all ranked by distance to the query itself.
-// k = 0: no shortlist (the filter runs inside the exact search). fan <= (kMaxShortlistQueries - 1) / 2.
+// With escapes > 0, the fan_k nearest of each of the first `escapes` escape queries join too:
+// the query's pose with a trajectory that stands where the character is, steps back, steps
+// left, steps right (kEscapeSpeed, facing ahead), so the filter sees ways to wait and give way
+// whatever the query asks. k = 0: no shortlist (the filter runs inside the exact search).
+// fan <= kMaxShortlistFan, escapes <= kMaxEscapes.
+constexpr int kMaxShortlistFan = 4;
+constexpr int kMaxEscapes = 4;
+constexpr float kEscapeSpeed = 0.5f;  // m/s of the step back and the steps aside
 struct Shortlist {
   int k = 0;
   int fan = 0;
   float fan_step = 0.0f;
   int fan_k = 1;
+  int escapes = 0;
 };
+static_assert(1 + 2 * kMaxShortlistFan + kMaxEscapes <= kMaxShortlistQueries, "shortlist queries");
 
-// The queries of a shortlist (1 + 2 * fan rows of kFeatureDim, the first the query itself).
+// The queries of a shortlist (1 + 2 * fan + escapes rows of kFeatureDim, the first the query itself).
 int shortlist_queries(const Database& db, const float* query, const Shortlist& shortlist, float* out);
 
 inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_t frame, const float* query,

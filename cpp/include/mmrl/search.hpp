@@ -52,7 +52,7 @@ struct MatcherOptions {
 // The most candidates a shortlist match (Matcher::match_shortlist) takes per query, and the
 // most queries it takes them from.
 constexpr int kMaxShortlist = 256;
-constexpr int kMaxShortlistQueries = 9;
+constexpr int kMaxShortlistQueries = 13;
 
 // The shortlist rule, by brute force (the reference): the `shortlist` nearest valid rows
 // outside [exclude_lo, exclude_hi) by plain squared distance (brute_force_knn: ordered by

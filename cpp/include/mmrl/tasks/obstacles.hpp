@@ -76,6 +76,7 @@ struct ObstacleTaskConfig : TaskConfig {
   int path_fan = 0;
   float path_fan_degrees = 30.0f;
   int path_fan_candidates = 1;
+  int path_escapes = 0;
   int compressed_path_fan = 3;
   int num_obstacles = 100;
   float obstacle_square_half = 10.0f;
@@ -118,13 +119,17 @@ struct ObstacleTaskConfig : TaskConfig {
     v("path_candidates", &C::path_candidates, closed_range(0, kMaxShortlist),
       "The path filter re-ranks this many nearest candidates of each decision (and the continuation); 0: the "
       "exact filtered search over the whole database (slow, for baselines).");
-    v("path_fan", &C::path_fan, closed_range(0, (kMaxShortlistQueries - 1) / 2),
+    v("path_fan", &C::path_fan, closed_range(0, kMaxShortlistFan),
       "Turns each way of the path fan: the query's trajectory turned by +-1..n x path_fan_degrees adds "
       "path_fan_candidates nearest frames each, so turning clips join the shortlist.");
     v("path_fan_degrees", &C::path_fan_degrees, OptionRange{0.0, 90.0, true},
       "The turn between the path fan's queries (degrees).");
     v("path_fan_candidates", &C::path_fan_candidates, closed_range(1, kMaxShortlist),
-      "How many nearest candidates each turned query of the path fan adds.");
+      "How many nearest candidates each turned query of the path fan, and each escape query, adds.");
+    v("path_escapes", &C::path_escapes, closed_range(0, kMaxEscapes),
+      "Escape queries of the path filter's shortlist: the query's pose asking to stand (1), and to step back, "
+      "left and right (2-4; 0.5 m/s), add path_fan_candidates nearest frames each, so ways to wait and give way "
+      "join the shortlist.");
     v("compressed_path_fan", &C::compressed_path_fan, closed_range(0, (kMlpMaxRows - 1) / 2),
       "A compressed controller under the path filter: the projections of the query and of the query turned by "
       "+-1..n x path_fan_degrees are its candidates (docs/compressed.md).");
@@ -271,7 +276,8 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   const CandidateFilter* candidate_filter(int i);
   Shortlist candidate_shortlist() const {
     if (!config_.path_filter) return {};
-    return {config_.path_candidates, config_.path_fan, deg_to_rad(config_.path_fan_degrees), config_.path_fan_candidates};
+    return {config_.path_candidates, config_.path_fan, deg_to_rad(config_.path_fan_degrees), config_.path_fan_candidates,
+            config_.path_escapes};
   }
   Shortlist projection_shortlist() const {
     if (!config_.path_filter) return {};
