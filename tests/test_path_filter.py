@@ -159,8 +159,23 @@ def turned_queries(db, query, fan, step_degrees):
     return out
 
 
+def escape_queries(db, query, escapes):
+    """decision.cpp's escape queries: the query's pose asking to stand, then to step back, left and
+    right at 0.5 m/s (X left, Z forward), facing ahead at each of the +10/+20/+30-frame samples."""
+    scale = np.asarray(db.feature_scale, np.float64)[15:]
+    mean = np.asarray(db.feature_mean, np.float64)[15:]
+    out = []
+    for dx, dz in [(0, 0), (0, -1), (1, 0), (-1, 0)][:escapes]:
+        raw = []
+        for frames in (10, 20, 30):
+            d = 0.5 * frames / db.fps
+            raw += [dx * d, dz * d, 0.0, 1.0]
+        out.append(np.concatenate([query[:15], (np.array(raw) - mean) / scale]))
+    return out
+
+
 def brute_force_shortlist(db, frame, action, low, high, extra, k, transition_cost=0.0, fan=0, fan_degrees=30.0,
-                          fan_k=1):
+                          fan_k=1, escapes=0):
     """(match, cost, slack) by search.hpp's shortlist rule; extra(rows) gives the filter's cost.
     slack: how close the decision came to going another way (the shortlist's cut, the runner-up)."""
     rows = np.asarray(db.normalized_features, np.float64)
@@ -174,9 +189,9 @@ def brute_force_shortlist(db, frame, action, low, high, extra, k, transition_cos
     ranked = cand[np.lexsort((cand, d[cand]))]
     order = ranked[:k]
     slack = d[ranked[k]] - d[ranked[k - 1]] if ranked.size > k else np.inf
-    if fan:
+    if fan or escapes:
         members = set(order.tolist())
-        for q in turned_queries(db, query, fan, fan_degrees)[1:]:
+        for q in turned_queries(db, query, fan, fan_degrees)[1:] + escape_queries(db, query, escapes):
             dq = ((rows[cand] - q) ** 2).sum(1)
             by_q = cand[np.lexsort((cand, dq))]
             members.update(by_q[:fan_k].tolist())
@@ -195,9 +210,9 @@ def brute_force_shortlist(db, frame, action, low, high, extra, k, transition_cos
     return best_i, (bound_c if best_i == frame else best_c), slack
 
 
-@pytest.mark.parametrize("fan", [0, 2])
-def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan):
-    cfg = config(path_fan=fan, path_fan_candidates=3, path_fan_degrees=25.0)
+@pytest.mark.parametrize("fan, escapes", [(0, 0), (2, 0), (0, 4), (1, 2)])
+def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan, escapes):
+    cfg = config(path_fan=fan, path_fan_candidates=3, path_fan_degrees=25.0, path_escapes=escapes)
     task = mmrl.get_task("obstacles")
     env = task.make_vector_env(4, db=db, config=cfg, num_threads=2)
     apply_stage(task, env, None)
@@ -215,7 +230,8 @@ def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan):
             extra = (lambda i: lambda rows: path_cost(env.path_hits(i, rows)))(i)
             no_extra = lambda rows: np.zeros(len(rows))
             before.append((brute_force_shortlist(db, frames[i], actions[i], low, high, extra, cfg.path_candidates,
-                                                 fan=fan, fan_degrees=cfg.path_fan_degrees, fan_k=3),
+                                                 fan=fan, fan_degrees=cfg.path_fan_degrees, fan_k=3,
+                                                 escapes=escapes),
                            brute_force_shortlist(db, frames[i], actions[i], low, high, no_extra, 1)))
         env.step(actions)
         for i, ((want, want_cost, slack), (plain, _, _)) in enumerate(before):
@@ -251,6 +267,7 @@ def test_the_filter_makes_collisions_rarer_for_the_same_actions(synthetic_db):
     ("path_candidates", -1, "path_candidates"), ("path_candidates", 257, "path_candidates"),
     ("path_fan", 5, "path_fan"), ("path_fan", -1, "path_fan"), ("path_fan_degrees", 0.0, "path_fan_degrees"),
     ("path_fan_degrees", 91.0, "path_fan_degrees"), ("path_fan_candidates", 0, "path_fan_candidates"),
+    ("path_escapes", 5, "path_escapes"), ("path_escapes", -1, "path_escapes"),
     ("path_margin", 3.0, "body_radius + path_margin"), ("body_radius", 3.5, "body_radius"),
 ])
 def test_bad_filter_options_name_the_option(synthetic_db, option, value, needle):
