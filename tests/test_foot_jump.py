@@ -15,21 +15,10 @@ from mmrl import _core
 from mmrl.export.runtime_export import read_controller, write_controller
 from mmrl.tasks.plane import PlaneConfig, PlaneVectorEnv
 from runtime_helpers import drive_both
-from test_candidate_filter import run_env
-from test_import_axes_fps import other_skeleton_database
+from test_candidate_filter import db, mixamo_db, run_env  # noqa: F401 (db, mixamo_db: its fixtures)
 from test_runtime import random_plane_policy
 
 TRANSITION_COST = 1.0
-
-
-@pytest.fixture(scope="module")
-def db():
-    return mmrl.default_database()
-
-
-@pytest.fixture(scope="module")
-def mixamo_db(tmp_path_factory):
-    return other_skeleton_database(tmp_path_factory.mktemp("mixamo"))
 
 
 def foot_distance(db, frame):
