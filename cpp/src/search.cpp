@@ -151,9 +151,11 @@ int merge_shortlists(const float* points, int dim, const float* query, int64_t* 
 
 // The re-ranking of a shortlist (found rows, ordered as k-NN orders them) with the
 // continuation rule; shared by the tree and the brute force so both decide alike.
+// best_cost (optional): the winner's filtered cost as the rule compares it (the bound's less the
+// transition cost; +inf when every row is refused).
 int64_t rerank_shortlist(const float* points, int dim, const float* query, const int64_t* rows, const float* sqdist,
                          int found, int64_t bound_index, float* out_cost, float transition_cost,
-                         const CandidateFilter* candidates) {
+                         const CandidateFilter* candidates, float* best_cost = nullptr) {
   RunningMatch match(points, dim, query, bound_index, transition_cost, candidates);
   for (int r = 0; r < found; ++r) {
     // Rows come by plain distance and extra costs are >= 0: once a row's distance reaches the
@@ -161,6 +163,7 @@ int64_t rerank_shortlist(const float* points, int dim, const float* query, const
     if (sqdist[r] >= match.best_cost()) break;
     if (rows[r] != bound_index) match.offer(rows[r], filtered_cost(sqdist[r], candidates, rows[r], points, dim));
   }
+  if (best_cost) *best_cost = match.best_cost();
   return match.finish(out_cost);
 }
 
@@ -226,9 +229,22 @@ int64_t Matcher::match_shortlist(const float* query, int shortlist, int64_t excl
   filter.exclude_lo = exclude_lo;
   filter.exclude_hi = exclude_hi;
   const int dim = tree_.dim();
-  for (int q = 0; q < num_queries; ++q)
-    found[q] = kdtree_knn(tree_, query + static_cast<size_t>(q) * dim, q == 0 ? shortlist : other_shortlist,
-                          rows + q * kMaxShortlist, sqdist + q * kMaxShortlist, filter);
+  found[0] = kdtree_knn(tree_, query, shortlist, rows, sqdist, filter);
+  if (num_queries > 1 && found[0] == shortlist) {
+    // The other queries' rows lie outside the first query's `shortlist` nearest, so no nearer
+    // than its last: a winner among those that is strictly cheaper than that distance stands,
+    // whatever they hold (the same decision as re-ranking the union, for less work).
+    float best = 0.0f, cost = 0.0f;
+    const int64_t j = rerank_shortlist(rows_, dim, query, rows, sqdist, found[0], bound_index, &cost,
+                                       transition_cost, candidates, &best);
+    if (best < sqdist[found[0] - 1]) {
+      if (out_cost) *out_cost = cost;
+      return j;
+    }
+  }
+  for (int q = 1; q < num_queries; ++q)
+    found[q] = kdtree_knn(tree_, query + static_cast<size_t>(q) * dim, other_shortlist, rows + q * kMaxShortlist,
+                          sqdist + q * kMaxShortlist, filter);
   const int n = num_queries == 1 ? found[0]
                                  : merge_shortlists(rows_, dim, query, rows, sqdist, found, num_queries, kMaxShortlist);
   return rerank_shortlist(rows_, dim, query, rows, sqdist, n, bound_index, out_cost, transition_cost, candidates);
