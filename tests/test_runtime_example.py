@@ -15,7 +15,7 @@ from mmrl.export.runtime_export import write_controller
 from mmrl.tasks.plane import PlaneConfig
 from mmrl.viewer.live import LiveSession
 from runtime_helpers import built_artifact
-from test_runtime import random_plane_policy
+from test_runtime import random_obstacle_policy, random_plane_policy
 
 TARGETS = [(0.0, 3.0), (3.0, 3.0), (3.0, -2.0), (-2.0, 0.0)]
 
@@ -121,9 +121,31 @@ def test_help_prints_the_usage_and_exits_0(flag, controller):
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and done.stderr == "", done.stderr
     assert done.stdout.startswith("usage: mmrl_runtime_example CONTROLLER")
-    for option in ("--characters", "--decisions", "--targets", "--trace", "--request", "-h, --help"):
+    for option in ("--characters", "--decisions", "--targets", "--trace", "--request", "--obstacles", "-h, --help"):
         assert option in done.stdout, option
     alone = subprocess.run([str(example_binary()), flag], capture_output=True, text=True, timeout=60)
     assert alone.returncode == 0 and alone.stdout == done.stdout
     bad = subprocess.run([str(example_binary()), "--helpme"], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "unknown option --helpme" in bad.stderr
+
+
+def test_example_walks_an_obstacles_controller_through_a_crowd(controller, tmp_path):
+    """--obstacles K: each character of an obstacles controller gets K moving rectangles before
+    every decision, which change its decisions; a controller whose task has no obstacles refuses
+    the flag with one line."""
+    path = tmp_path / "obstacles.mmrl"
+    config = mmrl.get_task("obstacles").default_config().replace(path_filter=True)
+    write_controller(path, mmrl.default_database(), random_obstacle_policy(5), "obstacles", config)
+    traces = {}
+    for k in (0, 60):
+        trace = tmp_path / f"crowd{k}.jsonl"
+        done = subprocess.run([str(example_binary()), str(path), "--characters", "3", "--decisions", "40",
+                               "--obstacles", str(k), "--trace", str(trace)], capture_output=True, text=True,
+                              timeout=120)
+        assert done.returncode == 0, done.stderr
+        traces[k] = [json.loads(line) for line in trace.read_text().splitlines()]
+        assert len(traces[k]) == 3 * 40
+    assert [x["frame"] for x in traces[0]] != [x["frame"] for x in traces[60]]
+    bad = subprocess.run([str(example_binary()), str(controller), "--obstacles", "10"], capture_output=True,
+                         text=True, timeout=60)
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "obstacles" in bad.stderr

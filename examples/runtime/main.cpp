@@ -11,14 +11,19 @@
 // within the task's success_radius of its target moves it on to the next (the list repeats).
 //
 // usage: mmrl_runtime_example CONTROLLER [--characters N] [--decisions D] [--targets "x,z;x,z;..."]
-//                             [--trace FILE] [--request "style=elderly"]
+//                             [--trace FILE] [--request "style=elderly"] [--obstacles K]
 // --request: every character keeps to the clips carrying these tags (docs/styles.md).
+// --obstacles: an obstacles controller's characters each walk among K moving rectangles of their
+// own (the task's stage 10: sides 0.25-3 m, speeds up to 0.5 m/s, bouncing inside 10 m of the
+// start), set before every decision, so the time includes the sensors and the collision-aware
+// search in a crowd.
 // -h, --help: the usage on stdout, exit 0.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
+#include <random>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -30,7 +35,7 @@ namespace {
 
 const char* const kUsage =
     "usage: mmrl_runtime_example CONTROLLER [--characters N] [--decisions D] [--targets \"x,z;x,z;...\"]\n"
-    "                            [--trace FILE] [--request TAGS]\n"
+    "                            [--trace FILE] [--request TAGS] [--obstacles K]\n"
     "\n"
     "Drives N characters with an exported controller (mmrl export RUN -o controller.mmrl) through\n"
     "a scripted list of targets, without Python, and prints the time per character per frame.\n"
@@ -42,12 +47,15 @@ const char* const kUsage =
     "                   the next one once the character is within the task's success radius\n"
     "  --trace FILE     write the JSON trace of `mmrl play --trace` (one line per decision per character)\n"
     "  --request TAGS   keep to the clips carrying these tags, e.g. \"style=elderly & gait=walk\"\n"
+    "  --obstacles K    an obstacles controller: K moving rectangles around each character (0.25-3 m,\n"
+    "                   up to 0.5 m/s, within 10 m of its start), set before every decision\n"
     "  -h, --help       this message\n";
 
 struct Options {
   std::string controller, trace, request;
   bool help = false;
   int characters = 1;
+  int obstacles = 0;
   long decisions = 100;
   std::vector<std::pair<float, float>> targets = {{0.0f, 4.0f}, {4.0f, 4.0f}, {4.0f, -2.0f}, {-3.0f, 0.0f}};
 };
@@ -85,6 +93,7 @@ Options parse(int argc, char** argv) {
     else if (a == "--targets") o.targets = parse_targets(value());
     else if (a == "--trace") o.trace = value();
     else if (a == "--request") o.request = value();
+    else if (a == "--obstacles") o.obstacles = std::stoi(value());
     else if (!a.empty() && a[0] == '-') throw std::invalid_argument("unknown option " + a);
     else if (o.controller.empty()) o.controller = a;
     else throw std::invalid_argument("one controller file only");
@@ -92,8 +101,45 @@ Options parse(int argc, char** argv) {
   if (o.controller.empty())
     throw std::invalid_argument("usage: mmrl_runtime_example CONTROLLER [options] (--help for the options)");
   if (o.characters < 1 || o.decisions < 1) throw std::invalid_argument("--characters and --decisions must be >= 1");
+  if (o.obstacles < 0) throw std::invalid_argument("--obstacles must be >= 0");
   return o;
 }
+
+// K moving rectangles around one character's start (stage 10 of the obstacles task), in world
+// meters: they move by their velocity and bounce inside the square of kHalf around the start.
+struct Crowd {
+  static constexpr float kHalf = 10.0f;
+  float x0, z0;
+  std::vector<float> centres, half_sizes, angles, velocities;
+  Crowd(int k, float x, float z, std::mt19937& rng) : x0(x), z0(z) {
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    for (int i = 0; i < k; ++i) {
+      float cx, cz;
+      do {  // none on the character's start
+        cx = (2 * u(rng) - 1) * kHalf;
+        cz = (2 * u(rng) - 1) * kHalf;
+      } while (std::hypot(cx, cz) < 2.0f);
+      const float heading = 6.2831853f * u(rng), speed = 0.5f * u(rng);
+      centres.insert(centres.end(), {x0 + cx, z0 + cz});
+      half_sizes.insert(half_sizes.end(), {0.125f + 1.375f * u(rng), 0.125f + 1.375f * u(rng)});
+      angles.push_back(6.2831853f * u(rng) - 3.1415927f);
+      velocities.insert(velocities.end(), {speed * std::sin(heading), speed * std::cos(heading)});
+    }
+  }
+  void move(float seconds) {
+    for (size_t i = 0; i < angles.size(); ++i)
+      for (int a = 0; a < 2; ++a) {
+        float& c = centres[2 * i + a];
+        float& v = velocities[2 * i + a];
+        const float o = a == 0 ? x0 : z0;
+        c += v * seconds;
+        if (std::abs(c - o) > kHalf) {  // mirrored back inside, that velocity component flips
+          c = o + std::copysign(2 * kHalf, c - o) - (c - o);
+          v = -v;
+        }
+      }
+  }
+};
 
 void write_line(FILE* f, int character, const mmrl::RuntimeDecision& d, float fps) {
   std::fprintf(f,
@@ -115,6 +161,8 @@ int run(const Options& o) {
   std::vector<std::unique_ptr<mmrl::RuntimeCharacter>> chars;
   std::vector<size_t> next(o.characters, 0);
   std::vector<std::pair<float, float>> origin;
+  std::vector<Crowd> crowds;
+  std::mt19937 rng(7);
   for (int i = 0; i < o.characters; ++i) {
     origin.emplace_back(2.0f * (i % 8), 2.0f * (i / 8));
     chars.push_back(std::make_unique<mmrl::RuntimeCharacter>(controller, origin[i].first, origin[i].second, 0.0f,
@@ -122,6 +170,7 @@ int run(const Options& o) {
     chars[i]->set_target(origin[i].first + o.targets[0].first, origin[i].second + o.targets[0].second);
     if (chars[i]->takes_facing()) chars[i]->set_facing(0.0f);  // an arrive controller: face +Z at each target
     if (!o.request.empty()) chars[i]->set_request(o.request);
+    if (o.obstacles > 0) crowds.emplace_back(o.obstacles, origin[i].first, origin[i].second, rng);
   }
   std::unique_ptr<FILE, int (*)(FILE*)> trace(o.trace.empty() ? nullptr : std::fopen(o.trace.c_str(), "w"),
                                               &std::fclose);
@@ -139,6 +188,11 @@ int run(const Options& o) {
       if (std::hypot(origin[i].first + tg.first - r.x, origin[i].second + tg.second - r.z) < radius) {
         const auto& nt = o.targets[++next[i] % o.targets.size()];
         c.set_target(origin[i].first + nt.first, origin[i].second + nt.second);
+      }
+      if (o.obstacles > 0) {  // the world moves on, and the character sees it at its next decision
+        Crowd& w = crowds[i];
+        if (step > 0) w.move(F * dt);
+        c.set_obstacles(o.obstacles, w.centres.data(), w.half_sizes.data(), w.angles.data(), w.velocities.data());
       }
       for (int k = 0; k < F; ++k) c.update(dt);
       if (trace) write_line(trace.get(), i, d, controller->fps());
