@@ -1,6 +1,6 @@
 #include "mmrl/rules.hpp"
 
-#include <array>
+#include <algorithm>
 #include <limits>
 
 namespace mmrl {
@@ -38,19 +38,17 @@ class RequestRule final : public CandidateRule {
 };
 
 // task.foot_jump_limit: refuses candidates whose left or right foot (features [0:3], [3:6], the
-// character frame) is farther than the limit from the shown frame's.
+// character frame) is farther than the limit from the shown frame's. The six columns are one
+// block with one scale, so the test runs on the normalized features against the limit in those units.
 class FootJumpRule final : public CandidateRule {
  public:
-  FootJumpRule(const Database& db, float limit) : limit2_(limit * limit) {
-    const std::array<float, kFeatureDim> scale = db.normalization.column_scale();
-    for (int j = 0; j < 6; ++j) {
-      mean_[j] = db.normalization.mean[j];
-      scale_[j] = scale[j];
-    }
+  FootJumpRule(const Database& db, float limit) {
+    const float units = limit / db.normalization.column_scale()[0];  // features.cpp: the foot_position block
+    limit2_ = units * units;
   }
   bool prepare(const RuleContext& context) override {
     const float* f = context.source.current(context.state).features;
-    for (int j = 0; j < 6; ++j) now_[j] = f[j] * scale_[j] + mean_[j];
+    std::copy(f, f + 6, now_);
     return true;
   }
 
@@ -58,18 +56,15 @@ class FootJumpRule final : public CandidateRule {
   float cost(const Candidate& c) const override {
     for (int foot = 0; foot < 2; ++foot) {
       float d2 = 0;
-      for (int j = 3 * foot; j < 3 * foot + 3; ++j) {
-        const float d = c.features[j] * scale_[j] + mean_[j] - now_[j];
-        d2 += d * d;
-      }
+      for (int j = 3 * foot; j < 3 * foot + 3; ++j) d2 += (c.features[j] - now_[j]) * (c.features[j] - now_[j]);
       if (d2 > limit2_) return std::numeric_limits<float>::infinity();
     }
     return 0.0f;
   }
 
  private:
-  float limit2_;
-  float mean_[6] = {}, scale_[6] = {}, now_[6] = {};
+  float limit2_ = 0;
+  float now_[6] = {};  // the shown frame's normalized foot positions
 };
 
 std::vector<CandidateRuleType>& registry() {
