@@ -151,19 +151,22 @@ int merge_shortlists(const float* points, int dim, const float* query, int64_t* 
 
 // The re-ranking of a shortlist (found rows, ordered as k-NN orders them) with the
 // continuation rule; shared by the tree and the brute force so both decide alike.
-// best_cost (optional): the winner's filtered cost as the rule compares it (the bound's less the
-// transition cost; +inf when every row is refused).
-int64_t rerank_shortlist(const float* points, int dim, const float* query, const int64_t* rows, const float* sqdist,
-                         int found, int64_t bound_index, float* out_cost, float transition_cost,
-                         const CandidateFilter* candidates, float* best_cost = nullptr) {
-  RunningMatch match(points, dim, query, bound_index, transition_cost, candidates);
+// Offers ranked rows to a running match. Rows come by plain distance and extra costs are >= 0:
+// once a row's distance reaches the best filtered cost, no later row can beat it (a replacement
+// must be strictly lower).
+void offer_ranked(RunningMatch& match, const float* points, int dim, const int64_t* rows, const float* sqdist,
+                  int found, int64_t bound_index, const CandidateFilter* candidates) {
   for (int r = 0; r < found; ++r) {
-    // Rows come by plain distance and extra costs are >= 0: once a row's distance reaches the
-    // best filtered cost, no later row can beat it (a replacement must be strictly lower).
     if (sqdist[r] >= match.best_cost()) break;
     if (rows[r] != bound_index) match.offer(rows[r], filtered_cost(sqdist[r], candidates, rows[r], points, dim));
   }
-  if (best_cost) *best_cost = match.best_cost();
+}
+
+int64_t rerank_shortlist(const float* points, int dim, const float* query, const int64_t* rows, const float* sqdist,
+                         int found, int64_t bound_index, float* out_cost, float transition_cost,
+                         const CandidateFilter* candidates) {
+  RunningMatch match(points, dim, query, bound_index, transition_cost, candidates);
+  offer_ranked(match, points, dim, rows, sqdist, found, bound_index, candidates);
   return match.finish(out_cost);
 }
 
@@ -230,24 +233,33 @@ int64_t Matcher::match_shortlist(const float* query, int shortlist, int64_t excl
   filter.exclude_hi = exclude_hi;
   const int dim = tree_.dim();
   found[0] = kdtree_knn(tree_, query, shortlist, rows, sqdist, filter);
-  if (num_queries > 1 && found[0] == shortlist) {
-    // The other queries' rows lie outside the first query's `shortlist` nearest, so no nearer
-    // than its last: a winner among those that is strictly cheaper than that distance stands,
-    // whatever they hold (the same decision as re-ranking the union, for less work).
-    float best = 0.0f, cost = 0.0f;
-    const int64_t j = rerank_shortlist(rows_, dim, query, rows, sqdist, found[0], bound_index, &cost,
-                                       transition_cost, candidates, &best);
-    if (best < sqdist[found[0] - 1]) {
-      if (out_cost) *out_cost = cost;
-      return j;
-    }
-  }
+  RunningMatch match(rows_, dim, query, bound_index, transition_cost, candidates);
+  offer_ranked(match, rows_, dim, rows, sqdist, found[0], bound_index, candidates);
+  // The other queries' rows lie outside the first query's `shortlist` nearest, so no nearer than
+  // its last: a winner strictly cheaper than that distance stands whatever they hold, and when
+  // the first query found fewer rows it found them all. Otherwise their new rows, ranked by
+  // distance to the first query, go on where its own left off (re-ranking the union, with no
+  // row priced twice).
+  if (num_queries == 1 || found[0] < shortlist || match.best_cost() < sqdist[found[0] - 1])
+    return match.finish(out_cost);
   for (int q = 1; q < num_queries; ++q)
     found[q] = kdtree_knn(tree_, query + static_cast<size_t>(q) * dim, other_shortlist, rows + q * kMaxShortlist,
                           sqdist + q * kMaxShortlist, filter);
-  const int n = num_queries == 1 ? found[0]
-                                 : merge_shortlists(rows_, dim, query, rows, sqdist, found, num_queries, kMaxShortlist);
-  return rerank_shortlist(rows_, dim, query, rows, sqdist, n, bound_index, out_cost, transition_cost, candidates);
+  std::sort(rows, rows + found[0]);  // the first query's rows, to leave out of the rest
+  std::pair<float, int64_t> more[kMaxShortlist * kMaxShortlistQueries];
+  int n = 0;
+  for (int q = 1; q < num_queries; ++q)
+    for (int r = 0; r < found[q]; ++r) {
+      const int64_t i = rows[q * kMaxShortlist + r];
+      if (!std::binary_search(rows, rows + found[0], i)) more[n++] = {sqdist_row(query, rows_ + i * dim, dim), i};
+    }
+  std::sort(more, more + n);
+  n = static_cast<int>(std::unique(more, more + n) - more);
+  int64_t* more_rows = rows + kMaxShortlist;  // the other queries' lists are read: reuse their room
+  float* more_sqdist = sqdist + kMaxShortlist;
+  for (int r = 0; r < n; ++r) more_sqdist[r] = more[r].first, more_rows[r] = more[r].second;
+  offer_ranked(match, rows_, dim, more_rows, more_sqdist, n, bound_index, candidates);
+  return match.finish(out_cost);
 }
 
 namespace {
