@@ -161,15 +161,22 @@ def turned_queries(db, query, fan, step_degrees):
 
 def escape_queries(db, query, escapes):
     """decision.cpp's escape queries: the query's pose asking to stand, then to step back, left and
-    right at 0.5 m/s (X left, Z forward), facing ahead at each of the +10/+20/+30-frame samples."""
+    right at 0.5 m/s facing ahead (X left, Z forward), then to walk at 1 m/s towards 0, +45, -45,
+    +90, -90, +135, -135 and 180 degrees facing the way, then to run those ways at 2 m/s, at each
+    of the +10/+20/+30-frame samples."""
     scale = np.asarray(db.feature_scale, np.float64)[15:]
     mean = np.asarray(db.feature_mean, np.float64)[15:]
+    ways = [(0, 0, 0, 1, 0.5), (0, -1, 0, 1, 0.5), (1, 0, 0, 1, 0.5), (-1, 0, 0, 1, 0.5)]
+    for speed in (1.0, 2.0):
+        for degrees in (0, 45, -45, 90, -90, 135, -135, 180):
+            a = np.radians(degrees)
+            ways.append((np.sin(a), np.cos(a), np.sin(a), np.cos(a), speed))
     out = []
-    for dx, dz in [(0, 0), (0, -1), (1, 0), (-1, 0)][:escapes]:
+    for dx, dz, fx, fz, speed in ways[:escapes]:
         raw = []
         for frames in (10, 20, 30):
-            d = 0.5 * frames / db.fps
-            raw += [dx * d, dz * d, 0.0, 1.0]
+            d = speed * frames / db.fps
+            raw += [dx * d, dz * d, fx, fz]
         out.append(np.concatenate([query[:15], (np.array(raw) - mean) / scale]))
     return out
 
@@ -210,7 +217,7 @@ def brute_force_shortlist(db, frame, action, low, high, extra, k, transition_cos
     return best_i, (bound_c if best_i == frame else best_c), slack
 
 
-@pytest.mark.parametrize("fan, escapes", [(0, 0), (2, 0), (0, 4), (1, 2)])
+@pytest.mark.parametrize("fan, escapes", [(0, 0), (2, 0), (0, 4), (1, 2), (0, 20)])
 def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan, escapes):
     cfg = config(path_fan=fan, path_fan_candidates=3, path_fan_degrees=25.0, path_escapes=escapes)
     task = mmrl.get_task("obstacles")
@@ -223,7 +230,8 @@ def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan, escapes):
         return np.where(first > 0, cfg.path_cost * (2 - first / h), 0.0)
 
     compared = changed = 0
-    for obs, actions in stepped(env, 60, 9):
+    # Twenty escape lists bring more near-ties (skipped below), so that case steps longer.
+    for obs, actions in stepped(env, 60 if escapes < 12 else 200, 9):
         frames = env.current_frames()
         before = []
         for i in range(env.num_envs):
@@ -267,12 +275,18 @@ def test_the_filter_makes_collisions_rarer_for_the_same_actions(synthetic_db):
     ("path_candidates", -1, "path_candidates"), ("path_candidates", 257, "path_candidates"),
     ("path_fan", 5, "path_fan"), ("path_fan", -1, "path_fan"), ("path_fan_degrees", 0.0, "path_fan_degrees"),
     ("path_fan_degrees", 91.0, "path_fan_degrees"), ("path_fan_candidates", 0, "path_fan_candidates"),
-    ("path_escapes", 5, "path_escapes"), ("path_escapes", -1, "path_escapes"),
+    ("path_escapes", 21, "path_escapes"), ("path_escapes", -1, "path_escapes"),
     ("path_margin", 3.0, "body_radius + path_margin"), ("body_radius", 3.5, "body_radius"),
 ])
 def test_bad_filter_options_name_the_option(synthetic_db, option, value, needle):
     with pytest.raises(ValueError, match=needle.replace("+", r"\+")):
         mmrl.get_task("obstacles").make_vector_env(2, db=synthetic_db, config=config(**{option: value}))
+
+
+def test_too_many_escape_rows_name_both_options(synthetic_db):
+    with pytest.raises(ValueError, match="path_escapes x path_fan_candidates must be at most 256, got 12 x 22"):
+        mmrl.get_task("obstacles").make_vector_env(
+            2, db=synthetic_db, config=config(path_escapes=12, path_fan_candidates=22))
 
 
 def test_path_hits_refuses_rows_that_cannot_be_matched(synthetic_db):

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <thread>
 
 namespace mmrl {
 
@@ -44,22 +45,76 @@ int shortlist_queries(const Database& db, const float* query, const Shortlist& s
       trajectory_normalize(db, turned, q + kPoseDim);
       ++n;
     }
-  // Escapes: stand, back, left, right (X left, Z forward), facing ahead at every sample.
-  static constexpr float kDirections[kMaxEscapes][2] = {{0, 0}, {0, -1}, {1, 0}, {-1, 0}};
-  for (int e = 0; e < std::min(shortlist.escapes, kMaxEscapes); ++e) {
-    for (int h = 0; h < 3; ++h) {
-      const float d = kEscapeSpeed * static_cast<float>(kTrajectoryOffsets[h]) / db.fps;
-      turned[4 * h] = kDirections[e][0] * d;
-      turned[4 * h + 1] = kDirections[e][1] * d;
-      turned[4 * h + 2] = 0.0f;
-      turned[4 * h + 3] = 1.0f;
-    }
-    float* q = out + static_cast<size_t>(n) * kFeatureDim;
-    std::copy(query, query + kPoseDim, q);
-    trajectory_normalize(db, turned, q + kPoseDim);
-    ++n;
-  }
   return n;
+}
+
+void escape_trajectory(const Database& db, int e, float* raw) {
+  if (e < 0 || e >= kMaxEscapes) throw std::out_of_range("escape_trajectory: no escape " + std::to_string(e));
+  // Stand, back, left, right (X left, Z forward) facing ahead; then walks towards 0, +-45,
+  // +-90, +-135, 180 degrees (positive: to the left) facing the way they go; then runs.
+  static constexpr float kSteps[4][2] = {{0, 0}, {0, -1}, {1, 0}, {-1, 0}};
+  static constexpr float kWalkDegrees[8] = {0, 45, -45, 90, -90, 135, -135, 180};
+  float dx, dz, fx = 0.0f, fz = 1.0f, speed = kEscapeSpeed;
+  if (e < 4) {
+    dx = kSteps[e][0], dz = kSteps[e][1];
+  } else {
+    const float a = kWalkDegrees[(e - 4) % 8] * 3.14159265358979f / 180.0f;
+    dx = fx = std::sin(a), dz = fz = std::cos(a);
+    speed = e < 12 ? kEscapeWalkSpeed : 2.0f * kEscapeWalkSpeed;
+  }
+  for (int h = 0; h < 3; ++h) {
+    const float d = speed * static_cast<float>(kTrajectoryOffsets[h]) / db.fps;
+    raw[4 * h] = dx * d;
+    raw[4 * h + 1] = dz * d;
+    raw[4 * h + 2] = fx;
+    raw[4 * h + 3] = fz;
+  }
+}
+
+EscapeTable::EscapeTable(const Database& db, const Matcher& matcher, int escapes, int k, int threads)
+    : escapes_(escapes), k_(k) {
+  if (escapes < 1 || escapes > kMaxEscapes || k < 1 || escapes * k > kMaxExtraRows)
+    throw std::invalid_argument("EscapeTable: escapes must be in [1, " + std::to_string(kMaxEscapes) +
+                                "] and k >= 1 with escapes * k <= " + std::to_string(kMaxExtraRows) + ", got " +
+                                std::to_string(escapes) + " and " + std::to_string(k));
+  if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("EscapeTable: the matcher is not over db");
+  float trajectories[kMaxEscapes][kTrajectoryDim];
+  for (int e = 0; e < escapes; ++e) {
+    float raw[kTrajectoryDim];
+    escape_trajectory(db, e, raw);
+    trajectory_normalize(db, raw, trajectories[e]);
+  }
+  const int per_frame = escapes * k;
+  rows_.assign(static_cast<size_t>(db.num_frames) * per_frame, -1);
+  if (matcher.num_valid() == 0) return;
+  ThreadPool pool(std::max(1, threads));
+  pool.parallel_for(
+      db.num_frames,
+      [&](int64_t b, int64_t end, int) {
+        float query[kFeatureDim], sqdist[kMaxExtraRows];
+        int64_t found[kMaxExtraRows];
+        for (int64_t f = b; f < end; ++f) {
+          SearchFilter filter;  // decision_match's exclusion window of frame f
+          const int c = db.frame_clip[f];
+          filter.exclude_lo = std::max<int64_t>(db.clip_ranges[c * 2], f - kMatchExcludeWindow);
+          filter.exclude_hi = std::min<int64_t>(db.clip_ranges[c * 2 + 1], f + kMatchExcludeWindow + 1);
+          for (int e = 0; e < escapes; ++e) {
+            decision_query(db, f, trajectories[e], query);
+            const int n = kdtree_knn(matcher.tree(), query, std::min<int64_t>(k, matcher.num_valid()), found, sqdist,
+                                     filter);
+            int32_t* out = &rows_[static_cast<size_t>(f) * per_frame + static_cast<size_t>(e) * k];
+            for (int r = 0; r < n; ++r) out[r] = static_cast<int32_t>(found[r]);
+          }
+        }
+      },
+      /*min_chunk=*/256);
+}
+
+std::shared_ptr<const EscapeTable> EscapeTable::shared(const Database& db, const Matcher& matcher, int escapes, int k) {
+  return matcher.cached<EscapeTable>("escapes " + std::to_string(escapes) + " " + std::to_string(k), [&] {
+    const unsigned hw = std::thread::hardware_concurrency();
+    return std::make_shared<const EscapeTable>(db, matcher, escapes, k, hw == 0 ? 1 : static_cast<int>(hw));
+  });
 }
 
 void trajectory_action_box(const Database& db, float limit_std, float* low, float* high) {

@@ -132,6 +132,16 @@ void check_shortlist(int shortlist, float transition_cost, int num_queries, int 
     throw std::invalid_argument(std::string(who) + ": transition_cost must be finite and >= 0");
 }
 
+void check_extra(const int32_t* extra_rows, int num_extra, int64_t num_points, const char* who) {
+  if (num_extra < 0 || num_extra > kMaxExtraRows || (num_extra > 0 && extra_rows == nullptr))
+    throw std::invalid_argument(std::string(who) + ": num_extra must be between 0 and " +
+                                std::to_string(kMaxExtraRows) + " with rows, got " + std::to_string(num_extra));
+  for (int r = 0; r < num_extra; ++r)
+    if (extra_rows[r] < -1 || extra_rows[r] >= num_points)
+      throw std::out_of_range(std::string(who) + ": extra row " + std::to_string(extra_rows[r]) + " is outside [-1, " +
+                              std::to_string(num_points) + ")");
+}
+
 // The union of several queries' k-NN lists (rows[q * k ..], found[q] each) in place: distinct
 // rows, ranked by plain distance to the first query (sqdist_row, the kernel every search uses),
 // then index. Returns the count; rows and sqdist then hold the ranked union.
@@ -142,7 +152,7 @@ int merge_shortlists(const float* points, int dim, const float* query, int64_t* 
     for (int r = 0; r < found[q]; ++r) rows[n++] = rows[q * k + r];
   std::sort(rows, rows + n);
   n = static_cast<int>(std::unique(rows, rows + n) - rows);
-  std::pair<float, int64_t> ranked[kMaxShortlist * kMaxShortlistQueries];
+  std::pair<float, int64_t> ranked[kMaxShortlist * (kMaxShortlistQueries + 1)];
   for (int r = 0; r < n; ++r) ranked[r] = {sqdist_row(query, points + rows[r] * dim, dim), rows[r]};
   std::sort(ranked, ranked + n);
   for (int r = 0; r < n; ++r) sqdist[r] = ranked[r].first, rows[r] = ranked[r].second;
@@ -175,14 +185,16 @@ int64_t rerank_shortlist(const float* points, int dim, const float* query, const
 int64_t brute_force_match_shortlist(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                                     const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
                                     int64_t bound_index, float* out_cost, float transition_cost,
-                                    const CandidateFilter* candidates, int num_queries, int other_shortlist) {
+                                    const CandidateFilter* candidates, int num_queries, int other_shortlist,
+                                    const int32_t* extra_rows, int num_extra) {
   check_points(points, num_points, dim, "brute_force_match_shortlist");
   if (query == nullptr) throw std::invalid_argument("brute_force_match_shortlist: null query");
   if (bound_index >= num_points) throw std::out_of_range("brute_force_match_shortlist: bound_index out of range");
   check_shortlist(shortlist, transition_cost, num_queries, other_shortlist, "brute_force_match_shortlist");
-  int64_t rows[kMaxShortlist * kMaxShortlistQueries];
-  float sqdist[kMaxShortlist * kMaxShortlistQueries];
-  int found[kMaxShortlistQueries];
+  check_extra(extra_rows, num_extra, num_points, "brute_force_match_shortlist");
+  int64_t rows[kMaxShortlist * (kMaxShortlistQueries + 1)];
+  float sqdist[kMaxShortlist * (kMaxShortlistQueries + 1)];
+  int found[kMaxShortlistQueries + 1];
   SearchFilter filter;
   filter.allowed = valid;
   filter.exclude_lo = exclude_lo;
@@ -191,8 +203,14 @@ int64_t brute_force_match_shortlist(const float* points, int64_t num_points, int
     found[q] = brute_force_knn(points, num_points, dim, query + static_cast<size_t>(q) * dim,
                                q == 0 ? shortlist : other_shortlist, rows + q * kMaxShortlist,
                                sqdist + q * kMaxShortlist, filter);
-  const int n = num_queries == 1 ? found[0]
-                                 : merge_shortlists(points, dim, query, rows, sqdist, found, num_queries, kMaxShortlist);
+  int lists = num_queries;
+  if (num_extra > 0) {  // the extra rows as one more list
+    found[lists] = 0;
+    for (int r = 0; r < num_extra; ++r)
+      if (extra_rows[r] >= 0) rows[lists * kMaxShortlist + found[lists]++] = extra_rows[r];
+    ++lists;
+  }
+  const int n = lists == 1 ? found[0] : merge_shortlists(points, dim, query, rows, sqdist, found, lists, kMaxShortlist);
   return rerank_shortlist(points, dim, query, rows, sqdist, n, bound_index, out_cost, transition_cost, candidates);
 }
 
@@ -222,9 +240,13 @@ MMRL_MULTIVERSION int64_t Matcher::match(const float* query, int64_t exclude_lo,
 
 int64_t Matcher::match_shortlist(const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
                                  int64_t bound_index, float* out_cost, float transition_cost,
-                                 const CandidateFilter* candidates, int num_queries, int other_shortlist) const {
+                                 const CandidateFilter* candidates, int num_queries, int other_shortlist,
+                                 const int32_t* extra_rows, int num_extra) const {
   check_shortlist(shortlist, transition_cost, num_queries, other_shortlist, "Matcher::match_shortlist");
   if (bound_index >= tree_.size()) throw std::out_of_range("Matcher::match_shortlist: bound_index out of range");
+  if (num_extra < 0 || num_extra > kMaxExtraRows || (num_extra > 0 && extra_rows == nullptr))
+    throw std::invalid_argument("Matcher::match_shortlist: num_extra must be between 0 and " +
+                                std::to_string(kMaxExtraRows) + " with rows");
   int64_t rows[kMaxShortlist * kMaxShortlistQueries];
   float sqdist[kMaxShortlist * kMaxShortlistQueries];
   int found[kMaxShortlistQueries];
@@ -235,28 +257,30 @@ int64_t Matcher::match_shortlist(const float* query, int shortlist, int64_t excl
   found[0] = kdtree_knn(tree_, query, shortlist, rows, sqdist, filter);
   RunningMatch match(rows_, dim, query, bound_index, transition_cost, candidates);
   offer_ranked(match, rows_, dim, rows, sqdist, found[0], bound_index, candidates);
-  // The other queries' rows lie outside the first query's `shortlist` nearest, so no nearer than
-  // its last: a winner strictly cheaper than that distance stands whatever they hold, and when
-  // the first query found fewer rows it found them all. Otherwise their new rows, ranked by
-  // distance to the first query, go on where its own left off (re-ranking the union, with no
-  // row priced twice).
-  if (num_queries == 1 || found[0] < shortlist || match.best_cost() < sqdist[found[0] - 1])
+  // The other queries' rows and the extra rows lie outside the first query's `shortlist`
+  // nearest, so no nearer than its last: a winner strictly cheaper than that distance stands
+  // whatever they hold, and when the first query found fewer rows it found them all. Otherwise
+  // their new rows, ranked by distance to the first query, go on where its own left off
+  // (re-ranking the union, with no row priced twice).
+  if ((num_queries == 1 && num_extra == 0) || found[0] < shortlist || match.best_cost() < sqdist[found[0] - 1])
     return match.finish(out_cost);
   for (int q = 1; q < num_queries; ++q)
     found[q] = kdtree_knn(tree_, query + static_cast<size_t>(q) * dim, other_shortlist, rows + q * kMaxShortlist,
                           sqdist + q * kMaxShortlist, filter);
   std::sort(rows, rows + found[0]);  // the first query's rows, to leave out of the rest
-  std::pair<float, int64_t> more[kMaxShortlist * kMaxShortlistQueries];
+  std::pair<float, int64_t> more[kMaxShortlist * kMaxShortlistQueries + kMaxExtraRows];
   int n = 0;
+  const auto add = [&](int64_t i) {
+    if (!std::binary_search(rows, rows + found[0], i)) more[n++] = {sqdist_row(query, rows_ + i * dim, dim), i};
+  };
   for (int q = 1; q < num_queries; ++q)
-    for (int r = 0; r < found[q]; ++r) {
-      const int64_t i = rows[q * kMaxShortlist + r];
-      if (!std::binary_search(rows, rows + found[0], i)) more[n++] = {sqdist_row(query, rows_ + i * dim, dim), i};
-    }
+    for (int r = 0; r < found[q]; ++r) add(rows[q * kMaxShortlist + r]);
+  for (int r = 0; r < num_extra; ++r)
+    if (extra_rows[r] >= 0) add(extra_rows[r]);
   std::sort(more, more + n);
   n = static_cast<int>(std::unique(more, more + n) - more);
-  int64_t* more_rows = rows + kMaxShortlist;  // the other queries' lists are read: reuse their room
-  float* more_sqdist = sqdist + kMaxShortlist;
+  int64_t more_rows[kMaxShortlist * kMaxShortlistQueries + kMaxExtraRows];
+  float more_sqdist[kMaxShortlist * kMaxShortlistQueries + kMaxExtraRows];
   for (int r = 0; r < n; ++r) more_sqdist[r] = more[r].first, more_rows[r] = more[r].second;
   offer_ranked(match, rows_, dim, more_rows, more_sqdist, n, bound_index, candidates);
   return match.finish(out_cost);

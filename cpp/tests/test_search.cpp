@@ -340,7 +340,47 @@ TEST(Matcher, ShortlistOfSeveralQueriesEqualsBruteForce) {
       differs += t != one;
     }
   EXPECT_GT(lowered, 0) << "the other queries never added a better row: the test tests nothing (" << differs << ")";
+  // Rows given ahead of time (the escape table's way): the other queries' nearest rows passed
+  // as extra rows decide exactly as the queries themselves, in the tree and the brute force.
+  for (int q = 0; q < 150; ++q) {
+    const int nq = 5, other = 4;
+    std::vector<float> queries(static_cast<size_t>(nq) * dim);
+    for (int k = 0; k < nq; ++k)
+      for (int d = 0; d < dim; ++d)
+        queries[k * dim + d] = c.queries[static_cast<size_t>(q) * dim + d] + (k == 0 ? 0.0f : g(rng));
+    mmrl::SearchFilter window;
+    window.allowed = valid.data();
+    window.exclude_lo = c.lo[q];
+    window.exclude_hi = c.hi[q];
+    std::vector<int32_t> extra(static_cast<size_t>((nq - 1) * other), -1);
+    for (int k = 1; k < nq; ++k) {
+      int64_t found[other];
+      float d2[other];
+      const int m = mmrl::brute_force_knn(rows.data(), n, dim, &queries[k * dim], other, found, d2, window);
+      for (int r = 0; r < m; ++r) extra[(k - 1) * other + r] = static_cast<int32_t>(found[r]);
+    }
+    const int64_t bound = c.bound[q] >= 0 && valid[c.bound[q]] ? c.bound[q] : -1;
+    float by_queries = -1, by_rows = -2, by_brute = -3;
+    const int64_t a =
+        matcher.match_shortlist(queries.data(), 8, c.lo[q], c.hi[q], bound, &by_queries, 0.3f, &filter, nq, other);
+    const int64_t b = matcher.match_shortlist(queries.data(), 8, c.lo[q], c.hi[q], bound, &by_rows, 0.3f, &filter, 1, 1,
+                                              extra.data(), static_cast<int>(extra.size()));
+    const int64_t e = mmrl::brute_force_match_shortlist(rows.data(), n, dim, valid.data(), queries.data(), 8, c.lo[q],
+                                                        c.hi[q], bound, &by_brute, 0.3f, &filter, 1, 1, extra.data(),
+                                                        static_cast<int>(extra.size()));
+    ASSERT_EQ(a, b) << "query " << q;
+    ASSERT_EQ(a, e) << "query " << q;
+    ASSERT_EQ(by_queries, by_rows);
+    ASSERT_EQ(by_queries, by_brute);
+  }
+  const int32_t outside[1] = {static_cast<int32_t>(n)};
   float cost = 0;
+  EXPECT_THROW(mmrl::brute_force_match_shortlist(rows.data(), n, dim, valid.data(), c.queries.data(), 8, 0, 0, -1,
+                                                 &cost, 0.0f, &filter, 1, 1, outside, 1),
+               std::out_of_range);
+  EXPECT_THROW(matcher.match_shortlist(c.queries.data(), 8, 0, 0, -1, &cost, 0.0f, &filter, 1, 1, outside,
+                                       mmrl::kMaxExtraRows + 1),
+               std::invalid_argument);
   EXPECT_THROW(matcher.match_shortlist(c.queries.data(), 8, 0, 0, -1, &cost, 0.0f, &filter, 0), std::invalid_argument);
   EXPECT_THROW(matcher.match_shortlist(c.queries.data(), 8, 0, 0, -1, &cost, 0.0f, &filter,
                                        mmrl::kMaxShortlistQueries + 1),

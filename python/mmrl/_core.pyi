@@ -846,7 +846,7 @@ class ObstacleTaskConfig:
     @property
     def path_escapes(self) -> int:
         """
-        Escape queries of the path filter's shortlist: the query's pose asking to stand (1), and to step back, left and right (2-4; 0.5 m/s), add path_fan_candidates nearest frames each, so ways to wait and give way join the shortlist.
+        Escape queries of the path filter's shortlist: the pose shown asking to stand (1), to step back, left and right (2-4; 0.5 m/s), to walk towards 0, +-45, +-90, +-135 and 180 degrees (5-12; 1 m/s) and to run the same ways (13-20; 2 m/s), add path_fan_candidates nearest frames each (found once per database frame), so ways to wait, give way and go round join the shortlist.
         """
     @path_escapes.setter
     def path_escapes(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:

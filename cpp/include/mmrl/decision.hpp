@@ -29,6 +29,7 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "mmrl/database.hpp"
@@ -66,29 +67,58 @@ void check_frames_per_step(int frames_per_step);
 // Frames on either side of the current one (within its clip) that a search skips.
 constexpr int kMatchExcludeWindow = 20;
 
-// The match with the continuation rule (see above). Returns the frame to play from.
 // How a filter's shortlist is drawn (decision_match): the k nearest candidates of the query,
 // and with fan > 0 the fan_k nearest of the query with its trajectory turned by +-step,
 // +-2 step, ... +-fan step radians about the vertical (positions and directions; the pose part
 // stays), so the filter sees turning clips as well; all ranked by distance to the query itself.
 // With escapes > 0, the fan_k nearest of each of the first `escapes` escape queries join too:
-// the query's pose with a trajectory that stands where the character is, steps back, steps
-// left, steps right (kEscapeSpeed, facing ahead), so the filter sees ways to wait and give way
-// whatever the query asks. k = 0: no shortlist (the filter runs inside the exact search).
-// fan <= kMaxShortlistFan, escapes <= kMaxEscapes.
+// the pose shown now with a fixed trajectory (escape_trajectory: stand where the character is,
+// step back, left, right at kEscapeSpeed facing ahead, then walk at kEscapeWalkSpeed towards
+// 0, +-45, +-90, +-135 and 180 degrees, turning to face the way, then run the same ways at
+// twice that speed), so the filter sees ways to
+// wait, give way and go round whatever the query asks. Those queries depend only on the frame
+// shown, so their nearest frames are found once per database frame (EscapeTable) and a
+// decision only reads them. k = 0: no shortlist (the filter runs inside the exact search).
+// fan <= kMaxShortlistFan, escapes <= kMaxEscapes, escapes * fan_k <= kMaxExtraRows.
 constexpr int kMaxShortlistFan = 4;
-constexpr int kMaxEscapes = 4;
-constexpr float kEscapeSpeed = 0.5f;  // m/s of the step back and the steps aside
+constexpr int kMaxEscapes = 20;
+constexpr float kEscapeSpeed = 0.5f;      // m/s of standing's neighbours: the step back and the steps aside
+constexpr float kEscapeWalkSpeed = 1.0f;  // m/s of the eight walks
+class EscapeTable;
 struct Shortlist {
   int k = 0;
   int fan = 0;
   float fan_step = 0.0f;
   int fan_k = 1;
   int escapes = 0;
+  const EscapeTable* escape_table = nullptr;  // required when escapes > 0 (EscapeTable::shared)
 };
-static_assert(1 + 2 * kMaxShortlistFan + kMaxEscapes <= kMaxShortlistQueries, "shortlist queries");
+static_assert(1 + 2 * kMaxShortlistFan <= kMaxShortlistQueries, "shortlist queries");
 
-// The queries of a shortlist (1 + 2 * fan + escapes rows of kFeatureDim, the first the query itself).
+// Escape e's trajectory (0 <= e < kMaxEscapes) in raw units (12 floats: positions and
+// directions at the three horizons, character frame, X left, Z forward).
+void escape_trajectory(const Database& db, int e, float* raw);
+
+// For every database frame f, the k nearest valid frames (outside f's exclusion window) of
+// each of the first `escapes` escape queries over f's pose: what decision_match's shortlist
+// adds for them, found ahead of time (escapes * k int32 per frame, -1 where fewer exist).
+class EscapeTable {
+ public:
+  // Builds the table over the matcher's rows (db's normalized features) on `threads` threads.
+  EscapeTable(const Database& db, const Matcher& matcher, int escapes, int k, int threads);
+  // The table for (escapes, k), built on first request and shared by every user of `matcher`.
+  static std::shared_ptr<const EscapeTable> shared(const Database& db, const Matcher& matcher, int escapes, int k);
+  int escapes() const { return escapes_; }
+  int k() const { return k_; }
+  const int32_t* rows(int64_t frame) const { return &rows_[static_cast<size_t>(frame) * escapes_ * k_]; }
+  size_t memory_bytes() const { return rows_.size() * sizeof(int32_t); }
+
+ private:
+  int escapes_, k_;
+  std::vector<int32_t> rows_;
+};
+
+// The queries of a shortlist (1 + 2 * fan rows of kFeatureDim, the first the query itself).
 int shortlist_queries(const Database& db, const float* query, const Shortlist& shortlist, float* out);
 
 inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_t frame, const float* query,
@@ -105,7 +135,10 @@ inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_
   if (shortlist.k > 0 && filter != nullptr) {
     float queries[kMaxShortlistQueries * kFeatureDim];
     const int n = shortlist_queries(db, query, shortlist, queries);
-    j = matcher.match_shortlist(queries, shortlist.k, lo, hi, bound, cost, transition_cost, filter, n, shortlist.fan_k);
+    const EscapeTable* escapes = shortlist.escapes > 0 ? shortlist.escape_table : nullptr;
+    j = matcher.match_shortlist(queries, shortlist.k, lo, hi, bound, cost, transition_cost, filter, n, shortlist.fan_k,
+                                escapes && frame >= 0 ? escapes->rows(frame) : nullptr,
+                                escapes && frame >= 0 ? escapes->escapes() * escapes->k() : 0);
   } else {
     j = matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
   }

@@ -10,6 +10,10 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
 
 #include "mmrl/kdtree.hpp"
 #include "mmrl/threadpool.hpp"
@@ -68,11 +72,15 @@ constexpr int kMaxShortlistQueries = 13;
 // `other_shortlist` nearest (e.g. the query's trajectory turned left and right, so a costly
 // filter sees turns too), ranked by plain distance to the first query (then index); the rest
 // is the same. 1 <= num_queries <= kMaxShortlistQueries, 1 <= other_shortlist <= kMaxShortlist.
+//
+// extra_rows (num_extra <= kMaxExtraRows row numbers, -1 entries skipped; e.g. the nearest rows
+// of fixed queries found ahead of time, decision.hpp's EscapeTable) join the union the same way.
+constexpr int kMaxExtraRows = 256;
 int64_t brute_force_match_shortlist(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                                     const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
                                     int64_t bound_index, float* out_cost, float transition_cost,
                                     const CandidateFilter* candidates, int num_queries = 1,
-                                    int other_shortlist = 1);
+                                    int other_shortlist = 1, const int32_t* extra_rows = nullptr, int num_extra = 0);
 
 class Matcher {
  public:
@@ -96,7 +104,19 @@ class Matcher {
   // many rows it makes dearer. Allocates nothing.
   int64_t match_shortlist(const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
                           int64_t bound_index, float* out_cost, float transition_cost,
-                          const CandidateFilter* candidates, int num_queries = 1, int other_shortlist = 1) const;
+                          const CandidateFilter* candidates, int num_queries = 1, int other_shortlist = 1,
+                          const int32_t* extra_rows = nullptr, int num_extra = 0) const;
+
+  // A table derived from this matcher's rows, built once by build() (returning
+  // std::shared_ptr<const T>) under a lock on first request for `key` and shared by every
+  // later caller (the envs and runtime characters over one database). Not for hot paths.
+  template <class T, class Build>
+  std::shared_ptr<const T> cached(const std::string& key, Build&& build) const {
+    std::lock_guard<std::mutex> lock(cache_->mutex);
+    std::shared_ptr<const void>& slot = cache_->tables[key];
+    if (!slot) slot = std::shared_ptr<const T>(build());
+    return std::static_pointer_cast<const T>(slot);
+  }
 
   // M queries (M x dim row-major) across the pool. Per-query exclude windows and bound
   // indices are optional arrays of M entries (null = none). Allocates nothing.
@@ -113,6 +133,11 @@ class Matcher {
   const float* rows_;
   const uint8_t* valid_;
   KDTree tree_;
+  struct Cache {
+    std::mutex mutex;
+    std::map<std::string, std::shared_ptr<const void>> tables;
+  };
+  std::unique_ptr<Cache> cache_ = std::make_unique<Cache>();
 };
 
 // The public k-NN (mmrl.KDTree.query) through multiversioned entry points, so a portable

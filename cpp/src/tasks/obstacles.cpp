@@ -61,6 +61,13 @@ ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int n
   pc.horizon = config.path_horizon;
   path_filters_.resize(static_cast<size_t>(num_envs));
   for (ObstaclePathFilter& f : path_filters_) f.init(db, config.num_obstacles, pc, nullptr);
+  if (config.path_filter && config.path_candidates > 0 && config.path_escapes > 0) {
+    if (config.path_escapes * config.path_fan_candidates > kMaxExtraRows)
+      throw std::invalid_argument("path_escapes x path_fan_candidates must be at most " +
+                                  std::to_string(kMaxExtraRows) + ", got " + std::to_string(config.path_escapes) +
+                                  " x " + std::to_string(config.path_fan_candidates));
+    escape_table_ = EscapeTable::shared(db, matcher, config.path_escapes, config.path_fan_candidates);
+  }
 }
 
 const CandidateFilter* ObstacleVecEnv::candidate_filter(int i) {

@@ -127,9 +127,10 @@ struct ObstacleTaskConfig : TaskConfig {
     v("path_fan_candidates", &C::path_fan_candidates, closed_range(1, kMaxShortlist),
       "How many nearest candidates each turned query of the path fan, and each escape query, adds.");
     v("path_escapes", &C::path_escapes, closed_range(0, kMaxEscapes),
-      "Escape queries of the path filter's shortlist: the query's pose asking to stand (1), and to step back, "
-      "left and right (2-4; 0.5 m/s), add path_fan_candidates nearest frames each, so ways to wait and give way "
-      "join the shortlist.");
+      "Escape queries of the path filter's shortlist: the pose shown asking to stand (1), to step back, left and "
+      "right (2-4; 0.5 m/s), to walk towards 0, +-45, +-90, +-135 and 180 degrees (5-12; 1 m/s) and to run the "
+      "same ways (13-20; 2 m/s), add path_fan_candidates nearest frames each (found once per database frame), so "
+      "ways to wait, give way and go round join the shortlist.");
     v("compressed_path_fan", &C::compressed_path_fan, closed_range(0, (kMlpMaxRows - 1) / 2),
       "A compressed controller under the path filter: the projections of the query and of the query turned by "
       "+-1..n x path_fan_degrees are its candidates (docs/compressed.md).");
@@ -277,7 +278,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   Shortlist candidate_shortlist() const {
     if (!config_.path_filter) return {};
     return {config_.path_candidates, config_.path_fan, deg_to_rad(config_.path_fan_degrees), config_.path_fan_candidates,
-            config_.path_escapes};
+            config_.path_escapes, escape_table_.get()};
   }
   Shortlist projection_shortlist() const {
     if (!config_.path_filter) return {};
@@ -300,6 +301,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
 
   ObstacleField field_;
   std::vector<ObstaclePathFilter> path_filters_;  // per env
+  std::shared_ptr<const EscapeTable> escape_table_;  // path_escapes' nearest frames (shared per matcher)
   const uint8_t* map_slot(int i, int k) const {
     return &maps_[(static_cast<size_t>(i) * map_slots_ + k) * kMapCells];
   }
