@@ -80,15 +80,17 @@ class ObstaclesConfig(TaskConfig):
 #: annealed learning rate. ``mmrl train obstacles`` uses "mmrl" unless told otherwise.
 _MMRL_REWARD = {"success_bonus": 1000.0, "hit_penalty": True, "hit_weight": 10.0, "hit_radius": 0.25,
                 "hit_lookahead": True, "anneal_lr": True}
-_DEPLOY_SEARCH = {"path_filter": True, "train_path_filter": False, "path_cost": float("inf"), "path_escapes": 20}
+_DEPLOY_SEARCH = {"path_filter": True, "train_path_filter": False, "path_cost": 10000.0, "path_escapes": 20}
 OBSTACLE_PRESETS: Dict[str, Dict[str, Any]] = {
     "paper": {},
     # The default: the reward above on the paper's CNN, trained without the collision-aware
     # search and deployed with it (eval, render, play, export): trained with it, the policy
-    # leans on the search and learns less. The deployed search refuses every path that hits
-    # while another is clear, and its shortlist holds the twenty escapes' nearest frames
-    # (stand, step back and aside, walk and run all round; found once per database frame):
-    # most of the exact search's gain within the runtime budget (docs/obstacles.md).
+    # leans on the search and learns less. In the deployed search a path that hits costs more
+    # than any feature distance (so a clear one always wins, and when every candidate hits the
+    # latest hit wins; with inf the search would fall back to one blind to the obstacles), and
+    # its shortlist holds the twenty escapes' nearest frames (stand, step back and aside, walk
+    # and run all round; found once per database frame): most of the exact search's gain at
+    # about the runtime budget (docs/obstacles.md, "The escape table").
     "mmrl": {**_MMRL_REWARD, **_DEPLOY_SEARCH},
     # The same with the cheap learner (a small CNN actor, an MLP critic, 8 minibatch steps per
     # rollout): 2.4x the training steps per second, less success per step (docs/obstacles.md).
