@@ -229,7 +229,7 @@ def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan, escapes):
     def path_cost(first):
         return np.where(first > 0, cfg.path_cost * (2 - first / h), 0.0)
 
-    compared = changed = 0
+    compared = changed = by_escapes = 0
     # Twenty escape lists bring more near-ties (skipped below), so that case steps longer.
     for obs, actions in stepped(env, 60 if escapes < 12 else 200, 9):
         frames = env.current_frames()
@@ -237,12 +237,15 @@ def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan, escapes):
         for i in range(env.num_envs):
             extra = (lambda i: lambda rows: path_cost(env.path_hits(i, rows)))(i)
             no_extra = lambda rows: np.zeros(len(rows))
-            before.append((brute_force_shortlist(db, frames[i], actions[i], low, high, extra, cfg.path_candidates,
-                                                 fan=fan, fan_degrees=cfg.path_fan_degrees, fan_k=3,
-                                                 escapes=escapes),
-                           brute_force_shortlist(db, frames[i], actions[i], low, high, no_extra, 1)))
+            full = brute_force_shortlist(db, frames[i], actions[i], low, high, extra, cfg.path_candidates,
+                                         fan=fan, fan_degrees=cfg.path_fan_degrees, fan_k=3, escapes=escapes)
+            no_escapes = full if not escapes else brute_force_shortlist(
+                db, frames[i], actions[i], low, high, extra, cfg.path_candidates, fan=fan,
+                fan_degrees=cfg.path_fan_degrees, fan_k=3)
+            before.append((full, brute_force_shortlist(db, frames[i], actions[i], low, high, no_extra, 1)[0],
+                           no_escapes[0]))
         env.step(actions)
-        for i, ((want, want_cost, slack), (plain, _, _)) in enumerate(before):
+        for i, ((want, want_cost, slack), plain, without_escapes) in enumerate(before):
             match, cost = env.last_step_decision(i)
             if slack < 1e-3:
                 continue  # float32 rounding may order near-equal rows either way
@@ -250,8 +253,11 @@ def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan, escapes):
             assert cost == pytest.approx(want_cost, rel=1e-4, abs=1e-4)
             compared += 1
             changed += match != plain
+            by_escapes += match != without_escapes
     assert compared >= 120
     assert changed >= 5, "the path filter never changed a decision: the test tests nothing"
+    if escapes:
+        assert by_escapes >= 1, "the escapes never changed a decision: the test tests nothing"
 
 
 def test_the_filter_makes_collisions_rarer_for_the_same_actions(synthetic_db):

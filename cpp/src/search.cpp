@@ -207,7 +207,8 @@ int64_t brute_force_match_shortlist(const float* points, int64_t num_points, int
   if (num_extra > 0) {  // the extra rows as one more list
     found[lists] = 0;
     for (int r = 0; r < num_extra; ++r)
-      if (extra_rows[r] >= 0) rows[lists * kMaxShortlist + found[lists]++] = extra_rows[r];
+      if (extra_rows[r] >= 0 && is_allowed(extra_rows[r], filter))
+        rows[lists * kMaxShortlist + found[lists]++] = extra_rows[r];
     ++lists;
   }
   const int n = lists == 1 ? found[0] : merge_shortlists(points, dim, query, rows, sqdist, found, lists, kMaxShortlist);
@@ -244,9 +245,7 @@ int64_t Matcher::match_shortlist(const float* query, int shortlist, int64_t excl
                                  const int32_t* extra_rows, int num_extra) const {
   check_shortlist(shortlist, transition_cost, num_queries, other_shortlist, "Matcher::match_shortlist");
   if (bound_index >= tree_.size()) throw std::out_of_range("Matcher::match_shortlist: bound_index out of range");
-  if (num_extra < 0 || num_extra > kMaxExtraRows || (num_extra > 0 && extra_rows == nullptr))
-    throw std::invalid_argument("Matcher::match_shortlist: num_extra must be between 0 and " +
-                                std::to_string(kMaxExtraRows) + " with rows");
+  check_extra(extra_rows, num_extra, tree_.size(), "Matcher::match_shortlist");
   int64_t rows[kMaxShortlist * kMaxShortlistQueries];
   float sqdist[kMaxShortlist * kMaxShortlistQueries];
   int found[kMaxShortlistQueries];
@@ -275,14 +274,17 @@ int64_t Matcher::match_shortlist(const float* query, int shortlist, int64_t excl
   };
   for (int q = 1; q < num_queries; ++q)
     for (int r = 0; r < found[q]; ++r) add(rows[q * kMaxShortlist + r]);
-  for (int r = 0; r < num_extra; ++r)
-    if (extra_rows[r] >= 0) add(extra_rows[r]);
+  for (int r = 0; r < num_extra; ++r)  // the extra rows the search itself could return (as the brute force)
+    if (extra_rows[r] >= 0 && (!valid_ || valid_[extra_rows[r]]) &&
+        !(extra_rows[r] >= exclude_lo && extra_rows[r] < exclude_hi))
+      add(extra_rows[r]);
   std::sort(more, more + n);
   n = static_cast<int>(std::unique(more, more + n) - more);
-  int64_t more_rows[kMaxShortlist * kMaxShortlistQueries + kMaxExtraRows];
-  float more_sqdist[kMaxShortlist * kMaxShortlistQueries + kMaxExtraRows];
-  for (int r = 0; r < n; ++r) more_sqdist[r] = more[r].first, more_rows[r] = more[r].second;
-  offer_ranked(match, rows_, dim, more_rows, more_sqdist, n, bound_index, candidates);
+  for (int r = 0; r < n; ++r) {  // offer_ranked over the (distance, row) pairs
+    if (more[r].first >= match.best_cost()) break;
+    if (more[r].second != bound_index)
+      match.offer(more[r].second, filtered_cost(more[r].first, candidates, more[r].second, rows_, dim));
+  }
   return match.finish(out_cost);
 }
 

@@ -342,6 +342,7 @@ TEST(Matcher, ShortlistOfSeveralQueriesEqualsBruteForce) {
   EXPECT_GT(lowered, 0) << "the other queries never added a better row: the test tests nothing (" << differs << ")";
   // Rows given ahead of time (the escape table's way): the other queries' nearest rows passed
   // as extra rows decide exactly as the queries themselves, in the tree and the brute force.
+  int extra_changed = 0;
   for (int q = 0; q < 150; ++q) {
     const int nq = 5, other = 4;
     std::vector<float> queries(static_cast<size_t>(nq) * dim);
@@ -359,6 +360,12 @@ TEST(Matcher, ShortlistOfSeveralQueriesEqualsBruteForce) {
       const int m = mmrl::brute_force_knn(rows.data(), n, dim, &queries[k * dim], other, found, d2, window);
       for (int r = 0; r < m; ++r) extra[(k - 1) * other + r] = static_cast<int32_t>(found[r]);
     }
+    // Rows the search could never return (invalid, in the window, the bound) and -1 gaps
+    // change nothing.
+    extra.push_back(-1);
+    extra.push_back(0);  // row 0 is not valid (every fifth row is not)
+    if (c.hi[q] > c.lo[q]) extra.push_back(static_cast<int32_t>(c.lo[q]));
+    if (c.bound[q] >= 0) extra.push_back(static_cast<int32_t>(c.bound[q]));
     const int64_t bound = c.bound[q] >= 0 && valid[c.bound[q]] ? c.bound[q] : -1;
     float by_queries = -1, by_rows = -2, by_brute = -3;
     const int64_t a =
@@ -372,7 +379,10 @@ TEST(Matcher, ShortlistOfSeveralQueriesEqualsBruteForce) {
     ASSERT_EQ(a, e) << "query " << q;
     ASSERT_EQ(by_queries, by_rows);
     ASSERT_EQ(by_queries, by_brute);
+    float alone = 0;
+    extra_changed += a != matcher.match_shortlist(queries.data(), 8, c.lo[q], c.hi[q], bound, &alone, 0.3f, &filter);
   }
+  EXPECT_GT(extra_changed, 0) << "the extra rows never changed a decision: the test tests nothing";
   const int32_t outside[1] = {static_cast<int32_t>(n)};
   float cost = 0;
   EXPECT_THROW(mmrl::brute_force_match_shortlist(rows.data(), n, dim, valid.data(), c.queries.data(), 8, 0, 0, -1,

@@ -91,7 +91,9 @@ struct Shortlist {
   float fan_step = 0.0f;
   int fan_k = 1;
   int escapes = 0;
-  const EscapeTable* escape_table = nullptr;  // required when escapes > 0 (EscapeTable::shared)
+  // Required when escapes > 0, built for (escapes, fan_k) (EscapeTable::shared): the caller that
+  // draws the shortlist (ObstacleVecEnv::candidate_shortlist) sets both from one config.
+  const EscapeTable* escape_table = nullptr;
 };
 static_assert(1 + 2 * kMaxShortlistFan <= kMaxShortlistQueries, "shortlist queries");
 

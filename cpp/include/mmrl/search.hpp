@@ -73,8 +73,9 @@ constexpr int kMaxShortlistQueries = 13;
 // filter sees turns too), ranked by plain distance to the first query (then index); the rest
 // is the same. 1 <= num_queries <= kMaxShortlistQueries, 1 <= other_shortlist <= kMaxShortlist.
 //
-// extra_rows (num_extra <= kMaxExtraRows row numbers, -1 entries skipped; e.g. the nearest rows
-// of fixed queries found ahead of time, decision.hpp's EscapeTable) join the union the same way.
+// extra_rows (num_extra <= kMaxExtraRows row numbers in [-1, num_points); -1 entries, and rows
+// that are not valid or lie in the exclusion window, are skipped; e.g. the nearest rows of fixed
+// queries found ahead of time, decision.hpp's EscapeTable) join the union the same way.
 constexpr int kMaxExtraRows = 256;
 int64_t brute_force_match_shortlist(const float* points, int64_t num_points, int dim, const uint8_t* valid,
                                     const float* query, int shortlist, int64_t exclude_lo, int64_t exclude_hi,
