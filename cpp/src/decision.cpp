@@ -72,7 +72,7 @@ void escape_trajectory(const Database& db, int e, float* raw) {
 }
 
 EscapeTable::EscapeTable(const Database& db, const Matcher& matcher, int escapes, int k, int threads)
-    : escapes_(escapes), k_(k) {
+    : row_count_(escapes * k) {
   if (escapes < 1 || escapes > kMaxEscapes || k < 1 || escapes * k > kMaxExtraRows)
     throw std::invalid_argument("EscapeTable: escapes must be in [1, " + std::to_string(kMaxEscapes) +
                                 "] and k >= 1 with escapes * k <= " + std::to_string(kMaxExtraRows) + ", got " +
@@ -84,8 +84,7 @@ EscapeTable::EscapeTable(const Database& db, const Matcher& matcher, int escapes
     escape_trajectory(db, e, raw);
     trajectory_normalize(db, raw, trajectories[e]);
   }
-  const int per_frame = escapes * k;
-  rows_.assign(static_cast<size_t>(db.num_frames) * per_frame, -1);
+  rows_.assign(static_cast<size_t>(db.num_frames) * row_count_, -1);
   if (matcher.num_valid() == 0) return;
   ThreadPool pool(std::max(1, threads));
   pool.parallel_for(
@@ -102,7 +101,7 @@ EscapeTable::EscapeTable(const Database& db, const Matcher& matcher, int escapes
             decision_query(db, f, trajectories[e], query);
             const int n = kdtree_knn(matcher.tree(), query, std::min<int64_t>(k, matcher.num_valid()), found, sqdist,
                                      filter);
-            int32_t* out = &rows_[static_cast<size_t>(f) * per_frame + static_cast<size_t>(e) * k];
+            int32_t* out = &rows_[static_cast<size_t>(f) * row_count_ + static_cast<size_t>(e) * k];
             for (int r = 0; r < n; ++r) out[r] = static_cast<int32_t>(found[r]);
           }
         }

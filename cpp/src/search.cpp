@@ -164,12 +164,21 @@ int merge_shortlists(const float* points, int dim, const float* query, int64_t* 
 // Offers ranked rows to a running match. Rows come by plain distance and extra costs are >= 0:
 // once a row's distance reaches the best filtered cost, no later row can beat it (a replacement
 // must be strictly lower).
+template <class Ranked>  // ranked(r): the r-th (plain distance, row) pair
+void offer_ranked(RunningMatch& match, const float* points, int dim, int found, Ranked ranked, int64_t bound_index,
+                  const CandidateFilter* candidates) {
+  for (int r = 0; r < found; ++r) {
+    const std::pair<float, int64_t> p = ranked(r);
+    if (p.first >= match.best_cost()) break;
+    if (p.second != bound_index) match.offer(p.second, filtered_cost(p.first, candidates, p.second, points, dim));
+  }
+}
+
 void offer_ranked(RunningMatch& match, const float* points, int dim, const int64_t* rows, const float* sqdist,
                   int found, int64_t bound_index, const CandidateFilter* candidates) {
-  for (int r = 0; r < found; ++r) {
-    if (sqdist[r] >= match.best_cost()) break;
-    if (rows[r] != bound_index) match.offer(rows[r], filtered_cost(sqdist[r], candidates, rows[r], points, dim));
-  }
+  offer_ranked(
+      match, points, dim, found, [&](int r) { return std::pair<float, int64_t>(sqdist[r], rows[r]); }, bound_index,
+      candidates);
 }
 
 int64_t rerank_shortlist(const float* points, int dim, const float* query, const int64_t* rows, const float* sqdist,
@@ -274,17 +283,13 @@ int64_t Matcher::match_shortlist(const float* query, int shortlist, int64_t excl
   };
   for (int q = 1; q < num_queries; ++q)
     for (int r = 0; r < found[q]; ++r) add(rows[q * kMaxShortlist + r]);
-  for (int r = 0; r < num_extra; ++r)  // the extra rows the search itself could return (as the brute force)
-    if (extra_rows[r] >= 0 && (!valid_ || valid_[extra_rows[r]]) &&
-        !(extra_rows[r] >= exclude_lo && extra_rows[r] < exclude_hi))
-      add(extra_rows[r]);
+  SearchFilter returnable = filter;  // the extra rows the search itself could return (as the brute force)
+  returnable.allowed = valid_;
+  for (int r = 0; r < num_extra; ++r)
+    if (extra_rows[r] >= 0 && is_allowed(extra_rows[r], returnable)) add(extra_rows[r]);
   std::sort(more, more + n);
   n = static_cast<int>(std::unique(more, more + n) - more);
-  for (int r = 0; r < n; ++r) {  // offer_ranked over the (distance, row) pairs
-    if (more[r].first >= match.best_cost()) break;
-    if (more[r].second != bound_index)
-      match.offer(more[r].second, filtered_cost(more[r].first, candidates, more[r].second, rows_, dim));
-  }
+  offer_ranked(match, rows_, dim, n, [&](int r) { return more[r]; }, bound_index, candidates);
   return match.finish(out_cost);
 }
 

@@ -110,13 +110,11 @@ class EscapeTable {
   EscapeTable(const Database& db, const Matcher& matcher, int escapes, int k, int threads);
   // The table for (escapes, k), built on first request and shared by every user of `matcher`.
   static std::shared_ptr<const EscapeTable> shared(const Database& db, const Matcher& matcher, int escapes, int k);
-  int escapes() const { return escapes_; }
-  int k() const { return k_; }
-  const int32_t* rows(int64_t frame) const { return &rows_[static_cast<size_t>(frame) * escapes_ * k_]; }
-  size_t memory_bytes() const { return rows_.size() * sizeof(int32_t); }
+  int row_count() const { return row_count_; }  // escapes * k entries per frame
+  const int32_t* rows(int64_t frame) const { return &rows_[static_cast<size_t>(frame) * row_count_]; }
 
  private:
-  int escapes_, k_;
+  int row_count_;
   std::vector<int32_t> rows_;
 };
 
@@ -137,10 +135,9 @@ inline int64_t decision_match(const Database& db, const Matcher& matcher, int64_
   if (shortlist.k > 0 && filter != nullptr) {
     float queries[kMaxShortlistQueries * kFeatureDim];
     const int n = shortlist_queries(db, query, shortlist, queries);
-    const EscapeTable* escapes = shortlist.escapes > 0 ? shortlist.escape_table : nullptr;
+    const EscapeTable* table = shortlist.escapes > 0 && frame >= 0 ? shortlist.escape_table : nullptr;
     j = matcher.match_shortlist(queries, shortlist.k, lo, hi, bound, cost, transition_cost, filter, n, shortlist.fan_k,
-                                escapes && frame >= 0 ? escapes->rows(frame) : nullptr,
-                                escapes && frame >= 0 ? escapes->escapes() * escapes->k() : 0);
+                                table ? table->rows(frame) : nullptr, table ? table->row_count() : 0);
   } else {
     j = matcher.match(query, lo, hi, bound, cost, transition_cost, filter);
   }
