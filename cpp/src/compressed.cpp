@@ -10,6 +10,7 @@
 
 #include "mmrl/kdtree.hpp"
 #include "mmrl/search.hpp"
+#include "mmrl/simd.hpp"
 
 #if defined(__x86_64__)
 #include <cpuid.h>
@@ -17,6 +18,8 @@
 #endif
 
 namespace mmrl {
+
+static_assert(kMlpMaxRows == 8, "with_count_1_to_8 (simd.hpp) covers 1..8 rows");
 
 namespace {
 
@@ -208,26 +211,10 @@ __attribute__((always_inline)) inline void dense_rows(const uint16_t* packed, co
   }
 }
 
-// f(std::integral_constant<int, R>{}) with R = rows (1..kMlpMaxRows; more counts as the most):
-// the one place a row count becomes a kernel's template argument.
-template <class F>
-__attribute__((always_inline)) inline void with_rows(int rows, F&& f) {
-  static_assert(kMlpMaxRows == 8, "with_rows lists 1..8");
-  switch (rows) {
-    case 1: return f(std::integral_constant<int, 1>{});
-    case 2: return f(std::integral_constant<int, 2>{});
-    case 3: return f(std::integral_constant<int, 3>{});
-    case 4: return f(std::integral_constant<int, 4>{});
-    case 5: return f(std::integral_constant<int, 5>{});
-    case 6: return f(std::integral_constant<int, 6>{});
-    case 7: return f(std::integral_constant<int, 7>{});
-    default: return f(std::integral_constant<int, 8>{});
-  }
-}
 
 MMRL_MULTIVERSION void dense_widening(const uint16_t* packed, const float* bias, const float* x, int x_stride,
                                       float* y, int y_stride, int in, int out, int rows) {
-  with_rows(rows, [&](auto r) { dense_rows<decltype(r)::value>(packed, bias, x, x_stride, y, y_stride, in, out); });
+  with_count_1_to_8(rows, [&](auto r) { dense_rows<decltype(r)::value>(packed, bias, x, x_stride, y, y_stride, in, out); });
 }
 
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(MMRL_NO_CLONES)
@@ -279,7 +266,7 @@ void dense_forward(const uint16_t* packed, const float* bias, const float* x, in
                    int in, int out, int rows) {
 #ifdef MMRL_HAS_F16C_KERNEL
   if (use_f16c())
-    return with_rows(rows, [&](auto r) {
+    return with_count_1_to_8(rows, [&](auto r) {
       dense_rows_f16c<decltype(r)::value>(packed, bias, x, x_stride, y, y_stride, in, out);
     });
 #endif

@@ -40,22 +40,11 @@
 #include <string>
 #include <vector>
 
+#include "mmrl/simd.hpp"
+
 namespace mmrl {
 
-// kLanes floats processed together. GCC/Clang vector extensions: the compiler maps them
-// to AVX/SSE/NEON registers (or scalar code), with the same per-lane operations everywhere.
-constexpr int kLanes = 8;
 constexpr int kMaxDim = 128;  // rows are staged in fixed stack buffers: no heap per query
-typedef float Lanes __attribute__((vector_size(kLanes * sizeof(float))));
-typedef int32_t LaneMask __attribute__((vector_size(kLanes * sizeof(float))));
-
-// Always inlined: a Lanes value never crosses a call, so the AVX2 and baseline clones of the
-// search (search.hpp) never disagree on how it is passed.
-__attribute__((always_inline)) inline Lanes load_lanes(const float* p) {
-  Lanes v;
-  std::memcpy(&v, p, sizeof(v));
-  return v;
-}
 
 // The one distance kernel of the library. x is a block of kLanes rows stored
 // dimension-major (x[d * kLanes + lane]); adds dims [d_begin, d_end) of each lane's

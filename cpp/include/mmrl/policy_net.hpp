@@ -8,8 +8,10 @@
 //     through convolutions (stride 1, no padding, each with its activation), flattened in
 //     (channel, row, col) order, then dense layer 0 (the map's FC); its output is concatenated
 //     with the observation's vector segment and runs through the remaining dense layers.
-// Weights are float32 as trained: dense (out x in, row-major), conv (out x in x kh x kw).
-// act() allocates nothing: every intermediate lives in a PolicyScratch the caller owns (one
+// Weights are float32 as trained: dense (out x in, row-major), conv (out x in x kh x kw) in the
+// file; in memory each layer keeps them transposed (in x out, each row padded to whole 8-float
+// lanes), so a layer adds weight rows for its non-zero inputs only: ReLU outputs and the binary
+// sensor maps are mostly zeros. act() allocates nothing: every intermediate lives in a PolicyScratch the caller owns (one
 // per character, or per thread), so many characters share one PolicyNet.
 #pragma once
 
@@ -22,22 +24,34 @@ namespace mmrl {
 
 enum class Activation : int32_t { kNone = 0, kTanh = 1, kRelu = 2 };
 
+// A layer's weights as its kernel reads them: in x stride floats, row i the weights of input i
+// for every output (stride: out rounded up to whole lanes, the padding zero).
+struct TransposedWeights {
+  int stride = 0;
+  std::vector<float> rows;
+  void assign(const std::vector<float>& weight, int out, int in);  // weight: out x in, row-major
+};
+
 struct DenseLayer {
   int in = 0, out = 0;
-  std::vector<float> weight, bias;  // out x in, out
+  TransposedWeights weight;  // in x out
+  std::vector<float> bias;   // out
   Activation activation = Activation::kNone;
 };
 
 struct ConvLayer {
   int in_channels = 0, out_channels = 0, kernel_h = 0, kernel_w = 0;
-  int in_h = 0, in_w = 0;           // input size (the output is in - kernel + 1)
-  std::vector<float> weight, bias;  // out x in x kh x kw, out
+  int in_h = 0, in_w = 0;    // input size (the output is in - kernel + 1)
+  TransposedWeights weight;  // (in x kh x kw) x out
+  std::vector<float> bias;   // out
   Activation activation = Activation::kNone;
 };
 
 struct PolicyScratch {
-  std::vector<float> a, b;  // ping-pong buffers, sized for the widest layer
-  std::vector<float> cols;  // im2col buffer of the widest convolution
+  std::vector<float> a, b;         // ping-pong buffers, sized for the widest layer
+  std::vector<float> sums;         // one position's outputs of a convolution (padded)
+  std::vector<int32_t> index;      // a layer's non-zero inputs: their indices
+  std::vector<float> value;        // ... and values
 };
 
 class PolicyNet {

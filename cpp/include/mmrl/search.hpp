@@ -18,18 +18,8 @@
 #include "mmrl/kdtree.hpp"
 #include "mmrl/threadpool.hpp"
 
-// The search entry points (Matcher::match, brute_force_match, brute_force_knn) are compiled
-// twice on x86-64 Linux with GCC, for AVX2 and for the baseline, and the loader picks one per
-// CPU (function multiversioning; `flatten` inlines the whole search into each clone): a
-// portable build runs the 8-lane distance kernel in AVX
-// registers where the CPU has them. -ffp-contract=off (CMakeLists.txt) keeps the two clones'
-// floats bit-identical, so results never depend on the machine. MMRL_NO_CLONES disables it.
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__) && \
-    !defined(MMRL_NO_CLONES) && !defined(__AVX2__)
-#define MMRL_MULTIVERSION __attribute__((target_clones("avx2", "default"), flatten))
-#else
-#define MMRL_MULTIVERSION
-#endif
+// The search entry points (Matcher::match, brute_force_match, brute_force_knn) are
+// MMRL_MULTIVERSION (simd.hpp): AVX2 and baseline clones with the same bits.
 
 namespace mmrl {
 
