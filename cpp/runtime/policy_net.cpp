@@ -68,32 +68,56 @@ void dense_forward(const DenseLayer& l, const float* x, float* y, PolicyScratch&
   for (int o = 0; o < l.out; ++o) y[o] = activate(y[o] + l.bias[o], l.activation);
 }
 
-// Valid convolution, stride 1: per output position, its receptive field's non-zero inputs (in
-// the weight's [in][kh][kw] order) times the weights; y in (channel, row, col) order.
-void conv_forward(const ConvLayer& l, const float* x, float* y, PolicyScratch& s) {
-  // Locals: the stores below go through int and float pointers, which could alias l's fields.
-  const int channels = l.in_channels, kh = l.kernel_h, kw = l.kernel_w, in_h = l.in_h, in_w = l.in_w;
-  const int oh = in_h - kh + 1, ow = in_w - kw + 1, positions = oh * ow;
-  int32_t* __restrict index = s.index.data();
-  float* __restrict value = s.value.data();
-  float* sums = s.sums.data();
-  for (int r = 0; r < oh; ++r)
-    for (int q = 0; q < ow; ++q) {
-      int count = 0;
-      for (int c = 0; c < channels; ++c)
-        for (int kr = 0; kr < kh; ++kr) {
-          const float* in = x + (static_cast<size_t>(c) * in_h + r + kr) * in_w + q;
-          const int k0 = (c * kh + kr) * kw;
-          for (int kq = 0; kq < kw; ++kq) {
-            index[count] = k0 + kq;
-            value[count] = in[kq];
-            count += in[kq] != 0.0f;
+// The sums of a valid convolution, stride 1, by scattering: each non-zero input adds its
+// weight rows to the output positions it reaches. sums: positions x stride, (row, col) order.
+// For one output the terms arrive in the loops' order: channel, then input row (the kernel
+// row ascending), then input column (the kernel column ascending): the plain loop's order over
+// the weight's [in][kh][kw], whatever the zeros. nonzero: room for in_w indices.
+MMRL_MULTIVERSION void conv_sums(const ConvLayer& l, const float* x, float* sums, int32_t* nonzero) {
+  const int kh = l.kernel_h, kw = l.kernel_w, in_w = l.in_w, oh = l.in_h - kh + 1, ow = in_w - kw + 1;
+  const int stride = l.weight.stride;
+  std::fill(sums, sums + static_cast<size_t>(oh) * ow * stride, 0.0f);
+  with_count_1_to_8(stride / kLanes, [&](auto lanes) {
+    constexpr int G = decltype(lanes)::value;
+    for (int c = 0; c < l.in_channels; ++c)
+      for (int yy = 0; yy < l.in_h; ++yy) {
+        const float* row = x + (static_cast<size_t>(c) * l.in_h + yy) * in_w;
+        int count = 0;
+        for (int xx = 0; xx < in_w; ++xx) {
+          nonzero[count] = xx;
+          count += row[xx] != 0.0f;
+        }
+        if (count == 0) continue;
+        for (int kr = std::max(0, yy - oh + 1); kr <= std::min(kh - 1, yy); ++kr) {
+          float* out_row = sums + static_cast<size_t>(yy - kr) * ow * stride;
+          const float* w_row = l.weight.rows.data() + static_cast<size_t>((c * kh + kr) * kw) * stride;
+          for (int t = 0; t < count; ++t) {
+            const int xx = nonzero[t];
+            const float v = row[xx];
+            for (int kq = std::max(0, xx - ow + 1); kq <= std::min(kw - 1, xx); ++kq) {
+              float* o = out_row + static_cast<size_t>(xx - kq) * stride;
+              const float* wk = w_row + static_cast<size_t>(kq) * stride;
+              for (int g = 0; g < G; ++g) store_lanes(o + g * kLanes, load_lanes(o + g * kLanes) + v * load_lanes(wk + g * kLanes));
+            }
           }
         }
-      sparse_input_product(l.weight, index, value, count, sums);
-      const int p = r * ow + q;
-      for (int o = 0; o < l.out_channels; ++o) y[o * positions + p] = activate(sums[o] + l.bias[o], l.activation);
+      }
+  });
+}
+
+// Valid convolution, stride 1; y in (channel, row, col) order.
+void conv_forward(const ConvLayer& l, const float* x, float* y, PolicyScratch& s) {
+  const int positions = (l.in_h - l.kernel_h + 1) * (l.in_w - l.kernel_w + 1), stride = l.weight.stride;
+  float* sums = s.sums.data();
+  conv_sums(l, x, sums, s.index.data());
+  for (int p = 0; p < positions; ++p) {
+    const float* from = sums + static_cast<size_t>(p) * stride;
+    if (l.activation == Activation::kRelu) {
+      for (int o = 0; o < l.out_channels; ++o) y[o * positions + p] = std::max(0.0f, from[o] + l.bias[o]);
+    } else {
+      for (int o = 0; o < l.out_channels; ++o) y[o * positions + p] = activate(from[o] + l.bias[o], l.activation);
     }
+  }
 }
 
 Activation activation_of(const ControllerFile& f, int32_t code) {
@@ -199,8 +223,8 @@ PolicyScratch PolicyNet::make_scratch() const {
     inputs = std::max(inputs, static_cast<size_t>(l.in));
   }
   for (const auto& l : convs_) {
-    inputs = std::max(inputs, static_cast<size_t>(l.in_channels) * l.kernel_h * l.kernel_w);
-    sums = std::max(sums, static_cast<size_t>(l.weight.stride));
+    inputs = std::max(inputs, static_cast<size_t>(l.in_w));
+    sums = std::max(sums, static_cast<size_t>(l.weight.stride) * (l.in_h - l.kernel_h + 1) * (l.in_w - l.kernel_w + 1));
   }
   // A dense layer writes its padded stride; the vector segment waits past the widest of them.
   widest = (widest + kLanes - 1) / kLanes * kLanes;

@@ -49,7 +49,7 @@ struct ConvLayer {
 
 struct PolicyScratch {
   std::vector<float> a, b;         // ping-pong buffers, sized for the widest layer
-  std::vector<float> sums;         // one position's outputs of a convolution (padded)
+  std::vector<float> sums;         // a convolution's sums (positions x padded outputs)
   std::vector<int32_t> index;      // a layer's non-zero inputs: their indices
   std::vector<float> value;        // ... and values
 };
