@@ -11,7 +11,8 @@ same decisions, for 1,000 decisions per task and across episode ends.
   the same observation bit for bit, decides the same frames and shows the same roots.
 
 The configs switch on every rule that changes a match: a transition cost, the obstacles'
-look-ahead and hit disc, a clip-cost filter, and (a third config) the collision-aware search."""
+look-ahead and hit disc, a clip-cost filter, (a third config) the collision-aware search, and (a
+fourth) the deployed search's twenty escapes, whose table the runtime reads from the file."""
 import numpy as np
 import pytest
 
@@ -32,6 +33,8 @@ def configs(db):
         obstacle_max_speed=1.0, clip_costs=f"{busy}=0.5", max_steps=60)
     # The collision-aware search (tasks/path_filter.hpp) on top, and the foot-jump rule: every rule at once.
     path = obstacles.replace(path_filter=True, path_cost=50.0, path_candidates=32, foot_jump_limit=0.3)
+    # The deployed search's escapes (the runtime reads their table from the file).
+    escapes = obstacles.replace(path_filter=True, path_cost=10000.0, path_escapes=20, path_fan_candidates=2)
     # The arrive task (a plug-in core): its hold ends episodes mid-step, its facing is an input.
     # (Its clip-cost rule is the same chain as the plane's: the plane config covers it.)
     arrive = mmrl.get_task("arrive").default_config().replace(transition_cost=3.0,
@@ -39,7 +42,8 @@ def configs(db):
                                                               facing_tolerance=1.5, hold_time=0.1,
                                                               target_half_extent=3.0)
     return {"plane": (plane, random_plane_policy(4)), "obstacles": (obstacles, random_obstacle_policy(5)),
-            "obstacles-path": (path, random_obstacle_policy(5)), "arrive": (arrive, random_plane_policy(6, 19))}
+            "obstacles-path": (path, random_obstacle_policy(5)),
+            "obstacles-escapes": (escapes, random_obstacle_policy(5)), "arrive": (arrive, random_plane_policy(6, 19))}
 
 
 def hand_obstacles(character, env):
@@ -48,7 +52,7 @@ def hand_obstacles(character, env):
                               for k in ("centres", "half_sizes", "angles", "velocities")))
 
 
-@pytest.mark.parametrize("kind", ["plane", "obstacles", "obstacles-path", "arrive"])
+@pytest.mark.parametrize("kind", ["plane", "obstacles", "obstacles-path", "obstacles-escapes", "arrive"])
 def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path):
     db = mmrl.default_database()
     task_name = kind.split("-")[0]

@@ -332,6 +332,74 @@ def test_runtime_files_carry_the_filter_and_a_loader_can_require_it(tmp_path, sy
         _core.RuntimeController.load(str(broken))
 
 
+def test_runtime_files_carry_the_escape_table(tmp_path, synthetic_db):
+    """The export writes the escapes' table (task.escape_table), so the runtime need not find it
+    at load; the runtime decides with the file's table; a broken one is refused naming it."""
+    from mmrl.export.runtime_export import write_controller
+    from mmrl.export.runtime_file import read_sections, write_sections
+    from test_runtime import random_obstacle_policy
+
+    # Two near candidates: the filter often finds both dear, and the escapes decide.
+    cfg = config(path_cost=10000.0, path_escapes=20, path_fan_candidates=2, path_candidates=2, num_obstacles=100,
+                 obstacle_max_speed=1.0)
+    policy = random_obstacle_policy(5)
+    path = tmp_path / "escapes.mmrl"
+    write_controller(path, synthetic_db, policy, "obstacles", cfg)
+    sections = read_sections(path)
+    table = np.asarray(sections["task.escape_table"])
+    assert table.shape == (synthetic_db.num_frames, 40) and table.dtype == np.int32
+    np.testing.assert_array_equal(table, synthetic_db.matcher.escape_table(synthetic_db._db, 20, 2))
+    # No table without escapes.
+    plain = tmp_path / "plain.mmrl"
+    write_controller(plain, synthetic_db, policy, "obstacles", config(path_cost=10000.0))
+    assert "task.escape_table" not in read_sections(plain)
+
+    def rewritten(name, **changes):
+        out = dict(sections, **changes)
+        write_sections(tmp_path / name, out)
+        return str(tmp_path / name)
+
+    def decisions(file):
+        from mmrl.rollout import FullPath
+
+        c = _core.RuntimeController.load(file)
+        out = []
+        for seed in range(4):
+            fp = FullPath(mmrl.get_task("obstacles"), synthetic_db, config=cfg, seed=seed, record=False)
+            ch = _core.RuntimeCharacter(c, *fp.character.root, fp.character.frame)
+            ch.set_target(*fp.target)
+            for _ in range(60):
+                o = fp.env.obstacles(0)
+                ch.set_obstacles(*(np.ascontiguousarray(o[k], np.float32)
+                                   for k in ("centres", "half_sizes", "angles", "velocities")))
+                step = fp.step(c.act(fp.obs))
+                for _ in range(step["step_frames"]):
+                    ch.advance_frame()
+                out.append((step["res"].match, ch.last_decision()["match"]))
+                if step["done"]:
+                    break
+        return np.array(out)
+
+    honest = decisions(str(path))
+    np.testing.assert_array_equal(honest[:, 1], honest[:, 0])  # the file's table: the env's decisions
+    # Without the section (a file written before it) the runtime builds the same table.
+    without = {k: v for k, v in sections.items() if k != "task.escape_table"}
+    write_sections(tmp_path / "without.mmrl", without)
+    np.testing.assert_array_equal(decisions(str(tmp_path / "without.mmrl")), honest)
+    # A table of no rows loads (every entry may be -1) and is the one the runtime uses.
+    empty = decisions(rewritten("empty.mmrl", **{"task.escape_table": np.full_like(table, -1)}))
+    assert np.any(empty[:len(honest), 1] != honest[:len(empty), 1]), "the runtime ignored the file's table"
+    bad = table.copy()
+    bad[3, 5] = synthetic_db.num_frames
+    with pytest.raises(_core.ControllerFileError, match="task.escape_table.*entry 125"):
+        _core.RuntimeController.load(rewritten("bad.mmrl", **{"task.escape_table": bad}))
+    with pytest.raises(_core.ControllerFileError, match="task.escape_table"):
+        _core.RuntimeController.load(rewritten("shape.mmrl", **{"task.escape_table": table[:, :20].copy()}))
+    with pytest.raises(_core.ControllerFileError, match="escape_table' is present but the file's search takes no"):
+        _core.RuntimeController.load(rewritten("noesc.mmrl", **{"task.escape_table": table,
+                                                                  **read_sections(plain)}))
+
+
 @pytest.mark.parametrize("network", ["small-cnn", "mlp"])
 def test_the_cheap_networks_train_export_and_run_in_the_runtime(tmp_path, network):
     """--set network=NAME builds the task's network; its actor exports to the runtime, which acts

@@ -4,6 +4,7 @@
 
 #include "bindings.hpp"
 #include "py_matcher.hpp"
+#include "mmrl/decision.hpp"
 #include "mmrl/kdtree.hpp"
 #include "mmrl/search.hpp"
 #include "mmrl/threadpool.hpp"
@@ -165,7 +166,25 @@ void bind_search(py::module_& m) {
       .def_property_readonly("num_rows", [](const PyMatcher& self) { return self.matcher.num_rows(); })
       .def_property_readonly("num_valid", [](const PyMatcher& self) { return self.matcher.num_valid(); })
       .def_property_readonly("dim", [](const PyMatcher& self) { return self.matcher.dim(); })
-      .def_property_readonly("num_threads", [](const PyMatcher& self) { return self.pool->num_threads(); });
+      .def_property_readonly("num_threads", [](const PyMatcher& self) { return self.pool->num_threads(); })
+      .def(
+          "escape_table",
+          [](const PyMatcher& self, const Database& db, int escapes, int k) {
+            if (self.matcher.num_rows() != db.num_frames)
+              throw py::value_error("escape_table: the matcher is not over this database");
+            std::shared_ptr<const EscapeTable> table;
+            {
+              py::gil_scoped_release release;
+              table = EscapeTable::shared(db, self.matcher, escapes, k);
+            }
+            py::array_t<int32_t> out({static_cast<py::ssize_t>(db.num_frames), static_cast<py::ssize_t>(table->row_count())});
+            std::copy(table->all_rows().begin(), table->all_rows().end(), out.mutable_data());
+            return out;
+          },
+          py::arg("db"), py::arg("escapes"), py::arg("k"),
+          "The escapes' table over db (decision.hpp's EscapeTable, shared with every env over this matcher): per "
+          "frame, the k nearest frames of each of the first `escapes` escape queries (-1 where fewer exist); "
+          "num_frames x escapes * k int32. ValueError on counts out of range.");
 }
 
 }  // namespace mmrl

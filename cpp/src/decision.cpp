@@ -71,12 +71,31 @@ void escape_trajectory(const Database& db, int e, float* raw) {
   }
 }
 
-EscapeTable::EscapeTable(const Database& db, const Matcher& matcher, int escapes, int k, int threads)
-    : row_count_(escapes * k) {
+namespace {
+
+void check_escape_counts(int escapes, int k) {
   if (escapes < 1 || escapes > kMaxEscapes || k < 1 || escapes * k > kMaxExtraRows)
     throw std::invalid_argument("EscapeTable: escapes must be in [1, " + std::to_string(kMaxEscapes) +
                                 "] and k >= 1 with escapes * k <= " + std::to_string(kMaxExtraRows) + ", got " +
                                 std::to_string(escapes) + " and " + std::to_string(k));
+}
+
+}  // namespace
+
+EscapeTable::EscapeTable(int64_t num_frames, int escapes, int k, std::vector<int32_t> rows)
+    : row_count_((check_escape_counts(escapes, k), escapes * k)), rows_(std::move(rows)) {
+  if (rows_.size() != static_cast<size_t>(num_frames) * row_count_)
+    throw std::invalid_argument("escape table: " + std::to_string(rows_.size()) + " entries, not " +
+                                std::to_string(num_frames) + " frames x " + std::to_string(row_count_));
+  for (size_t i = 0; i < rows_.size(); ++i)
+    if (rows_[i] < -1 || rows_[i] >= num_frames)
+      throw std::invalid_argument("escape table: entry " + std::to_string(i) + " (" + std::to_string(rows_[i]) +
+                                  ") is not a frame of the database or -1");
+}
+
+EscapeTable::EscapeTable(const Database& db, const Matcher& matcher, int escapes, int k, int threads)
+    : row_count_(escapes * k) {
+  check_escape_counts(escapes, k);
   if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("EscapeTable: the matcher is not over db");
   float trajectories[kMaxEscapes][kTrajectoryDim];
   for (int e = 0; e < escapes; ++e) {
@@ -109,8 +128,10 @@ EscapeTable::EscapeTable(const Database& db, const Matcher& matcher, int escapes
       /*min_chunk=*/256);
 }
 
-std::shared_ptr<const EscapeTable> EscapeTable::shared(const Database& db, const Matcher& matcher, int escapes, int k) {
+std::shared_ptr<const EscapeTable> EscapeTable::shared(const Database& db, const Matcher& matcher, int escapes, int k,
+                                                       std::shared_ptr<const EscapeTable> prebuilt) {
   return matcher.cached<EscapeTable>("escapes " + std::to_string(escapes) + " " + std::to_string(k), [&] {
+    if (prebuilt) return prebuilt;
     const unsigned hw = std::thread::hardware_concurrency();
     return std::make_shared<const EscapeTable>(db, matcher, escapes, k, hw == 0 ? 1 : static_cast<int>(hw));
   });

@@ -214,6 +214,10 @@ class Matcher:
         """
         The same contract as match(), answered by a brute-force scan (the reference).
         """
+    def escape_table(self, db: Database, escapes: typing.SupportsInt | typing.SupportsIndex, k: typing.SupportsInt | typing.SupportsIndex) -> numpy.typing.NDArray[numpy.int32]:
+        """
+        The escapes' table over db (decision.hpp's EscapeTable, shared with every env over this matcher): per frame, the k nearest frames of each of the first `escapes` escape queries (-1 where fewer exist); num_frames x escapes * k int32. ValueError on counts out of range.
+        """
     def match(self, queries: typing.Any, bound_indices: typing.Any = None, exclude: typing.Any = None) -> tuple:
         """
         (M, D) float32 normalized queries [, (M,) int64 bound indices, -1 = none] [, (M, 2) int64 excluded row windows [lo, hi)] -> (indices int64 (M,), squared costs float32 (M,)). Index -1 when no valid row exists and there is no bound.

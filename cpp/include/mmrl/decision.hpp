@@ -108,10 +108,16 @@ class EscapeTable {
  public:
   // Builds the table over the matcher's rows (db's normalized features) on `threads` threads.
   EscapeTable(const Database& db, const Matcher& matcher, int escapes, int k, int threads);
-  // The table for (escapes, k), built on first request and shared by every user of `matcher`.
-  static std::shared_ptr<const EscapeTable> shared(const Database& db, const Matcher& matcher, int escapes, int k);
+  // A table built before (a controller file's search.escapes: num_frames x escapes * k); throws
+  // std::invalid_argument when its size or an entry (a frame, or -1) is out of range.
+  EscapeTable(int64_t num_frames, int escapes, int k, std::vector<int32_t> rows);
+  // The table for (escapes, k), shared by every user of `matcher`: `prebuilt` when given (and
+  // none is shared yet), else built on first request.
+  static std::shared_ptr<const EscapeTable> shared(const Database& db, const Matcher& matcher, int escapes, int k,
+                                                   std::shared_ptr<const EscapeTable> prebuilt = nullptr);
   int row_count() const { return row_count_; }  // escapes * k entries per frame
   const int32_t* rows(int64_t frame) const { return &rows_[static_cast<size_t>(frame) * row_count_]; }
+  const std::vector<int32_t>& all_rows() const { return rows_; }  // num_frames x row_count
 
  private:
   int row_count_;

@@ -22,6 +22,7 @@
 
 #include "mmrl/character.hpp"
 #include "mmrl/decider.hpp"
+#include "mmrl/decision.hpp"
 #include "mmrl/runtime_file.hpp"
 #include "mmrl/target_env.hpp"
 
@@ -37,6 +38,7 @@ struct RuntimeTask {
   int num_obstacles = 0;                // tasks with obstacles: at most this many (set_obstacles); else 0
   bool path_filter = false;             // the collision-aware search is on (tasks that have it)
   ObsLayout layout;                     // the observation the policy reads, segment by segment
+  std::shared_ptr<const EscapeTable> escape_table;  // the file's task.escape_table, or null (built at load)
   std::shared_ptr<const TaskConfig> config;  // the core's own config (its type is the core's)
 };
 

@@ -90,11 +90,27 @@ RuntimeTaskType obstacles_runtime_task() {
         f.fail(std::string("task.") + key + " is on: an experiment's option this runtime no longer has " +
                "(docs/obstacles.md, \"Retired options\")");
     }
+    // The escapes' nearest frames, found at export (optional: without it the table is built when
+    // the controller loads, seconds for a large database).
+    if (f.has("task.escape_table")) {
+      const int escapes = config->path_filter ? config->path_escapes : 0, k = config->path_fan_candidates;
+      if (escapes == 0) f.fail("section 'task.escape_table' is present but the file's search takes no escapes");
+      try {
+        task.escape_table = std::make_shared<const EscapeTable>(
+            db.num_frames, escapes, k, f.ints("task.escape_table", {db.num_frames, int64_t(escapes) * k}));
+      } catch (const std::invalid_argument& e) {
+        f.fail(std::string("section 'task.escape_table': ") + e.what());
+      }
+    }
     task.num_obstacles = config->num_obstacles;
     task.path_filter = config->path_filter;
     task.config = std::move(config);
   };
   t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
+    if (task.escape_table) {  // the env finds the file's table where it would keep the one it builds
+      const auto& c = static_cast<const ObstacleTaskConfig&>(*task.config);
+      EscapeTable::shared(db, matcher, c.path_escapes, c.path_fan_candidates, task.escape_table);
+    }
     return std::make_unique<ObstaclesRuntimeEnv>(db, matcher, task);
   };
   return t;

@@ -161,6 +161,9 @@ def controller_sections(db, policy, task_name: str, task_config,
     groups = request_group_list(getattr(task_config, "request_groups", ""))
     if groups:  # the tag groups the policy observes a request code of (docs/styles.md)
         out["task.request_groups"] = groups
+    escapes = int(getattr(task_config, "path_escapes", 0)) if getattr(task_config, "path_filter", False) else 0
+    if escapes:  # the escapes' nearest frames per frame, so the runtime need not find them at load
+        out["task.escape_table"] = db.matcher.escape_table(db._db, escapes, int(task_config.path_fan_candidates))
     out.update(_numbers("character", dict(CHARACTER_DEFAULTS, **(character or {}))))
     return out
 
