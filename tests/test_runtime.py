@@ -127,14 +127,15 @@ def test_runtime_on_another_skeleton(tmp_path):
     assert np.count_nonzero(np.diff(out["py_matches"]) != 6) >= 5
 
 
-def random_obstacle_policy(seed: int, layout=None) -> Policy:
+def random_obstacle_policy(seed: int, layout=None, **sizes) -> Policy:
     """A CNN policy with random weights for the obstacles task's observation (``layout``: an
-    env's, e.g. with a request code; default the paper's 529 floats)."""
+    env's, e.g. with a request code; default the paper's 529 floats; ``sizes``: the network's
+    channels, map_features, head)."""
     from mmrl.rl.networks import OBSTACLE_DEFAULT_LAYOUT, ObstacleActorCritic
 
     torch.manual_seed(seed)
     layout = tuple(layout or OBSTACLE_DEFAULT_LAYOUT)
-    model = ObstacleActorCritic(12, layout=layout)
+    model = ObstacleActorCritic(12, layout=layout, **sizes)
     with torch.no_grad():
         model.actor.head[-1].weight.normal_(0, 0.3)
     norm = ObsNormalizer(model.obs_dim, True, ObstacleActorCritic.map_range(layout), 10.0, torch.device("cpu"))
@@ -151,22 +152,24 @@ def test_runtime_cnn_policy_matches_torch(tmp_path):
 
     task, db = mmrl.get_task("obstacles"), mmrl.default_database()
     config = ObstaclesConfig(num_obstacles=60)
-    policy = random_obstacle_policy(4)
-    path = tmp_path / "cnn.mmrl"
-    write_controller(path, db, policy, "obstacles", config)
-    c = _core.RuntimeController.load(str(path))
-    obs = sample_observations(task, db, config, policy, 300, seed=2)
+    obs = sample_observations(task, db, config, random_obstacle_policy(4), 300, seed=2)
     assert 0.02 < np.mean(obs[:, :512] != 0) < 0.9  # the maps hold obstacles, and zeros to skip
     dense = np.random.default_rng(0).normal(0, 2, obs.shape).astype(np.float32)
-    for batch in (obs, dense):
-        ours = np.stack([c.act(o) for o in batch])
-        # The reference: the same network in float64 (torch's float32 is itself 2e-6 / 8e-6 off it).
-        with torch.no_grad():
-            normalized = policy.obs_normalizer(torch.as_tensor(batch)).double()
-            ref = copy.deepcopy(policy.model).double().actor_mean(normalized).numpy()
-        # measured 1.8e-6 (the task's observations) and 6.2e-6 (dense)
-        assert np.max(np.abs(ours - ref) / np.maximum(1.0, np.abs(ref))) <= 1e-5
-        assert np.ptp(ref, axis=0).min() > 1e-3
+    # The paper's sizes, and layers wider than one pass of the kernels (64 outputs) and not whole lanes.
+    for policy in (random_obstacle_policy(4), random_obstacle_policy(4, channels=(20, 70), map_features=100,
+                                                                     head=(140, 36))):
+        path = tmp_path / "cnn.mmrl"
+        write_controller(path, db, policy, "obstacles", config)
+        c = _core.RuntimeController.load(str(path))
+        for batch in (obs, dense):
+            ours = np.stack([c.act(o) for o in batch])
+            # The reference: the same network in float64 (torch's float32 is itself 2e-6 / 8e-6 off it).
+            with torch.no_grad():
+                normalized = policy.obs_normalizer(torch.as_tensor(batch)).double()
+                ref = copy.deepcopy(policy.model).double().actor_mean(normalized).numpy()
+            # measured 2.5e-6 (the task's observations) and 5.9e-6 (dense)
+            assert np.max(np.abs(ours - ref) / np.maximum(1.0, np.abs(ref))) <= 1e-5
+            assert np.ptp(ref, axis=0).min() > 1e-3
 
 
 def test_obstacle_runtime_equals_python_full_path(tmp_path):

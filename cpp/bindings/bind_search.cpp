@@ -93,6 +93,29 @@ py::tuple run_match(PyMatcher& self, const py::handle& queries_obj, const py::ob
 
 }  // namespace
 
+// Matcher.escape_table: the obstacles search's escapes (decision.hpp), for the export.
+void def_escape_table(py::class_<PyMatcher>& c) {
+  c.def(
+      "escape_table",
+      [](const PyMatcher& self, const Database& db, int escapes, int k) {
+        if (self.matcher.num_rows() != db.num_frames)
+          throw py::value_error("escape_table: the matcher is not over this database");
+        std::shared_ptr<const EscapeTable> table;
+        {
+          py::gil_scoped_release release;
+          table = EscapeTable::shared(db, self.matcher, escapes, k);
+        }
+        const auto rows = static_cast<py::ssize_t>(db.num_frames), cols = static_cast<py::ssize_t>(table->row_count());
+        py::array_t<int32_t> out({rows, cols});
+        std::copy(table->all_rows().begin(), table->all_rows().end(), out.mutable_data());
+        return out;
+      },
+      py::arg("db"), py::arg("escapes"), py::arg("k"),
+      "The escapes' table over db (decision.hpp's EscapeTable, shared with every env over this matcher): per "
+      "frame, the k nearest frames of each of the first `escapes` escape queries (-1 where fewer exist); "
+      "num_frames x escapes * k int32. ValueError on counts out of range.");
+}
+
 void bind_search(py::module_& m) {
   py::class_<PyKDTree>(m, "KDTree",
                        "Exact k-NN KD-tree over float32 rows (squared L2). Borrows `points` (kept alive) and "
@@ -132,9 +155,10 @@ void bind_search(py::module_& m) {
       .def_property_readonly("depth", [](const PyKDTree& self) { return self.tree.depth(); })
       .def_property_readonly("num_threads", [](const PyKDTree& self) { return self.pool->num_threads(); });
 
-  py::class_<PyMatcher>(m, "Matcher",
+  py::class_<PyMatcher> matcher_class(m, "Matcher",
                         "Motion-matching search over normalized feature rows: nearest valid row, optionally "
-                        "bounded by the current frame's continuation. Borrows `points` and `valid_mask`.")
+                        "bounded by the current frame's continuation. Borrows `points` and `valid_mask`.");
+  matcher_class
       .def(py::init([](const py::handle& points_obj, const py::handle& mask_obj, int num_threads, int leaf_size) {
              auto points = check_points(points_obj);
              auto valid = check_mask(mask_obj, points.shape(0));
@@ -166,25 +190,8 @@ void bind_search(py::module_& m) {
       .def_property_readonly("num_rows", [](const PyMatcher& self) { return self.matcher.num_rows(); })
       .def_property_readonly("num_valid", [](const PyMatcher& self) { return self.matcher.num_valid(); })
       .def_property_readonly("dim", [](const PyMatcher& self) { return self.matcher.dim(); })
-      .def_property_readonly("num_threads", [](const PyMatcher& self) { return self.pool->num_threads(); })
-      .def(
-          "escape_table",
-          [](const PyMatcher& self, const Database& db, int escapes, int k) {
-            if (self.matcher.num_rows() != db.num_frames)
-              throw py::value_error("escape_table: the matcher is not over this database");
-            std::shared_ptr<const EscapeTable> table;
-            {
-              py::gil_scoped_release release;
-              table = EscapeTable::shared(db, self.matcher, escapes, k);
-            }
-            py::array_t<int32_t> out({static_cast<py::ssize_t>(db.num_frames), static_cast<py::ssize_t>(table->row_count())});
-            std::copy(table->all_rows().begin(), table->all_rows().end(), out.mutable_data());
-            return out;
-          },
-          py::arg("db"), py::arg("escapes"), py::arg("k"),
-          "The escapes' table over db (decision.hpp's EscapeTable, shared with every env over this matcher): per "
-          "frame, the k nearest frames of each of the first `escapes` escape queries (-1 where fewer exist); "
-          "num_frames x escapes * k int32. ValueError on counts out of range.");
+      .def_property_readonly("num_threads", [](const PyMatcher& self) { return self.pool->num_threads(); });
+  def_escape_table(matcher_class);
 }
 
 }  // namespace mmrl

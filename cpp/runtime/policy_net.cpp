@@ -77,7 +77,8 @@ MMRL_MULTIVERSION void conv_sums(const ConvLayer& l, const float* x, float* sums
   const int kh = l.kernel_h, kw = l.kernel_w, in_w = l.in_w, oh = l.in_h - kh + 1, ow = in_w - kw + 1;
   const int stride = l.weight.stride;
   std::fill(sums, sums + static_cast<size_t>(oh) * ow * stride, 0.0f);
-  with_count_1_to_8(stride / kLanes, [&](auto lanes) {
+  for (int c0 = 0; c0 < stride; c0 += 8 * kLanes)  // up to 64 output channels per pass
+  with_count_1_to_8(std::min(8, (stride - c0) / kLanes), [&](auto lanes) {
     constexpr int G = decltype(lanes)::value;
     for (int c = 0; c < l.in_channels; ++c)
       for (int yy = 0; yy < l.in_h; ++yy) {
@@ -89,15 +90,16 @@ MMRL_MULTIVERSION void conv_sums(const ConvLayer& l, const float* x, float* sums
         }
         if (count == 0) continue;
         for (int kr = std::max(0, yy - oh + 1); kr <= std::min(kh - 1, yy); ++kr) {
-          float* out_row = sums + static_cast<size_t>(yy - kr) * ow * stride;
-          const float* w_row = l.weight.rows.data() + static_cast<size_t>((c * kh + kr) * kw) * stride;
+          float* out_row = sums + static_cast<size_t>(yy - kr) * ow * stride + c0;
+          const float* w_row = l.weight.rows.data() + static_cast<size_t>((c * kh + kr) * kw) * stride + c0;
           for (int t = 0; t < count; ++t) {
             const int xx = nonzero[t];
             const float v = row[xx];
             for (int kq = std::max(0, xx - ow + 1); kq <= std::min(kw - 1, xx); ++kq) {
               float* o = out_row + static_cast<size_t>(xx - kq) * stride;
               const float* wk = w_row + static_cast<size_t>(kq) * stride;
-              for (int g = 0; g < G; ++g) store_lanes(o + g * kLanes, load_lanes(o + g * kLanes) + v * load_lanes(wk + g * kLanes));
+              for (int g = 0; g < G; ++g)
+                store_lanes(o + g * kLanes, load_lanes(o + g * kLanes) + v * load_lanes(wk + g * kLanes));
             }
           }
         }
