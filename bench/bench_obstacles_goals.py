@@ -17,7 +17,7 @@ raw-mocap floor. Peers (``--peers``):
   ``--peer-cost`` sets its path cost.
 
 Each RUN runs with its own options (its config.json), and once more per ``--set`` with those
-changed (e.g. ``--set transition_cost=30`` or ``--set path_fan=2,path_candidates=8``). Prints a
+changed (e.g. ``--set transition_cost=30`` or ``--set path_escapes=20,path_cost=10000``). Prints a
 markdown table.
 """
 from __future__ import annotations

@@ -181,8 +181,7 @@ def escape_queries(db, query, escapes):
     return out
 
 
-def brute_force_shortlist(db, frame, action, low, high, extra, k, transition_cost=0.0, fan=0, fan_degrees=30.0,
-                          fan_k=1, escapes=0):
+def brute_force_shortlist(db, frame, action, low, high, extra, k, transition_cost=0.0, fan_k=1, escapes=0):
     """(match, cost, slack) by search.hpp's shortlist rule; extra(rows) gives the filter's cost.
     slack: how close the decision came to going another way (the shortlist's cut, the runner-up)."""
     rows = np.asarray(db.normalized_features, np.float64)
@@ -196,9 +195,9 @@ def brute_force_shortlist(db, frame, action, low, high, extra, k, transition_cos
     ranked = cand[np.lexsort((cand, d[cand]))]
     order = ranked[:k]
     slack = d[ranked[k]] - d[ranked[k - 1]] if ranked.size > k else np.inf
-    if fan or escapes:
+    if escapes:
         members = set(order.tolist())
-        for q in turned_queries(db, query, fan, fan_degrees)[1:] + escape_queries(db, query, escapes):
+        for q in escape_queries(db, query, escapes):
             dq = ((rows[cand] - q) ** 2).sum(1)
             by_q = cand[np.lexsort((cand, dq))]
             members.update(by_q[:fan_k].tolist())
@@ -217,9 +216,9 @@ def brute_force_shortlist(db, frame, action, low, high, extra, k, transition_cos
     return best_i, (bound_c if best_i == frame else best_c), slack
 
 
-@pytest.mark.parametrize("fan, escapes", [(0, 0), (2, 0), (0, 4), (1, 2), (0, 20)])
-def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan, escapes):
-    cfg = config(path_fan=fan, path_fan_candidates=3, path_fan_degrees=25.0, path_escapes=escapes)
+@pytest.mark.parametrize("escapes", [0, 4, 20])
+def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, escapes):
+    cfg = config(path_fan_candidates=3, path_escapes=escapes)
     task = mmrl.get_task("obstacles")
     env = task.make_vector_env(4, db=db, config=cfg, num_threads=2)
     apply_stage(task, env, None)
@@ -238,10 +237,9 @@ def test_decisions_equal_a_brute_force_of_the_shortlist_rule(db, fan, escapes):
             extra = (lambda i: lambda rows: path_cost(env.path_hits(i, rows)))(i)
             no_extra = lambda rows: np.zeros(len(rows))
             full = brute_force_shortlist(db, frames[i], actions[i], low, high, extra, cfg.path_candidates,
-                                         fan=fan, fan_degrees=cfg.path_fan_degrees, fan_k=3, escapes=escapes)
+                                         fan_k=3, escapes=escapes)
             no_escapes = full if not escapes else brute_force_shortlist(
-                db, frames[i], actions[i], low, high, extra, cfg.path_candidates, fan=fan,
-                fan_degrees=cfg.path_fan_degrees, fan_k=3)
+                db, frames[i], actions[i], low, high, extra, cfg.path_candidates, fan_k=3)
             before.append((full, brute_force_shortlist(db, frames[i], actions[i], low, high, no_extra, 1)[0],
                            no_escapes[0]))
         env.step(actions)
@@ -279,7 +277,7 @@ def test_the_filter_makes_collisions_rarer_for_the_same_actions(synthetic_db):
     ("path_cost", -1.0, "path_cost"), ("path_cost", float("nan"), "path_cost"),
     ("path_margin", -0.1, "path_margin"), ("path_margin", float("inf"), "path_margin"),
     ("path_candidates", -1, "path_candidates"), ("path_candidates", 257, "path_candidates"),
-    ("path_fan", 5, "path_fan"), ("path_fan", -1, "path_fan"), ("path_fan_degrees", 0.0, "path_fan_degrees"),
+    ("path_fan_degrees", 0.0, "path_fan_degrees"),
     ("path_fan_degrees", 91.0, "path_fan_degrees"), ("path_fan_candidates", 0, "path_fan_candidates"),
     ("path_escapes", 21, "path_escapes"), ("path_escapes", -1, "path_escapes"),
     ("path_margin", 3.0, "body_radius + path_margin"), ("body_radius", 3.5, "body_radius"),
@@ -477,8 +475,10 @@ def test_a_runtime_file_whose_policy_does_not_read_its_observation_is_refused(tm
         _core.RuntimeController.load(str(path))
 
 
-@pytest.mark.parametrize("name", ["hit_played", "bias_yields", "observe_continuation"])
-def test_a_retired_option_is_refused_everywhere_with_one_line(name, tmp_path, capsys, synthetic_db):
+@pytest.mark.parametrize("name, on, now", [("hit_played", True, False), ("bias_yields", True, False),
+                                           ("observe_continuation", True, False), ("path_fan", 2, 0),
+                                           ("previous_map_lag", 5, 1)])
+def test_a_retired_option_is_refused_everywhere_with_one_line(name, on, now, tmp_path, capsys, synthetic_db):
     """An experiment's option that was removed (docs/obstacles.md, "Retired options"): --set gives
     one line and exit 2; a config.json that ran it on is refused naming it, one that has the value
     the code now always has still loads; a controller file with it on is refused by the runtime."""
@@ -492,17 +492,17 @@ def test_a_retired_option_is_refused_everywhere_with_one_line(name, tmp_path, ca
     from test_runtime import random_obstacle_policy
 
     assert main(["train", "obstacles", "--steps", "512", "--out", str(tmp_path / "x"), "--no-progress",
-                 "--set", f"{name}=true"]) == 2
+                 "--set", f"{name}={str(on).lower()}"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"{name!r} was an experiment's and is retired" in err[0], err
     task = mmrl.get_task("obstacles")
     with pytest.raises(ValueError, match="retired"):
-        task.default_config().replace(**{name: True})
+        task.default_config().replace(**{name: on})
     for strict in (False, True):  # old runs' saved default (strict: what an RLlib worker reads)
-        assert task.config_from_dict({name: False, "num_obstacles": 7}, strict=strict).num_obstacles == 7
+        assert task.config_from_dict({name: now, "num_obstacles": 7}, strict=strict).num_obstacles == 7
     run = tmp_path / "run"
     run.mkdir()
-    (run / "config.json").write_text(json.dumps({"task": "obstacles", "task_config": {name: True}}))
+    (run / "config.json").write_text(json.dumps({"task": "obstacles", "task_config": {name: on}}))
     with pytest.raises(InputError, match=f"config.json: .*{name}"):
         RunDir(run).task_config()
     old = tmp_path / "old-run"  # a run that trained with it on cannot be resumed without it
@@ -510,7 +510,7 @@ def test_a_retired_option_is_refused_everywhere_with_one_line(name, tmp_path, ca
                  "--set", "network=small-cnn"]) == 0
     config_file = old / "config.json"
     saved = json.loads(config_file.read_text())
-    saved["task_config"][name] = True
+    saved["task_config"][name] = on
     config_file.write_text(json.dumps(saved))
     capsys.readouterr()
     assert main(["train", "--resume", str(old), "--steps", "512", "--no-progress"]) == 2
@@ -520,13 +520,16 @@ def test_a_retired_option_is_refused_everywhere_with_one_line(name, tmp_path, ca
     write_controller(path, synthetic_db, random_obstacle_policy(2), "obstacles", config())
     sections = read_sections(path)
     sections["task.keys"] = list(sections["task.keys"]) + [name]
-    sections["task.values"] = np.append(sections["task.values"], 1.0)
+    sections["task.values"] = np.append(sections["task.values"], float(on))
     write_sections(path, sections)
     if name == "hit_played":  # a training option: the runtime never read it
         _core.RuntimeController.load(str(path))
     else:
-        with pytest.raises(_core.ControllerFileError, match=f"task.{name} is on: an experiment's option"):
+        with pytest.raises(_core.ControllerFileError, match=f"task.{name} is {float(on):g}: an experiment's option"):
             _core.RuntimeController.load(str(path))
+        sections["task.values"][-1] = float(now)  # the value the code now always has: loads
+        write_sections(path, sections)
+        _core.RuntimeController.load(str(path))
 
 
 def test_an_unknown_network_is_refused(tmp_path, capsys):

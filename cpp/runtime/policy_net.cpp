@@ -72,28 +72,42 @@ void dense_forward(const DenseLayer& l, const float* x, float* y, PolicyScratch&
 // weight rows to the output positions it reaches. sums: positions x stride, (row, col) order.
 // For one output the terms arrive in the loops' order: channel, then input row (the kernel
 // row ascending), then input column (the kernel column ascending): the plain loop's order over
-// the weight's [in][kh][kw], whatever the zeros. nonzero: room for in_w indices.
+// the weight's [in][kh][kw], whatever the zeros. nonzero: room for conv_index_size(l) indices.
+inline size_t conv_index_size(const ConvLayer& l) {
+  const size_t rows = static_cast<size_t>(l.in_channels) * l.in_h;
+  return rows + 1 + rows * l.in_w;
+}
 MMRL_MULTIVERSION void conv_sums(const ConvLayer& l, const float* x, float* sums, int32_t* nonzero) {
   const int kh = l.kernel_h, kw = l.kernel_w, in_w = l.in_w, oh = l.in_h - kh + 1, ow = in_w - kw + 1;
-  const int stride = l.weight.stride;
+  const int stride = l.weight.stride, rows = l.in_channels * l.in_h;
+  // Each input row's non-zero columns, found once for every pass: row r's are cols[starts[r]
+  // .. starts[r + 1]) (r = channel * in_h + row).
+  int32_t* starts = nonzero;
+  int32_t* cols = nonzero + rows + 1;
+  int n = 0;
+  for (int r = 0; r < rows; ++r) {
+    starts[r] = n;
+    const float* row = x + static_cast<size_t>(r) * in_w;
+    for (int xx = 0; xx < in_w; ++xx) {
+      cols[n] = xx;
+      n += row[xx] != 0.0f;
+    }
+  }
+  starts[rows] = n;
   std::fill(sums, sums + static_cast<size_t>(oh) * ow * stride, 0.0f);
   for (int c0 = 0; c0 < stride; c0 += 8 * kLanes)  // up to 64 output channels per pass
   with_count_1_to_8(std::min(8, (stride - c0) / kLanes), [&](auto lanes) {
     constexpr int G = decltype(lanes)::value;
     for (int c = 0; c < l.in_channels; ++c)
       for (int yy = 0; yy < l.in_h; ++yy) {
-        const float* row = x + (static_cast<size_t>(c) * l.in_h + yy) * in_w;
-        int count = 0;
-        for (int xx = 0; xx < in_w; ++xx) {
-          nonzero[count] = xx;
-          count += row[xx] != 0.0f;
-        }
-        if (count == 0) continue;
+        const int r = c * l.in_h + yy;
+        if (starts[r] == starts[r + 1]) continue;
+        const float* row = x + static_cast<size_t>(r) * in_w;
         for (int kr = std::max(0, yy - oh + 1); kr <= std::min(kh - 1, yy); ++kr) {
           float* out_row = sums + static_cast<size_t>(yy - kr) * ow * stride + c0;
           const float* w_row = l.weight.rows.data() + static_cast<size_t>((c * kh + kr) * kw) * stride + c0;
-          for (int t = 0; t < count; ++t) {
-            const int xx = nonzero[t];
+          for (int t = starts[r]; t < starts[r + 1]; ++t) {
+            const int xx = cols[t];
             const float v = row[xx];
             for (int kq = std::max(0, xx - ow + 1); kq <= std::min(kw - 1, xx); ++kq) {
               float* o = out_row + static_cast<size_t>(xx - kq) * stride;
@@ -114,11 +128,7 @@ void conv_forward(const ConvLayer& l, const float* x, float* y, PolicyScratch& s
   conv_sums(l, x, sums, s.index.data());
   for (int p = 0; p < positions; ++p) {
     const float* from = sums + static_cast<size_t>(p) * stride;
-    if (l.activation == Activation::kRelu) {
-      for (int o = 0; o < l.out_channels; ++o) y[o * positions + p] = std::max(0.0f, from[o] + l.bias[o]);
-    } else {
-      for (int o = 0; o < l.out_channels; ++o) y[o * positions + p] = activate(from[o] + l.bias[o], l.activation);
-    }
+    for (int o = 0; o < l.out_channels; ++o) y[o * positions + p] = activate(from[o] + l.bias[o], l.activation);
   }
 }
 
@@ -224,15 +234,16 @@ PolicyScratch PolicyNet::make_scratch() const {
     widest = std::max(widest, static_cast<size_t>(std::max(l.in, l.weight.stride)));
     inputs = std::max(inputs, static_cast<size_t>(l.in));
   }
+  size_t indices = inputs;
   for (const auto& l : convs_) {
-    inputs = std::max(inputs, static_cast<size_t>(l.in_w));
+    indices = std::max(indices, conv_index_size(l));
     sums = std::max(sums, static_cast<size_t>(l.weight.stride) * (l.in_h - l.kernel_h + 1) * (l.in_w - l.kernel_w + 1));
   }
   // A dense layer writes its padded stride; the vector segment waits past the widest of them.
   widest = (widest + kLanes - 1) / kLanes * kLanes;
   PolicyScratch s;
   s.sums.assign(sums, 0.0f);
-  s.index.assign(inputs, 0);
+  s.index.assign(indices, 0);
   s.value.assign(inputs, 0.0f);
   s.a.assign(widest + vector_size_, 0.0f);
   s.b.assign(widest + vector_size_, 0.0f);

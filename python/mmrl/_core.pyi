@@ -675,7 +675,7 @@ class ObstacleTaskConfig:
     """
     Numbers of the moving-obstacles task (tasks/obstacles.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan', 'path_fan_degrees', 'path_fan_candidates', 'path_escapes', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'previous_map_lag', 'grid_cell_size')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan_degrees', 'path_fan_candidates', 'path_escapes', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'grid_cell_size')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -856,17 +856,9 @@ class ObstacleTaskConfig:
     def path_escapes(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
-    def path_fan(self) -> int:
-        """
-        Turns each way of the path fan: the query's trajectory turned by +-1..n x path_fan_degrees adds path_fan_candidates nearest frames each, so turning clips join the shortlist.
-        """
-    @path_fan.setter
-    def path_fan(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
-        ...
-    @property
     def path_fan_candidates(self) -> int:
         """
-        How many nearest candidates each turned query of the path fan, and each escape query, adds.
+        How many nearest candidates each escape query adds to the shortlist.
         """
     @path_fan_candidates.setter
     def path_fan_candidates(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
@@ -874,7 +866,7 @@ class ObstacleTaskConfig:
     @property
     def path_fan_degrees(self) -> float:
         """
-        The turn between the path fan's queries (degrees).
+        The turn between a compressed controller's turned queries (degrees; compressed_path_fan).
         """
     @path_fan_degrees.setter
     def path_fan_degrees(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
@@ -902,14 +894,6 @@ class ObstacleTaskConfig:
         """
     @path_margin.setter
     def path_margin(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
-    @property
-    def previous_map_lag(self) -> int:
-        """
-        The observation's second map is the one read this many RL steps ago (1: the paper's previous step).
-        """
-    @previous_map_lag.setter
-    def previous_map_lag(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
         ...
     @property
     def random_heading(self) -> bool:

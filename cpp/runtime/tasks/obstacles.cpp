@@ -3,7 +3,9 @@
 // own sensor maps, rules and decision.
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "mmrl/runtime_task.hpp"
@@ -82,13 +84,20 @@ RuntimeTaskType obstacles_runtime_task() {
         if (task.values.find(key) == task.values.end())
           f.fail(std::string("task.path_filter is on but the file lacks task.") + key + " (the path filter's data)");
     }
-    // Options of experiments that lost (docs/obstacles.md, "Retired options"): a file written
-    // with one on runs a rule this runtime no longer has.
-    for (const char* key : {"bias_yields", "observe_continuation"}) {
+    // Options of experiments that lost (docs/obstacles.md, "Retired options"), with the value
+    // the code now always has: a file written with another runs a rule this runtime no longer has.
+    static const std::pair<const char*, double> kRetired[] = {
+        {"bias_yields", 0}, {"observe_continuation", 0}, {"path_fan", 0}, {"previous_map_lag", 1}};
+    const auto format_number = [](double v) {
+      std::ostringstream out;
+      out << v;
+      return out.str();
+    };
+    for (const auto& [key, now] : kRetired) {
       const auto it = task.values.find(key);
-      if (it != task.values.end() && it->second != 0)
-        f.fail(std::string("task.") + key + " is on: an experiment's option this runtime no longer has " +
-               "(docs/obstacles.md, \"Retired options\")");
+      if (it != task.values.end() && it->second != now)
+        f.fail(std::string("task.") + key + " is " + format_number(it->second) + ": an experiment's option this " +
+               "runtime no longer has (it always runs " + format_number(now) + "; docs/obstacles.md, \"Retired options\")");
     }
     // The escapes' nearest frames, found at export (optional: without it the table is built when
     // the controller loads, seconds for a large database).

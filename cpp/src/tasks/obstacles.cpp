@@ -50,8 +50,7 @@ ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int n
                                const ObstacleTaskConfig& config, int num_threads)
     : TargetVecEnv(db, matcher, num_envs, config, num_threads),
       field_(num_envs, field_config(db, config)),
-      map_slots_(config.previous_map_lag + 1),
-      maps_(static_cast<size_t>(num_envs) * (config.previous_map_lag + 1) * kMapCells, 0),
+      maps_(static_cast<size_t>(num_envs) * 2 * kMapCells, 0),
       stage_max_speed_(config.obstacle_max_speed),
       stage_half_extent_(config.target_half_extent),
       frame_dt_(1.0f / db.fps) {
@@ -133,15 +132,12 @@ void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
     field_.rebuild(i, margin(i));
     st.grid_age = 0;
   }
-  // A ring of previous_map_lag + 1 maps: a new map overwrites the oldest slot (the one after
-  // the head) and becomes the head, so the slot after the new head is previous_map_lag steps
-  // old. A reset (and hand-set scenes) gives every slot the new map.
-  if (maps == MapUpdate::kPush) st.map_head = (st.map_head + 1) % map_slots_;
+  // Two maps: a new one overwrites the previous RL step's slot and becomes the current one. A
+  // reset (and hand-set scenes) gives both slots the new map.
+  if (maps == MapUpdate::kPush) st.map_head ^= 1;
   uint8_t* cur = map_slot(i, st.map_head);
   field_.sensor_map(i, st.root.x, st.root.z, st.root.yaw, cur);
-  if (maps == MapUpdate::kReset)
-    for (int k = 0; k < map_slots_; ++k)
-      if (k != st.map_head) std::copy(cur, cur + kMapCells, map_slot(i, k));
+  if (maps == MapUpdate::kReset) std::copy(cur, cur + kMapCells, map_slot(i, st.map_head ^ 1));
 }
 
 void ObstacleVecEnv::observe(int i, float* obs) const {

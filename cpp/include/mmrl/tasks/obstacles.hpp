@@ -5,8 +5,7 @@
 // observation (kObsDim = 529 floats, flat):
 //   [0, 256)    current sensor map, row-major [row][col] (grid.hpp: row along the
 //               character's Z / forward, col along X / left), 0 or 1
-//   [256, 512)  the previous RL step's map (previous_map_lag steps ago; at reset: a copy of
-//               the current map)
+//   [256, 512)  the previous RL step's map (at reset: a copy of the current map)
 //   [512, 527)  c_t: normalized pose features of the current frame
 //   [527, 529)  g_t: target (x, z) in the character frame, meters
 //   i.e. maps as (channel, row, col) with channel 0 current, 1 previous.
@@ -73,7 +72,6 @@ struct ObstacleTaskConfig : TaskConfig {
   int path_horizon = 30;
   float path_margin = 0.05f;
   int path_candidates = 16;
-  int path_fan = 0;
   float path_fan_degrees = 30.0f;
   int path_fan_candidates = 1;
   int path_escapes = 0;
@@ -87,7 +85,6 @@ struct ObstacleTaskConfig : TaskConfig {
   float target_clearance = 0.5f;
   float sensor_size = 6.0f;
   float sensor_forward = 1.5f;
-  int previous_map_lag = 1;
   float grid_cell_size = 1.5f;
 
   template <class Visit>
@@ -119,13 +116,10 @@ struct ObstacleTaskConfig : TaskConfig {
     v("path_candidates", &C::path_candidates, closed_range(0, kMaxShortlist),
       "The path filter re-ranks this many nearest candidates of each decision (and the continuation); 0: the "
       "exact filtered search over the whole database (slow, for baselines).");
-    v("path_fan", &C::path_fan, closed_range(0, kMaxShortlistFan),
-      "Turns each way of the path fan: the query's trajectory turned by +-1..n x path_fan_degrees adds "
-      "path_fan_candidates nearest frames each, so turning clips join the shortlist.");
     v("path_fan_degrees", &C::path_fan_degrees, OptionRange{0.0, 90.0, true},
-      "The turn between the path fan's queries (degrees).");
+      "The turn between a compressed controller's turned queries (degrees; compressed_path_fan).");
     v("path_fan_candidates", &C::path_fan_candidates, closed_range(1, kMaxShortlist),
-      "How many nearest candidates each turned query of the path fan, and each escape query, adds.");
+      "How many nearest candidates each escape query adds to the shortlist.");
     v("path_escapes", &C::path_escapes, closed_range(0, kMaxEscapes),
       "Escape queries of the path filter's shortlist: the pose shown asking to stand (1), to step back, left and "
       "right (2-4; 0.5 m/s), to walk towards 0, +-45, +-90, +-135 and 180 degrees (5-12; 1 m/s) and to run the "
@@ -147,8 +141,6 @@ struct ObstacleTaskConfig : TaskConfig {
     v("sensor_size", &C::sensor_size, kPositive, "Side of the square sensor map (meters), 16 x 16 point sensors.");
     v("sensor_forward", &C::sensor_forward, kAny,
       "Centre of the sensor square ahead of the root (meters); 0 centres it on the character.");
-    v("previous_map_lag", &C::previous_map_lag, closed_range(1, 30),
-      "The observation's second map is the one read this many RL steps ago (1: the paper's previous step).");
     v("grid_cell_size", &C::grid_cell_size, kPositive,
       "Cell side (meters) of the uniform grid used for sensors, hits and collisions.");
   }
@@ -164,7 +156,7 @@ struct ObstacleEnvState : TargetEnvState {
   uint8_t hit_inside[3] = {0, 0, 0};
   bool collided = false;
   int grid_age = 0;  // RL steps since env's grid was rebuilt
-  int map_head = 0;  // ring slot of the current sensor map (the previous one is the next slot)
+  int map_head = 0;  // slot (0 or 1) of the current sensor map; the previous one is in the other
 };
 
 class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState> {
@@ -201,7 +193,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   void observe(int i, float* obs_row) const;
   const ObstacleField& field() const { return field_; }
   const uint8_t* sensor_map(int i) const { return map_slot(i, envs_[i].map_head); }
-  const uint8_t* previous_sensor_map(int i) const { return map_slot(i, (envs_[i].map_head + 1) % map_slots_); }
+  const uint8_t* previous_sensor_map(int i) const { return map_slot(i, envs_[i].map_head ^ 1); }
   // Env i's map now with every sensor tested against every obstacle (the tests' reference),
   // kMapCells bytes [row][col].
   void sensor_map_bruteforce(int i, uint8_t* map) const;
@@ -277,8 +269,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   const CandidateFilter* candidate_filter(int i);
   Shortlist candidate_shortlist() const {
     if (!config_.path_filter) return {};
-    return {config_.path_candidates, config_.path_fan, deg_to_rad(config_.path_fan_degrees), config_.path_fan_candidates,
-            config_.path_escapes, escape_table_.get()};
+    return {config_.path_candidates, 0, 0.0f, config_.path_fan_candidates, config_.path_escapes, escape_table_.get()};
   }
   Shortlist projection_shortlist() const {
     if (!config_.path_filter) return {};
@@ -303,11 +294,10 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   std::vector<ObstaclePathFilter> path_filters_;  // per env
   std::shared_ptr<const EscapeTable> escape_table_;  // path_escapes' nearest frames (shared per matcher)
   const uint8_t* map_slot(int i, int k) const {
-    return &maps_[(static_cast<size_t>(i) * map_slots_ + k) * kMapCells];
+    return &maps_[(static_cast<size_t>(i) * 2 + k) * kMapCells];
   }
-  uint8_t* map_slot(int i, int k) { return &maps_[(static_cast<size_t>(i) * map_slots_ + k) * kMapCells]; }
-  int map_slots_;              // previous_map_lag + 1
-  std::vector<uint8_t> maps_;  // per env: a ring of map_slots_ maps, the newest at the env's map_head
+  uint8_t* map_slot(int i, int k) { return &maps_[(static_cast<size_t>(i) * 2 + k) * kMapCells]; }
+  std::vector<uint8_t> maps_;  // per env: two maps, the current one in slot map_head, the previous one in the other
   float stage_max_speed_, stage_half_extent_;
   float frame_dt_;
 };
