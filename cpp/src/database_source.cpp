@@ -28,7 +28,7 @@ DatabaseDecider::DatabaseDecider(const Database& db, const Matcher& matcher, con
   if (matcher.num_rows() != db.num_frames) throw std::invalid_argument("matcher was not built over this database");
   check_option("foot_jump_limit", config.foot_jump_limit, kNonNegative);
   set_transition_cost(config.transition_cost);
-  rules_ = RuleChain(db, config);
+  rules_ = RuleChain(RuleSetup{db, matcher, config});
   every_clip_ = select_request(db, TagRequest{});
 }
 
@@ -42,7 +42,7 @@ Decision DatabaseDecider::decide(int64_t frame, const float* action) {
   source_.start(state_, frame);
   DecisionRules rules;
   rules.transition_cost = transition_cost_;
-  rules.filter = rules_.prepare(RuleContext{source_, state_, every_clip_});
+  rules_.prepare(RuleContext{source_, state_, every_clip_}, rules);
   return decider_.decide(source_, state_, action, rules);
 }
 

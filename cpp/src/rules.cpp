@@ -1,5 +1,7 @@
 #include "mmrl/rules.hpp"
 
+#include "mmrl/tasks/path_filter.hpp"
+
 #include <algorithm>
 #include <limits>
 
@@ -68,18 +70,19 @@ class FootJumpRule final : public CandidateRule {
 };
 
 std::vector<CandidateRuleType>& registry() {
-  // The builtin rules, one line each, in chain order. (The obstacles' path filter is that
-  // task's own, on top of the chain: obstacles.hpp.)
+  // The builtin rules, one line each, in chain order.
   static std::vector<CandidateRuleType> types = {
-      {"clip-costs", [](const Database& db, const TaskConfig& c) -> std::unique_ptr<CandidateRule> {
-         return c.clip_costs.empty() ? nullptr : std::make_unique<ClipCostRule>(db, c.clip_costs);
+      {"clip-costs", [](const RuleSetup& s) -> std::unique_ptr<CandidateRule> {
+         return s.config.clip_costs.empty() ? nullptr : std::make_unique<ClipCostRule>(s.db, s.config.clip_costs);
        }},
-      {"request", [](const Database& db, const TaskConfig&) -> std::unique_ptr<CandidateRule> {
-         return std::make_unique<RequestRule>(db);
+      {"request", [](const RuleSetup& s) -> std::unique_ptr<CandidateRule> {
+         return std::make_unique<RequestRule>(s.db);
        }},
-      {"foot-jump", [](const Database& db, const TaskConfig& c) -> std::unique_ptr<CandidateRule> {
-         return c.foot_jump_limit > 0 ? std::make_unique<FootJumpRule>(db, c.foot_jump_limit) : nullptr;
+      {"foot-jump", [](const RuleSetup& s) -> std::unique_ptr<CandidateRule> {
+         const float limit = s.config.foot_jump_limit;
+         return limit > 0 ? std::make_unique<FootJumpRule>(s.db, limit) : nullptr;
        }},
+      {"path-filter", make_path_filter_rule},
   };
   return types;
 }
@@ -88,19 +91,20 @@ std::vector<CandidateRuleType>& registry() {
 
 const std::vector<CandidateRuleType>& candidate_rule_types() { return registry(); }
 
-RuleChain::RuleChain(const Database& db, const TaskConfig& config) {
+RuleChain::RuleChain(const RuleSetup& setup) {
   for (const CandidateRuleType& type : candidate_rule_types())
-    if (auto rule = type.make(db, config)) rules_.push_back(std::move(rule));
+    if (auto rule = type.make(setup)) rules_.push_back(std::move(rule));
 }
 
-const CandidateFilter* RuleChain::prepare(const RuleContext& context) {
+void RuleChain::prepare(const RuleContext& context, DecisionRules& rules) {
   const CandidateFilter* below = nullptr;
   for (const auto& rule : rules_) {
     if (!rule->prepare(context)) continue;
     rule->set_below(below);
+    rule->shape(rules);
     below = rule.get();
   }
-  return below;
+  rules.filter = below;
 }
 
 int register_candidate_rule(CandidateRuleType type) {

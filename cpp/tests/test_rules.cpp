@@ -45,7 +45,7 @@ class FootRule final : public CandidateRule {
 struct ToyRuleRegistered {
   int before = static_cast<int>(candidate_rule_types().size());
   ToyRuleRegistered() {
-    register_candidate_rule({"toy-foot", [](const Database&, const TaskConfig&) -> std::unique_ptr<CandidateRule> {
+    register_candidate_rule({"toy-foot", [](const RuleSetup&) -> std::unique_ptr<CandidateRule> {
                                if (!(g_weight > 0)) return nullptr;
                                return std::make_unique<FootRule>(g_weight);
                              }});

@@ -92,7 +92,7 @@ struct Shortlist {
   int fan_k = 1;
   int escapes = 0;
   // Required when escapes > 0, built for (escapes, fan_k) (EscapeTable::shared): the caller that
-  // draws the shortlist (ObstacleVecEnv::candidate_shortlist) sets both from one config.
+  // draws the shortlist (the path filter rule, tasks/path_filter.hpp) sets both from one config.
   const EscapeTable* escape_table = nullptr;
 };
 static_assert(1 + 2 * kMaxShortlistFan <= kMaxShortlistQueries, "shortlist queries");

@@ -6,10 +6,11 @@
 //
 // Each env of every task holds one instance of each registered rule that its config turns on
 // (CandidateRuleType::make), built once from the config. The builtin rules come first: the clip
-// costs (task.clip_costs), then the env's request (its clips only). Before each decision the env
-// prepares every rule for the character (RuleContext) and chains the ones that price this
-// decision, in registration order, each over the ones before it (RuleChain below); a
-// task's own filter (the obstacles' path filter) sits on top. The search then prices
+// costs (task.clip_costs), then the env's request (its clips only), the foot-jump limit and the
+// obstacles' collision-aware search (tasks/path_filter.hpp: a rule that reads the character's
+// obstacles from RuleContext and asks for a shortlist). Before each decision the env prepares
+// every rule for the character (RuleContext) and chains the ones that price this decision, in
+// registration order, each over the ones before it (RuleChain below). The search then prices
 // candidates through extra_cost, so a rule only adds cost (>= 0; +inf refuses) and the search
 // stays exact under it. When the rule refuses every candidate the decision falls back to the
 // rules below it (decision.hpp).
@@ -19,7 +20,8 @@
 //
 // Adding a rule: a class deriving from CandidateRule (its cost, and prepare if it needs the
 // character's state), its option in the task config's table (task_config.hpp) if it has one,
-// and one line in rules.cpp's builtin list, or register_candidate_rule (a plug-in, a test).
+// and one line in rules.cpp's builtin list, or register_candidate_rule (a plug-in, a test). A
+// rule that only some task's config has reads it by dynamic_cast of RuleSetup::config.
 #pragma once
 
 #include <limits>
@@ -33,11 +35,22 @@
 
 namespace mmrl {
 
+struct ObstacleScene;  // tasks/path_filter.hpp
+
+// What a rule is built from: one env's database, its matcher, and its task's config (the task's
+// own type: ObstacleTaskConfig, ...).
+struct RuleSetup {
+  const Database& db;
+  const Matcher& matcher;
+  const TaskConfig& config;
+};
+
 // What a rule may read of the character before a decision.
 struct RuleContext {
   const MotionSource& source;
   const MotionState& state;         // the candidate it shows: source.current(state)
   const RequestSelection& request;  // the clips it keeps to now (restricts(): some only)
+  const ObstacleScene* obstacles = nullptr;  // the character's obstacles (tasks that have them), or null
 };
 
 class CandidateRule : public CandidateFilter {
@@ -55,6 +68,10 @@ class CandidateRule : public CandidateFilter {
     return own > 0.0f || own != own ? below + own : below;  // a negative cost counts as 0; NaN refuses
   }
   const CandidateFilter* fallback() const final { return below_; }
+  // How the search shows this rule its candidates when it prices a decision (a costly rule asks
+  // for a shortlist, decision.hpp): changes rules.shortlist and rules.projections; by default
+  // nothing (the rule runs inside the exact search).
+  virtual void shape(DecisionRules& /*rules*/) const {}
 
  protected:
   // This rule's own cost of candidate c: >= 0 in squared normalized feature distance, +inf
@@ -65,25 +82,26 @@ class CandidateRule : public CandidateFilter {
   const CandidateFilter* below_ = nullptr;
 };
 
-// A registered rule: its name and what builds it for one env of a task with config c over db
-// (null when c leaves it off; std::invalid_argument for a bad config).
+// A registered rule: its name and what builds it for one env (null when the env's config leaves
+// it off; std::invalid_argument for a bad config).
 struct CandidateRuleType {
   std::string name;
-  std::unique_ptr<CandidateRule> (*make)(const Database& db, const TaskConfig& c) = nullptr;
+  std::unique_ptr<CandidateRule> (*make)(const RuleSetup& setup) = nullptr;
 };
 
 // The registered rules, in chain order (the builtin ones first).
 const std::vector<CandidateRuleType>& candidate_rule_types();
 
 // One character's instances of the registered rules its config turns on, built once; before each
-// decision prepare() chains the ones that price it, each over the ones before it, and returns the
-// top of the chain (null when none does): the filter a decision runs with. What every env of
-// every task (vecenv.hpp) and a standalone character's decider (database_source.hpp) decide with.
+// decision prepare() chains the ones that price it, each over the ones before it, and puts the
+// top of the chain (null when none does) in rules.filter and their shortlists in rules: what a
+// decision runs with. What every env of every task (vecenv.hpp) and a standalone character's
+// decider (database_source.hpp) decide with.
 class RuleChain {
  public:
   RuleChain() = default;
-  RuleChain(const Database& db, const TaskConfig& config);
-  const CandidateFilter* prepare(const RuleContext& context);
+  explicit RuleChain(const RuleSetup& setup);
+  void prepare(const RuleContext& context, DecisionRules& rules);
 
  private:
   std::vector<std::unique_ptr<CandidateRule>> rules_;

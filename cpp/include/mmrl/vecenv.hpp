@@ -210,9 +210,7 @@ class TargetVecEnv {
   DecisionRules decision_rules(int i) {
     DecisionRules rules;
     rules.transition_cost = task().decision_transition_cost(i);
-    rules.filter = task().candidate_filter(i);
-    rules.shortlist = task().candidate_shortlist();
-    rules.projections = task().projection_shortlist();
+    rules_[static_cast<size_t>(i)].prepare(RuleContext{*source_, envs_[i], request(i), task().scene(i)}, rules);
     return rules;
   }
 
@@ -262,7 +260,7 @@ class TargetVecEnv {
     source_ = &database_source_;
     decider_ = Decider(db, config.action_limit_std);
     rules_.reserve(envs_.size());
-    for (size_t i = 0; i < envs_.size(); ++i) rules_.emplace_back(db, config);
+    for (size_t i = 0; i < envs_.size(); ++i) rules_.emplace_back(RuleSetup{db, matcher, config_});
     request_code_ = RequestCode(db, config.request_groups);
     request_mix_ = mmrl::request_mix(db, request_code_, config.request_any);
     every_clip_ = select_request(db, TagRequest{});
@@ -354,17 +352,9 @@ class TargetVecEnv {
   // its state): the config's transition_cost.
   float decision_transition_cost(int) const { return config_.transition_cost; }
 
-  // The candidate filter of env i's next match (a task hides it to add its own on top of
-  // rule_chain): the rules that price it (rules.hpp), chained.
-  const CandidateFilter* candidate_filter(int i) { return rule_chain(i); }
-  // Env i's rules (rules.hpp: the clip costs, its request, the registered ones) prepared for its
-  // state now, each that prices this decision chained over the ones before it; null when none does.
-  const CandidateFilter* rule_chain(int i) {
-    return rules_[static_cast<size_t>(i)].prepare(RuleContext{*source_, envs_[i], request(i)});
-  }
-  // The queries a source of rowless candidates projects (shortlist_queries' fan; k is unused): the
-  // query alone, unless a task's filter prices projections and wants its turned copies too.
-  Shortlist projection_shortlist() const { return {}; }
+  // The obstacles env i's rules may read at its next decision (a task with obstacles hides it):
+  // none.
+  const ObstacleScene* scene(int) { return nullptr; }
   // The request code of env i (request_dim() floats) into out: all 0 without a request.
   void observe_request(int i, float* out) const {
     const State& s = envs_[i];
@@ -375,9 +365,6 @@ class TargetVecEnv {
       code = request_mix_.codes[static_cast<size_t>(s.request_index)].data();
     for (int k = 0; k < request_dim(); ++k) out[k] = code ? code[k] : 0.0f;
   }
-  // How the filter's shortlist is drawn (decision.hpp's Shortlist; k = 0: no shortlist, the
-  // filter runs in the exact search, the clip costs' rule). A task with a costly filter hides it.
-  Shortlist candidate_shortlist() const { return {}; }
 
   // Distance (meters) from env i's root to its target.
   float target_distance(const State& s) const { return std::hypot(s.target_x - s.root.x, s.target_z - s.root.z); }

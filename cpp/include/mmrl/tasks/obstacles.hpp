@@ -258,22 +258,17 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   friend class TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState>;
   // After set_state: rebuild the grid and both sensor maps around the new root.
   void on_state_set(int i) { refresh(i, false, true); }
-  // After the motion source changed (set_source): the path filters are ready for its
+  // After the motion source changed (set_source): path_hits' filters are ready for its
   // candidates, and the maps follow the new state.
   void on_source_set() {
     for (ObstaclePathFilter& f : path_filters_) f.set_prices_states(source().rowless_candidates());
     for (int i = 0; i < num_envs(); ++i) refresh(i, false, true);
   }
-  // The base's chain (registered rules over the request over the clip costs), or with
-  // path_filter env i's collision-aware filter prepared for its current state on top of it.
-  const CandidateFilter* candidate_filter(int i);
-  Shortlist candidate_shortlist() const {
-    if (!config_.path_filter) return {};
-    return {config_.path_candidates, 0, 0.0f, config_.path_fan_candidates, config_.path_escapes, escape_table_.get()};
-  }
-  Shortlist projection_shortlist() const {
-    if (!config_.path_filter) return {};
-    return {0, config_.compressed_path_fan, deg_to_rad(config_.path_fan_degrees), 1};
+  // Env i's obstacles for its next decision's rules (the path filter reads them).
+  const ObstacleScene* scene(int i) {
+    const ObstacleEnvState& s = envs_[i];
+    scenes_[static_cast<size_t>(i)] = ObstacleScene{&field_, i, s.root, s.max_speed > 0, frame_dt_};
+    return &scenes_[static_cast<size_t>(i)];
   }
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
@@ -291,8 +286,8 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
                       const float* velocities);
 
   ObstacleField field_;
-  std::vector<ObstaclePathFilter> path_filters_;  // per env
-  std::shared_ptr<const EscapeTable> escape_table_;  // path_escapes' nearest frames (shared per matcher)
+  std::vector<ObstacleScene> scenes_;             // per env: what scene(i) gave its rules last
+  std::vector<ObstaclePathFilter> path_filters_;  // per env: path_hits' and state_path_hits' tests
   const uint8_t* map_slot(int i, int k) const {
     return &maps_[(static_cast<size_t>(i) * 2 + k) * kMapCells];
   }

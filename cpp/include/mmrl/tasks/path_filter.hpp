@@ -32,6 +32,7 @@
 
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <vector>
 
 #include "mmrl/database.hpp"
@@ -40,6 +41,28 @@
 #include "mmrl/kdtree.hpp"
 
 namespace mmrl {
+
+// One character's obstacles as a decision's rules see them (RuleContext::obstacles): env `env`
+// of `field`, seen from a character at `root`, moved by the env's rule when `moving` (frame_dt
+// seconds per frame) and frozen otherwise.
+struct ObstacleScene {
+  const ObstacleField* field = nullptr;
+  int env = 0;
+  RootState root;
+  bool moving = false;
+  float frame_dt = 0;
+};
+
+struct RuleSetup;
+class CandidateRule;
+// The collision-aware search as a registered candidate rule (rules.cpp's "path-filter" line):
+// built for an ObstacleTaskConfig with path_filter on (else null). Before each decision that has
+// a scene it prices every candidate's played path against the obstacles (ObstaclePathFilter
+// below, with path_cost, path_horizon, body_radius + path_margin) and asks for its shortlist:
+// path_candidates nearest plus the path_escapes' path_fan_candidates nearest each (the escape
+// table, shared per matcher), and for a compressed controller the query turned by
+// +-1..compressed_path_fan x path_fan_degrees. std::invalid_argument for a bad config.
+std::unique_ptr<CandidateRule> make_path_filter_rule(const RuleSetup& setup);
 
 struct PathFilterConfig {
   float radius = 0.3f;   // disc around each path point (meters)

@@ -53,7 +53,15 @@ void check_options(const Config& c) {
   });
 }
 
+// A task's config derives from this (a registered rule finds its task's own numbers by
+// dynamic_cast: rules.hpp).
 struct TaskConfig {
+  TaskConfig() = default;
+  TaskConfig(const TaskConfig&) = default;
+  TaskConfig(TaskConfig&&) = default;
+  TaskConfig& operator=(const TaskConfig&) = default;
+  TaskConfig& operator=(TaskConfig&&) = default;
+  virtual ~TaskConfig() = default;
   int frames_per_step = 6;
   float target_half_extent = 5.0f;
   float min_target_distance = 0.6f;
