@@ -45,62 +45,32 @@ ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c
   return f;
 }
 
-}  // namespace
-
-namespace {
-
-// The collision-aware search as a candidate rule (path_filter.hpp's make_path_filter_rule).
-class PathFilterRule final : public CandidateRule {
- public:
-  PathFilterRule(const RuleSetup& setup, const ObstacleTaskConfig& c) {
-    PathFilterConfig pc;
-    pc.radius = c.body_radius + c.path_margin;
-    pc.cost = c.path_cost;
-    pc.horizon = c.path_horizon;
-    filter_.init(setup.db, c.num_obstacles, pc, nullptr);
-    shortlist_ = {c.path_candidates, 0, 0.0f, c.path_fan_candidates, c.path_escapes, nullptr};
-    if (c.path_candidates > 0 && c.path_escapes > 0) {
-      if (c.path_escapes * c.path_fan_candidates > kMaxExtraRows)
-        throw std::invalid_argument("path_escapes x path_fan_candidates must be at most " +
-                                    std::to_string(kMaxExtraRows) + ", got " + std::to_string(c.path_escapes) +
-                                    " x " + std::to_string(c.path_fan_candidates));
-      escapes_ = EscapeTable::shared(setup.db, setup.matcher, c.path_escapes, c.path_fan_candidates);
-      shortlist_.escape_table = escapes_.get();
-    }
-    projections_ = {0, c.compressed_path_fan, deg_to_rad(c.path_fan_degrees), 1};
-  }
-  bool prepare(const RuleContext& context) override {
-    if (!context.obstacles) return false;  // a character without obstacles (mmrl.Character.step)
-    const bool states = context.source.rowless_candidates();
-    if (states != states_) filter_.set_prices_states(states_ = states);
-    const ObstacleScene& o = *context.obstacles;
-    filter_.prepare(*o.field, o.env, o.root, o.moving, o.frame_dt);
-    return true;
-  }
-  void shape(DecisionRules& rules) const override {
-    rules.shortlist = shortlist_;
-    rules.projections = projections_;
-  }
-
- protected:
-  float cost(const Candidate& c) const override {
-    const int s = filter_.first_hit(c);
-    return s < 0 ? 0.0f : filter_.hit_cost(s);
-  }
-
- private:
-  ObstaclePathFilter filter_;
-  bool states_ = false;  // the filter prices rowless candidates (set_prices_states)
-  Shortlist shortlist_, projections_;
-  std::shared_ptr<const EscapeTable> escapes_;  // path_escapes' nearest frames (shared per matcher)
-};
+PathFilterConfig path_filter_config(const ObstacleTaskConfig& c) {
+  PathFilterConfig pc;
+  pc.radius = c.body_radius + c.path_margin;
+  pc.cost = c.path_cost;
+  pc.horizon = c.path_horizon;
+  return pc;
+}
 
 }  // namespace
 
 std::unique_ptr<CandidateRule> make_path_filter_rule(const RuleSetup& setup) {
   const auto* c = dynamic_cast<const ObstacleTaskConfig*>(&setup.config);
   if (!c || !c->path_filter) return nullptr;
-  return std::make_unique<PathFilterRule>(setup, *c);
+  auto rule = std::make_unique<ObstaclePathFilter>();
+  rule->init(setup.db, c->num_obstacles, path_filter_config(*c));
+  std::shared_ptr<const EscapeTable> escapes;
+  if (c->path_candidates > 0 && c->path_escapes > 0) {
+    if (c->path_escapes * c->path_fan_candidates > kMaxExtraRows)
+      throw std::invalid_argument("path_escapes x path_fan_candidates must be at most " + std::to_string(kMaxExtraRows) +
+                                  ", got " + std::to_string(c->path_escapes) + " x " +
+                                  std::to_string(c->path_fan_candidates));
+    escapes = EscapeTable::shared(setup.db, setup.matcher, c->path_escapes, c->path_fan_candidates);
+  }
+  rule->set_shortlist({c->path_candidates, 0, 0.0f, c->path_fan_candidates, c->path_escapes, nullptr},
+                      {0, c->compressed_path_fan, deg_to_rad(c->path_fan_degrees), 1}, std::move(escapes));
+  return rule;
 }
 
 ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int num_envs,
@@ -111,13 +81,9 @@ ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int n
       stage_max_speed_(config.obstacle_max_speed),
       stage_half_extent_(config.target_half_extent),
       frame_dt_(1.0f / db.fps) {
-  PathFilterConfig pc;
-  pc.radius = config.body_radius + config.path_margin;
-  pc.cost = config.path_cost;
-  pc.horizon = config.path_horizon;
   scenes_.resize(static_cast<size_t>(num_envs));
   path_filters_.resize(static_cast<size_t>(num_envs));
-  for (ObstaclePathFilter& f : path_filters_) f.init(db, config.num_obstacles, pc, nullptr);
+  for (ObstaclePathFilter& f : path_filters_) f.init(db, config.num_obstacles, path_filter_config(config));
 }
 
 void ObstacleVecEnv::path_hits(int i, const int64_t* rows, int n, int32_t* first_hit_frames) {

@@ -7,8 +7,16 @@
 
 namespace mmrl {
 
-void ObstaclePathFilter::init(const Database& db, int capacity, const PathFilterConfig& config,
-                              const CandidateFilter* base) {
+bool ObstaclePathFilter::prepare(const RuleContext& context) {
+  if (!context.obstacles) return false;
+  const bool states = context.source.rowless_candidates();
+  if (states != states_) set_prices_states(states);
+  const ObstacleScene& o = *context.obstacles;
+  prepare(*o.field, o.env, o.root, o.moving, o.frame_dt);
+  return true;
+}
+
+void ObstaclePathFilter::init(const Database& db, int capacity, const PathFilterConfig& config) {
   if (!(config.radius >= 0) || !std::isfinite(config.radius))
     throw std::invalid_argument("path filter: radius must be finite and >= 0");
   if (!(config.cost >= 0)) throw std::invalid_argument("path_cost must be >= 0 (inf: never play a path that hits)");
@@ -21,7 +29,6 @@ void ObstaclePathFilter::init(const Database& db, int capacity, const PathFilter
   if (capacity < 0) throw std::invalid_argument("path filter: capacity must be >= 0");
   db_ = &db;
   paths_ = db.path_samples.data();
-  base_ = base;
   config_ = config;
   capacity_ = capacity;
   samples_ = 0;

@@ -1,5 +1,4 @@
-// The collision-aware search: a candidate filter (kdtree.hpp's CandidateFilter, the decision's
-// extension point) that tests the path each candidate frame would play against where every
+// The collision-aware search: a registered candidate rule (rules.hpp, "path-filter") that tests the path each candidate frame would play against where every
 // obstacle will be at that time, so the match prefers clips that stay clear. The idea is
 // environment-aware motion matching (Ponton, Andrews, Andujar, Pelechano 2025: collision costs
 // inside the search), here as one rule that the training env, the full path, the engine runtime
@@ -15,8 +14,7 @@
 //     between samples) around its path point overlaps an obstacle there. The extra cost of j
 //     is cost * (2 - t_s / horizon) for its first hit at t_s = kPathSampleFrames[s] frames
 //     (twice the cost for a hit right away, the cost itself at the horizon), 0 for a clear
-//     path; cost = +inf refuses every candidate that hits. Costs add to the base filter's (the
-//     task's clip costs), if any.
+//     path; cost = +inf refuses every candidate that hits. Costs add to the rules' below it.
 // The continuation is a candidate like any other: it keeps its transition-cost advantage while
 // its path is clear, and loses it (plus the hit's cost) when it is not. A compressed
 // controller's candidate (a state, no database row) is priced by the same method, its path
@@ -39,6 +37,7 @@
 #include "mmrl/decision.hpp"
 #include "mmrl/grid.hpp"
 #include "mmrl/kdtree.hpp"
+#include "mmrl/rules.hpp"
 
 namespace mmrl {
 
@@ -53,8 +52,6 @@ struct ObstacleScene {
   float frame_dt = 0;
 };
 
-struct RuleSetup;
-class CandidateRule;
 // The collision-aware search as a registered candidate rule (rules.cpp's "path-filter" line):
 // built for an ObstacleTaskConfig with path_filter on (else null). Before each decision that has
 // a scene it prices every candidate's played path against the obstacles (ObstaclePathFilter
@@ -80,13 +77,19 @@ struct PathFilterConfig {
 // windows and the training database give the same test).
 void trajectory_path(const float* raw_trajectory, float* path);
 
-class ObstaclePathFilter final : public CandidateFilter {
+class ObstaclePathFilter final : public CandidateRule {
  public:
   ObstaclePathFilter() = default;
-  // Sizes the filter for up to `capacity` obstacles. base (may be null) is added to every
-  // row's cost and must outlive the filter. Throws std::invalid_argument for a config out of
-  // range or a database without path samples.
-  void init(const Database& db, int capacity, const PathFilterConfig& config, const CandidateFilter* base);
+  // Sizes the filter for up to `capacity` obstacles. Throws std::invalid_argument for a config
+  // out of range or a database without path samples.
+  void init(const Database& db, int capacity, const PathFilterConfig& config);
+  // The shortlist and projections it asks a decision for as a rule (shape), and the escape table
+  // the shortlist reads (kept alive here; null without escapes).
+  void set_shortlist(const Shortlist& shortlist, const Shortlist& projections,
+                     std::shared_ptr<const EscapeTable> escapes) {
+    shortlist_ = shortlist, projections_ = projections, escapes_ = std::move(escapes);
+    shortlist_.escape_table = escapes_.get();
+  }
   // Prepares one decision: env's obstacles of `field` seen from a character at `root`, moved by
   // the env's rule when `moving` (frame_dt seconds per frame) and frozen otherwise.
   void prepare(const ObstacleField& field, int env, const RootState& root, bool moving, float frame_dt);
@@ -100,16 +103,12 @@ class ObstaclePathFilter final : public CandidateFilter {
     prepared_ = false;
   }
 
-  // The filter under this one (a request's clips and the clip costs; may be null).
-  void set_base(const CandidateFilter* base) { base_ = base; }
-  const CandidateFilter* fallback() const override { return base_; }
-
-  float extra_cost(const Candidate& c) const override {
-    const float base = base_ ? base_->extra_cost(c) : 0.0f;
-    if (!(base < std::numeric_limits<float>::infinity())) return base;  // refused below: no path test
-    const int s = first_hit(c);
-    if (s < 0) return base;
-    return base + hit_cost_[s];
+  // As a rule: prepares for the context's obstacles (off without them: a character with none)
+  // and asks for its shortlist.
+  bool prepare(const RuleContext& context) override;
+  void shape(DecisionRules& rules) const override {
+    rules.shortlist = shortlist_;
+    rules.projections = projections_;
   }
   // The first sample index s at which a candidate's path hits (kPathSampleFrames[s] frames
   // ahead), or -1. A database row's path is its path samples; a candidate without a row (a
@@ -128,9 +127,15 @@ class ObstaclePathFilter final : public CandidateFilter {
   int nearby() const { return kept_; }
 
  private:
+  float cost(const Candidate& c) const override {
+    const int s = first_hit(c);
+    return s < 0 ? 0.0f : hit_cost_[s];
+  }
+
   const Database* db_ = nullptr;
   const float* paths_ = nullptr;  // db.path_samples
-  const CandidateFilter* base_ = nullptr;
+  Shortlist shortlist_, projections_;
+  std::shared_ptr<const EscapeTable> escapes_;
   PathFilterConfig config_;
   float reach_ = 0;  // farthest path point within the horizon (meters)
   bool states_ = false;  // set_prices_states
