@@ -10,11 +10,14 @@ namespace mmrl {
 
 namespace {
 
-inline float activate(float x, Activation a) {
+// Calls f with the activation as a function object, so that a loop over a layer's outputs
+// branches once, not per output (a per-output switch cost a crowd about 8% of its time).
+template <class F>
+void with_activation(Activation a, F&& f) {
   switch (a) {
-    case Activation::kTanh: return std::tanh(x);
-    case Activation::kRelu: return x > 0.0f ? x : 0.0f;
-    default: return x;
+    case Activation::kTanh: return f([](float x) { return std::tanh(x); });
+    case Activation::kRelu: return f([](float x) { return x > 0.0f ? x : 0.0f; });
+    default: return f([](float x) { return x; });
   }
 }
 
@@ -65,7 +68,9 @@ inline int nonzero_inputs(const float* x, int n, int32_t* __restrict index, floa
 void dense_forward(const DenseLayer& l, const float* x, float* y, PolicyScratch& s) {
   const int count = nonzero_inputs(x, l.in, s.index.data(), s.value.data());
   sparse_input_product(l.weight, s.index.data(), s.value.data(), count, y);
-  for (int o = 0; o < l.out; ++o) y[o] = activate(y[o] + l.bias[o], l.activation);
+  with_activation(l.activation, [&](auto act) {
+    for (int o = 0; o < l.out; ++o) y[o] = act(y[o] + l.bias[o]);
+  });
 }
 
 // The sums of a valid convolution, stride 1, by scattering: each non-zero input adds its
@@ -126,10 +131,12 @@ void conv_forward(const ConvLayer& l, const float* x, float* y, PolicyScratch& s
   const int positions = (l.in_h - l.kernel_h + 1) * (l.in_w - l.kernel_w + 1), stride = l.weight.stride;
   float* sums = s.sums.data();
   conv_sums(l, x, sums, s.index.data());
-  for (int p = 0; p < positions; ++p) {
-    const float* from = sums + static_cast<size_t>(p) * stride;
-    for (int o = 0; o < l.out_channels; ++o) y[o * positions + p] = activate(from[o] + l.bias[o], l.activation);
-  }
+  with_activation(l.activation, [&](auto act) {
+    for (int p = 0; p < positions; ++p) {
+      const float* from = sums + static_cast<size_t>(p) * stride;
+      for (int o = 0; o < l.out_channels; ++o) y[o * positions + p] = act(from[o] + l.bias[o]);
+    }
+  });
 }
 
 Activation activation_of(const ControllerFile& f, int32_t code) {
