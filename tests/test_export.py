@@ -95,3 +95,33 @@ def test_pose_bindings_refuse_bad_input():
         _core.database_global_positions(db._db, np.zeros(3, np.int32))
     with pytest.raises(IndexError):
         _core.database_global_positions(db._db, np.array([db.num_frames], np.int64))
+
+
+def test_set_deploys_a_task_option_for_one_command(tmp_path, capsys):
+    """--set on the commands that run a trained controller: eval and export use the option (the
+    transitions follow the transition cost; the exported file carries it), the run's config.json
+    is kept, and a bad option is one line and exit 2."""
+    from mmrl.export.runtime_file import read_sections
+
+    run = tmp_path / "run"
+    assert main(["train", "plane", "--steps", "256", "--envs", "4", "--out", str(run), "--no-progress"]) == 0
+    saved = (run / "config.json").read_text()
+    rates = {}
+    for cost in ("0", "1000000"):
+        capsys.readouterr()
+        assert main(["eval", str(run), "--episodes", "3", "--json", "--no-peer", "--set", f"transition_cost={cost}"]) == 0
+        rates[cost] = json.loads(capsys.readouterr().out)["transitions_per_s"]
+    assert rates["1000000"] < rates["0"], rates
+    out = tmp_path / "c.mmrl"
+    assert main(["export", str(run), "-o", str(out), "--set", "transition_cost=123"]) == 0
+    sections = read_sections(out)
+    values = dict(zip(list(sections["task.keys"]), sections["task.values"]))
+    assert values["transition_cost"] == 123.0
+    assert (run / "config.json").read_text() == saved
+    for command in (["eval", str(run), "--episodes", "1"], ["export", str(run), "-o", str(out)]):
+        for bad, needle in (("transition_cost=-1", "transition_cost must be"), ("nope=1", "unknown option 'nope'"),
+                            ("transition_cost", "KEY=VALUE")):
+            capsys.readouterr()
+            assert main(command + ["--set", bad]) == 2, (command, bad)
+            err = capsys.readouterr().err.strip().splitlines()
+            assert len(err) == 1 and needle in err[0], err

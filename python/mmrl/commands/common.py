@@ -236,6 +236,29 @@ def check_ppo_overrides(values: Dict[str, Any]) -> None:
             raise InputError(f"--set hidden={','.join(map(str, v))}: expected layer widths >= 1, e.g. 64,64")
 
 
+def add_deploy_set(p: argparse.ArgumentParser) -> None:
+    """``--set KEY=VALUE`` of the commands that run a trained controller (eval, render, export-bvh,
+    export, play): a task option for this command only (see :func:`deploy_config`)."""
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a task option for this command only, the run's own kept, e.g. transition_cost=150 "
+                        "(repeatable; mmrl train TASK --list-options lists them)")
+
+
+def deploy_config(task: Task, config, items: List[str], db):
+    """``config`` with the ``--set`` items applied, checked by building one env over ``db``: how
+    a trained controller is deployed (its search, its transition cost), not how it trained.
+    InputError naming the option for an unknown, retired or out-of-range one."""
+    if not items:
+        return config
+    (values,) = split_overrides(items, config)
+    config = config.replace(**values)
+    try:
+        task.make_vector_env(1, db=db, config=config, num_threads=1)
+    except (ValueError, TypeError) as e:
+        raise InputError(f"--set: {task.name} options: {e}") from None
+    return config
+
+
 def apply_values(obj, values: Dict[str, Any]) -> None:
     for k, v in values.items():
         setattr(obj, k, tuple(v) if isinstance(getattr(obj, k), tuple) and v is not None else v)

@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from ..errors import InputError
-from .common import add_data_options, output_path, positive_int, run_database
+from .common import add_data_options, add_deploy_set, deploy_config, output_path, positive_int, run_database
 
 
 def register_cli(sub) -> None:
@@ -31,6 +31,7 @@ def register_cli(sub) -> None:
                    help="with --compressed: start frames kept for the characters (default: 8)")
     x.add_argument("--check-observations", type=positive_int, default=512, metavar="N",
                    help="observations the ONNX check compares on (default: 512)")
+    add_deploy_set(x)
     x.set_defaults(func=cmd_export)
 
 
@@ -69,7 +70,8 @@ def cmd_export(args: argparse.Namespace) -> int:
             output_path(getattr(args, name), "-o" if name == "output" else "--onnx")
     run = RunDir(args.run, require_run=True)
     task = run.task
-    policy, db, config = run.policy(), run_database(run, args), run.task_config(task)
+    policy, db = run.policy(), run_database(run, args)
+    config = deploy_config(task, run.task_config(task), args.set, db)
     if args.output is not None:
         from ..export.runtime_export import write_controller
 

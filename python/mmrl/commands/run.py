@@ -20,7 +20,7 @@ import numpy as np
 from ..errors import InputError
 from ..tasks import get_task, task_names
 from .db import fps_text
-from .common import (add_data_options, bounded_int, count, database_from_args, deprecated_alias, nonnegative_float,
+from .common import (add_data_options, add_deploy_set, deploy_config, bounded_int, count, database_from_args, deprecated_alias, nonnegative_float,
                      output_path, positive_float, seed)
 
 #: Episodes of the joystick that ``mmrl eval`` runs at the policy's speed by default (the first
@@ -63,6 +63,7 @@ def add_shared_options(p: argparse.ArgumentParser, motion: bool) -> None:
     p.add_argument("--compressed", default=None, metavar="FILE",
                    help="play a compressed controller (mmrl compress) instead of the database: the same policy, "
                         "its projector for the search and its stepper for playback (docs/compressed.md)")
+    add_deploy_set(p)
 
 
 def register_cli(sub) -> None:
@@ -128,6 +129,7 @@ class Setup:
                 run.check_database(self.db, "--db" if args.db else "--data")
         else:
             self.db = run.database()
+        self.config = deploy_config(self.task, self.config, args.set, self.db)
         self.policy, self.policy_name = self._policy(args, run)
         self.options = dict(ik=not args.no_ik, foot_locking=not args.no_ik,
                             inertialization_halflife=0.0 if args.no_inertialization else 0.1)

@@ -14,7 +14,8 @@ import threading
 import webbrowser
 
 from ..errors import InputError
-from .common import add_data_options, deprecated_alias, output_path, port, positive_float, run_database, seed
+from .common import (add_data_options, add_deploy_set, deploy_config, deprecated_alias, output_path, port,
+                     positive_float, run_database, seed)
 
 
 def _server_options(p: argparse.ArgumentParser) -> None:
@@ -50,6 +51,7 @@ def register_cli(sub) -> None:
                    help="the request to start with, e.g. \"style=elderly\" (switchable in the page; docs/styles.md)")
     p.add_argument("--compressed", default=None, metavar="FILE",
                    help="play a compressed controller (mmrl compress) instead of the database (docs/compressed.md)")
+    add_deploy_set(p)
     p.set_defaults(func=cmd_play)
 
 
@@ -126,7 +128,8 @@ def cmd_play(args: argparse.Namespace) -> int:
         if args.request:
             raise InputError("--compressed: a compressed controller keeps to no tags; drop --request")
         compressed = CompressedModel(args.compressed, db)
-    session = LiveSession(task, db, run.policy(), config=run.task_config(task), stage=args.stage,
+    config = deploy_config(task, run.task_config(task), args.set, db)
+    session = LiveSession(task, db, run.policy(), config=config, stage=args.stage,
                           seed=args.seed, trace=args.trace, request=check_request(db, args.request),
                           compressed=compressed)
     session.policy_name = args.policy
