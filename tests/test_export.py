@@ -120,8 +120,11 @@ def test_set_deploys_a_task_option_for_one_command(tmp_path, capsys):
     assert (run / "config.json").read_text() == saved
     for command in (["eval", str(run), "--episodes", "1"], ["export", str(run), "-o", str(out)]):
         for bad, needle in (("transition_cost=-1", "transition_cost must be"), ("nope=1", "unknown option 'nope'"),
-                            ("transition_cost", "KEY=VALUE")):
+                            ("transition_cost", "KEY=VALUE"),
+                            ("frames_per_step=3", "trained with frames_per_step=6")):
             capsys.readouterr()
             assert main(command + ["--set", bad]) == 2, (command, bad)
             err = capsys.readouterr().err.strip().splitlines()
             assert len(err) == 1 and needle in err[0], err
+    capsys.readouterr()  # a joystick has no trained inputs: it may run another step length
+    assert main(["eval", "--episodes", "1", "--no-peer", "--json", "--set", "frames_per_step=3"]) == 0

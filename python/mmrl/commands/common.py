@@ -244,13 +244,18 @@ def add_deploy_set(p: argparse.ArgumentParser) -> None:
                         "(repeatable; mmrl train TASK --list-options lists them)")
 
 
-def deploy_config(task: Task, config, items: List[str], db):
+def deploy_config(task: Task, config, items: List[str], db, trained: bool = True):
     """``config`` with the ``--set`` items applied, checked by building one env over ``db``: how
-    a trained controller is deployed (its search, its transition cost), not how it trained.
-    InputError naming the option for an unknown, retired or out-of-range one."""
+    a controller is deployed (its search, its transition cost), not how it trained. InputError
+    naming the option for an unknown, retired or out-of-range one, and (``trained``: a trained
+    policy runs) for one that would change what the policy observes or how its action is read."""
     if not items:
         return config
     (values,) = split_overrides(items, config)
+    for k, v in values.items():
+        if trained and k in config.policy_inputs and v != getattr(config, k):
+            raise InputError(f"--set {k}: the policy was trained with {k}={getattr(config, k)!r}, and what it "
+                             f"observes or how its action is read cannot change at deployment")
     config = config.replace(**values)
     try:
         task.make_vector_env(1, db=db, config=config, num_threads=1)

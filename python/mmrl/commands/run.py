@@ -129,7 +129,8 @@ class Setup:
                 run.check_database(self.db, "--db" if args.db else "--data")
         else:
             self.db = run.database()
-        self.config = deploy_config(self.task, self.config, args.set, self.db)
+        self.config = deploy_config(self.task, self.config, args.set, self.db,
+                                    trained=run is not None and args.policy is None)
         self.policy, self.policy_name = self._policy(args, run)
         self.options = dict(ik=not args.no_ik, foot_locking=not args.no_ik,
                             inertialization_halflife=0.0 if args.no_inertialization else 0.1)

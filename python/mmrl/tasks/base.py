@@ -57,6 +57,9 @@ class TaskConfig:
 
     #: Fields the trainer reads and the C++ core never sees (``Task.training_config``).
     training_only: ClassVar[Tuple[str, ...]] = ()
+    #: Options that shape what a trained policy observes or how its action is read: a deployment
+    #: (``--set`` on eval, export, play) cannot change them.
+    policy_inputs: ClassVar[Tuple[str, ...]] = ("frames_per_step", "action_limit_std", "request_groups")
     #: Options of experiments that lost, removed from the code (``options.check_retired``).
     retired: ClassVar[Mapping[str, Any]] = {}
 
