@@ -96,8 +96,9 @@ RuntimeTaskType obstacles_runtime_task() {
     for (const auto& [key, now] : kRetired) {
       const auto it = task.values.find(key);
       if (it != task.values.end() && it->second != now)
-        f.fail(std::string("task.") + key + " is " + format_number(it->second) + ": an experiment's option this " +
-               "runtime no longer has (it always runs " + format_number(now) + "; docs/obstacles.md, \"Retired options\")");
+        f.fail(std::string("task.") + key + " is " + format_number(it->second) + ": an experiment's option " +
+               "this runtime no longer has (it always runs " + format_number(now) +
+               "; docs/obstacles.md, \"Retired options\")");
     }
     // The escapes' nearest frames, found at export (optional: without it the table is built when
     // the controller loads, seconds for a large database).

@@ -63,9 +63,9 @@ std::unique_ptr<CandidateRule> make_path_filter_rule(const RuleSetup& setup) {
   std::shared_ptr<const EscapeTable> escapes;
   if (c->path_candidates > 0 && c->path_escapes > 0) {
     if (c->path_escapes * c->path_fan_candidates > kMaxExtraRows)
-      throw std::invalid_argument("path_escapes x path_fan_candidates must be at most " + std::to_string(kMaxExtraRows) +
-                                  ", got " + std::to_string(c->path_escapes) + " x " +
-                                  std::to_string(c->path_fan_candidates));
+      throw std::invalid_argument("path_escapes x path_fan_candidates must be at most " +
+                                  std::to_string(kMaxExtraRows) + ", got " + std::to_string(c->path_escapes) +
+                                  " x " + std::to_string(c->path_fan_candidates));
     escapes = EscapeTable::shared(setup.db, setup.matcher, c->path_escapes, c->path_fan_candidates);
   }
   rule->set_shortlist({c->path_candidates, 0, 0.0f, c->path_fan_candidates, c->path_escapes, nullptr},
