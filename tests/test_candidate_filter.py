@@ -31,12 +31,14 @@ def mixamo_db(tmp_path_factory):
     return other_skeleton_database(tmp_path_factory.mktemp("mixamo"))
 
 
-def brute_force_decision(db, frame, action, low, high, transition_cost, clip_costs):
+def brute_force_decision(db, frame, action, low, high, transition_cost, clip_costs, row_costs=None):
     """(frame to play from, its filtered cost, slack to the nearest competitor) by the rule of
-    decision.hpp with a per-clip extra cost."""
+    decision.hpp with a per-clip extra cost (and a per-frame one, row_costs)."""
     rows = np.asarray(db.normalized_features, np.float64)
     query = np.concatenate([rows[frame, :15], np.clip(action, low, high)])
     cost = ((rows - query) ** 2).sum(1) + np.asarray(clip_costs, np.float64)[db.frame_clip]
+    if row_costs is not None:
+        cost = cost + row_costs
     allowed = np.asarray(db.valid_mask, bool) & np.isfinite(cost)
     c = int(db.frame_clip[frame])
     start, stop = db.clip_ranges[c]

@@ -1,7 +1,8 @@
 """Motion while standing (issue 38, mmrl.eval.standing): the raw-mocap floor over a subset of
 frames against the floor of a database of that subset alone, the idle frames against the motion
 kinds, the standing phase's segment and stop jump against brute force over the recording, the
-same episodes for every controller, and the arrive task's rest transition cost step by step."""
+same episodes for every controller, the arrive task's stand step by step, and the stand's
+preference for frames that go on standing against brute force on two skeletons."""
 import math
 
 import numpy as np
@@ -14,6 +15,8 @@ from mmrl.motion import synth
 from mmrl.motion.kinds import idle_frames, motion_kinds
 from mmrl.rl.policies import JoystickPolicy, database_speeds
 from mmrl.rollout import FullPath
+from test_candidate_filter import brute_force_decision
+from test_import_axes_fps import other_skeleton_database
 
 ARRIVE = mmrl.get_task("arrive")
 
@@ -116,7 +119,7 @@ def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance
     features = np.asarray(db.features)
     config = ARRIVE.default_config().replace(success_radius=0.5, stand_radius=0.3, facing_tolerance=0.5,
                                              target_half_extent=2.0, min_target_distance=0.8, hold_time=3.0,
-                                             stand_exit=stand_exit)
+                                             stand_exit=stand_exit, stand_idle_cost=0.0)
     standing = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
     plain = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
     obs, _ = standing.reset(seed=2)
@@ -166,7 +169,7 @@ def test_an_arrived_character_keeps_standing_within_stand_exit(stand_exit):
     still = np.flatnonzero(valid & (np.hypot(features[:, 12], features[:, 14]) < 0.05))
     assert len(still) > 0
     config = ARRIVE.default_config().replace(success_radius=0.3, stand_radius=0.1, facing_tolerance=0.5,
-                                             stand_exit=stand_exit)
+                                             stand_exit=stand_exit, stand_idle_cost=0.0)
     env = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
     plain = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
     other = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
@@ -196,3 +199,62 @@ def test_an_arrived_character_keeps_standing_within_stand_exit(stand_exit):
     decide(0.5, stand_exit >= 2.0)
     if stand_exit >= 2.0:
         decide(0.7, False)
+
+
+def stand_idle_costs(db, seconds, cost) -> np.ndarray:
+    """Each frame's cost in a stand by hand (arrive.hpp's stand-idle rule): an idle frame (the
+    motion kinds' measure) that goes on standing t seconds (its run of idle frames in its clip,
+    to the last one's next second) costs cost * max(0, 1 - t / seconds); any other frame cost."""
+    idle = idle_frames(db)
+    out = np.full(db.num_frames, cost, np.float64)
+    for a, b in np.asarray(db.clip_ranges):
+        run = 0
+        for r in range(b - 1, a - 1, -1):
+            run = run + 1 if idle[r] else 0
+            if idle[r]:
+                out[r] = cost * max(0.0, 1.0 - (run - 1 + 30) / db.fps / seconds)
+    return out
+
+
+@pytest.mark.parametrize("which", ["synthetic", "mixamo"])
+def test_a_standing_match_prefers_frames_that_go_on_standing(which, tmp_path):
+    """An arrived character (at rest at its target, facing its facing) on each of 40 still
+    frames: its match is the brute-force decision with every frame's stand-idle cost added (and
+    without it when the rule is off); the rule changes some matches and makes every changed one
+    stand longer."""
+    db = (mmrl.default_database() if which == "synthetic" else
+          other_skeleton_database(tmp_path, clips=((1.4, 0.3), (0.0, 0.0), (1.2, -0.5), (3.0, 0.2))))
+    features = np.asarray(db.features)
+    still = np.flatnonzero(np.asarray(db.valid_mask, bool) & (np.hypot(features[:, 12], features[:, 14]) < 0.05))
+    assert len(still) >= 40
+    config = ARRIVE.default_config().replace(success_radius=0.3, stand_radius=0.1, facing_tolerance=0.5,
+                                             hold_time=5.0, transition_cost=2.0, stand_idle_seconds=10.0,
+                                             stand_idle_cost=20.0)
+    envs = {cost: ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_idle_cost=cost), num_threads=1)
+            for cost in (20.0, 0.0)}
+    row_costs = {cost: stand_idle_costs(db, 10.0, cost) for cost in envs}
+    low, high = envs[0.0].single_action_space.low, envs[0.0].single_action_space.high
+    rng = np.random.default_rng(1)
+    walk = rng.normal(0, 1, (1, 12)).astype(np.float32)  # the stand overrides it
+    checked = changed = 0
+    for frame in rng.choice(still, 40, replace=False):
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        matches = {}
+        for cost, env in envs.items():
+            env.reset(seed=0)
+            env.set_state(0, int(frame), 1.0, 2.0, yaw)
+            env.set_facing(0, yaw + 0.1)
+            env.set_target(0, 1.0 + 0.05 * math.sin(yaw), 2.0 + 0.05 * math.cos(yaw))
+            query = _stand_query(db, env.env_state(0))
+            env.step(walk)
+            matches[cost] = env.env_state(0)["last_step_match"]
+            want, _, slack = brute_force_decision(db, int(frame), query, low, high, config.transition_cost,
+                                                  np.zeros(db.num_clips), row_costs[cost])
+            if slack < 1e-3:  # float32 in C++ against float64 here: skip near-ties
+                continue
+            assert matches[cost] == want
+            checked += 1
+        if matches[20.0] != matches[0.0]:
+            changed += 1
+            assert row_costs[20.0][matches[20.0]] <= row_costs[20.0][matches[0.0]] + 1e-6
+    assert checked >= 40 and changed >= 3

@@ -1,5 +1,6 @@
 #include "mmrl/rules.hpp"
 
+#include "mmrl/tasks/arrive.hpp"
 #include "mmrl/tasks/path_filter.hpp"
 
 #include <algorithm>
@@ -83,6 +84,7 @@ std::vector<CandidateRuleType>& registry() {
          return limit > 0 ? std::make_unique<FootJumpRule>(s.db, limit) : nullptr;
        }},
       {"path-filter", make_path_filter_rule},
+      {"stand-idle", make_stand_idle_rule},
   };
   return types;
 }

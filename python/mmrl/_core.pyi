@@ -1191,7 +1191,7 @@ class ArriveTaskConfig:
     """
     Numbers of the arrive task (see tasks/arrive.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit', 'stand_idle_seconds', 'stand_idle_cost')
     options: typing.ClassVar[tuple]
     def __init__(self) -> None:
         ...
@@ -1306,6 +1306,22 @@ class ArriveTaskConfig:
         """
     @stand_exit.setter
     def stand_exit(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def stand_idle_cost(self) -> float:
+        """
+        The most a stand's match adds for a frame that stands shorter than stand_idle_seconds (squared normalized feature distance, as transition_cost). 0: off.
+        """
+    @stand_idle_cost.setter
+    def stand_idle_cost(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def stand_idle_seconds(self) -> float:
+        """
+        Once arrived, the stand's match prefers idle frames (moving less than 0.15 m over the next second) that go on standing this long (s), so that a character stands through long idles rather than from one short one to the next: a frame that stands for less costs stand_idle_cost times the share of this time it falls short by (a frame that does not stand: all of it). 0: off.
+        """
+    @stand_idle_seconds.setter
+    def stand_idle_seconds(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
         ...
     @property
     def stand_radius(self) -> float:

@@ -51,6 +51,7 @@ struct RuleContext {
   const MotionState& state;         // the candidate it shows: source.current(state)
   const RequestSelection& request;  // the clips it keeps to now (restricts(): some only)
   const ObstacleScene* obstacles = nullptr;  // the character's obstacles (tasks that have them), or null
+  bool standing = false;  // the task asks the character to stand still (the arrive task once arrived)
 };
 
 class CandidateRule : public CandidateFilter {

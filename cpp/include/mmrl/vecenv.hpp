@@ -210,7 +210,7 @@ class TargetVecEnv {
   DecisionRules decision_rules(int i) {
     DecisionRules rules;
     rules.transition_cost = task().decision_transition_cost(i);
-    rules_[static_cast<size_t>(i)].prepare(RuleContext{*source_, envs_[i], request(i), task().scene(i)}, rules);
+    rules_[static_cast<size_t>(i)].prepare(RuleContext{*source_, envs_[i], request(i), task().scene(i), task().standing(i)}, rules);
     return rules;
   }
 
@@ -355,6 +355,9 @@ class TargetVecEnv {
   // The obstacles env i's rules may read at its next decision (a task with obstacles hides it):
   // none.
   const ObstacleScene* scene(int) { return nullptr; }
+  // Whether env i's next decision asks the character to stand still (a task that stands hides
+  // it; read after decision_action): no.
+  bool standing(int) const { return false; }
   // The request code of env i (request_dim() floats) into out: all 0 without a request.
   void observe_request(int i, float* out) const {
     const State& s = envs_[i];

@@ -3,7 +3,11 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
+#include <vector>
+
+#include "mmrl/rules.hpp"
 
 namespace mmrl {
 
@@ -110,6 +114,43 @@ TaskStep ArriveVecEnv::advance(int i, const float* action) {
   }
   out.terminated = out.success;
   return out;
+}
+
+namespace {
+
+class StandIdleRule final : public CandidateRule {
+ public:
+  StandIdleRule(const Database& db, const ArriveTaskConfig& config)
+      : shortfall_(static_cast<size_t>(db.num_frames), config.stand_idle_cost) {
+    const int p = trajectory_position_column(2);
+    const float lookahead = static_cast<float>(kTrajectoryOffsets[2]);
+    for (int c = 0; c < db.num_clips(); ++c) {
+      float run = 0;  // idle frames from the next one on, in this clip
+      for (int r = db.clip_ranges[2 * c + 1] - 1; r >= db.clip_ranges[2 * c]; --r) {
+        const float* f = &db.features[static_cast<size_t>(r) * kFeatureDim];
+        const bool idle = db.valid[static_cast<size_t>(r)] && std::hypot(f[p], f[p + 1]) < kIdleMeters;
+        run = idle ? run + 1 : 0;
+        if (!idle) continue;
+        const float seconds = (run - 1 + lookahead) / db.fps;
+        shortfall_[static_cast<size_t>(r)] = config.stand_idle_cost * std::max(0.0f, 1.0f - seconds / config.stand_idle_seconds);
+      }
+    }
+  }
+  bool prepare(const RuleContext& context) override { return context.standing; }
+
+ protected:
+  float cost(const Candidate& c) const override { return c.row >= 0 ? shortfall_[static_cast<size_t>(c.row)] : 0.0f; }
+
+ private:
+  std::vector<float> shortfall_;  // each database frame's cost while standing
+};
+
+}  // namespace
+
+std::unique_ptr<CandidateRule> make_stand_idle_rule(const RuleSetup& setup) {
+  const auto* config = dynamic_cast<const ArriveTaskConfig*>(&setup.config);
+  if (!config || !(config->stand_idle_seconds > 0) || !(config->stand_idle_cost > 0)) return nullptr;
+  return std::make_unique<StandIdleRule>(setup.db, *config);
 }
 
 void ArriveVecEnv::step(const float* actions, const TargetStepBuffers& out) { step_envs(actions, out, 4, [](int) {}); }

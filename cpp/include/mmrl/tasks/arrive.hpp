@@ -33,6 +33,8 @@ struct ArriveTaskConfig : TaskConfig {
   float precision_weight = 1.0f;
   float stand_radius = 0.25f;
   float stand_exit = 2.0f;
+  float stand_idle_seconds = 2.0f;
+  float stand_idle_cost = 30.0f;
   ArriveTaskConfig() {
     success_radius = 0.25f;
     max_steps = 150;
@@ -62,6 +64,14 @@ struct ArriveTaskConfig : TaskConfig {
       "stop_speed), the stand holds until the root is farther than stand_exit times success_radius from the "
       "target or turned more than stand_exit times facing_tolerance from its facing. 1: no more than before "
       "arriving.");
+    v("stand_idle_seconds", &ArriveTaskConfig::stand_idle_seconds, kNonNegative,
+      "Once arrived, the stand's match prefers idle frames (moving less than 0.15 m over the next second) that "
+      "go on standing this long (s), so that a character stands through long idles rather than from one short "
+      "one to the next: a frame that stands for less costs stand_idle_cost times the share of this time it "
+      "falls short by (a frame that does not stand: all of it). 0: off.");
+    v("stand_idle_cost", &ArriveTaskConfig::stand_idle_cost, kNonNegative,
+      "The most a stand's match adds for a frame that stands shorter than stand_idle_seconds (squared "
+      "normalized feature distance, as transition_cost). 0: off.");
   }
 };
 
@@ -102,6 +112,9 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   void begin_episode(int i);
   TaskStep advance(int i, const float* action);
   void on_state_set(int i) { envs_[i].hold = 0; }
+  // Once arrived (read after decision_action), the character stands: the stand-idle rule prices
+  // the match.
+  bool standing(int i) const { return config_.stand_radius > 0 && envs_[i].arrived; }
   // Within stand_radius and facing_tolerance, or once arrived within stand_exit times the
   // tolerances: stand at the target facing its facing, normalized. Updates s.arrived.
   const float* decision_action(int i, const float* action, float* scratch);
@@ -115,5 +128,17 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   // The hips velocity columns' (x, z) normalization, for the rest test of an arrival.
   float hips_mean_[2] = {}, hips_scale_[2] = {1, 1};
 };
+
+// The arrive task's candidate rule "stand-idle" (rules.cpp registers it): while the character
+// stands (RuleContext::standing), a database frame costs stand_idle_cost * max(0, 1 - t /
+// stand_idle_seconds), t the seconds it goes on standing (kIdleMeters over the next second, for
+// each frame of its run of such frames in its clip, up to the last one's second); a compressed
+// controller's candidate (no row) costs nothing. Null unless the config is an arrive task's with
+// both numbers above 0.
+std::unique_ptr<CandidateRule> make_stand_idle_rule(const RuleSetup& setup);
+
+// A frame stands (is idle) when its +30-frame trajectory sample is nearer than this (m): the
+// measure of mmrl.motion.kinds and mmrl db info.
+constexpr float kIdleMeters = 0.15f;
 
 }  // namespace mmrl
