@@ -44,7 +44,7 @@ inline py::dict target_state_dict(const TargetEnvState& st) {
 // A task's config class: a default constructor, every field of Config::visit as a property
 // with its doc, and the option table `options`: a tuple of (name, kind, default, lo, hi,
 // lo_open, inf_ok, doc) per field, kind one of "int", "float", "bool", "floats", "texts" (what
-// python/mmrl/tasks/options.py builds the Python config from).
+// python/mmrl/tasks/options.py builds the Python config from), and its retired options.
 template <class Config>
 py::class_<Config> bind_task_config(py::module_& m, const char* name, const char* doc) {
   py::class_<Config> c(m, name, doc);
@@ -64,6 +64,9 @@ py::class_<Config> bind_task_config(py::module_& m, const char* name, const char
   });
   c.attr("field_names") = py::tuple(names);
   c.attr("options") = py::tuple(options);
+  py::dict retired;  // name -> the value the code now always runs (task_config.hpp's RetiredOption)
+  for (const RetiredOption& r : Config::retired()) retired[r.name] = r.now;
+  c.attr("retired") = retired;
   return c;
 }
 

@@ -289,6 +289,7 @@ class PlaneTaskConfig:
     """
     field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any')
     options: typing.ClassVar[tuple]
+    retired: typing.ClassVar[dict] = {}
     def __init__(self) -> None:
         ...
     @property
@@ -677,6 +678,7 @@ class ObstacleTaskConfig:
     """
     field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'obstacle_max_speed', 'speed_cap', 'hit_reward', 'hit_weight', 'hit_penalty', 'hit_radius', 'hit_lookahead', 'path_filter', 'path_cost', 'path_horizon', 'path_margin', 'path_candidates', 'path_fan_degrees', 'path_fan_candidates', 'path_escapes', 'compressed_path_fan', 'num_obstacles', 'obstacle_square_half', 'obstacle_min_side', 'obstacle_max_side', 'body_radius', 'start_clearance', 'target_clearance', 'sensor_size', 'sensor_forward', 'grid_cell_size')
     options: typing.ClassVar[tuple]
+    retired: typing.ClassVar[dict] = {'hit_played': 0.0, 'bias_yields': 0.0, 'observe_continuation': 0.0, 'path_fan': 0.0, 'previous_map_lag': 1.0}
     def __init__(self) -> None:
         ...
     @property
@@ -1193,6 +1195,7 @@ class ArriveTaskConfig:
     """
     field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit', 'stand_idle_seconds', 'stand_idle_cost')
     options: typing.ClassVar[tuple]
+    retired: typing.ClassVar[dict] = {}
     def __init__(self) -> None:
         ...
     @property

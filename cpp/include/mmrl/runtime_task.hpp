@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
@@ -107,8 +108,24 @@ const RuntimeTaskType* find_runtime_task(const std::string& core);
 
 // The config of a task core from the file's task numbers (by Config::visit's field names; a
 // field the file lacks keeps its default) and its optional per-clip and text sections.
+// A number as a file's reader writes it (0, 1, 2.5).
+inline std::string format_number(double v) {
+  std::ostringstream out;
+  out << v;
+  return out.str();
+}
+
+// A retired option (Config::retired) with another value than the code now runs is refused: the
+// file was written for a rule this runtime no longer has.
 template <class Config>
 Config runtime_task_config(const ControllerFile& f, const RuntimeTask& t, int64_t num_clips) {
+  for (const RetiredOption& r : Config::retired()) {
+    const auto it = t.values.find(r.name);
+    if (r.deployed && it != t.values.end() && it->second != r.now)
+      f.fail(std::string("task.") + r.name + " is " + format_number(it->second) + ": an experiment's option " +
+             "this runtime no longer has (it always runs " + format_number(r.now) + "; docs/obstacles.md, " +
+             "\"Retired options\")");
+  }
   Config c;
   Config::visit([&](const char* name, auto member, const OptionRange&, const char*) {
     using T = typename std::decay<decltype(c.*member)>::type;

@@ -3,7 +3,6 @@
 // own sensor maps, rules and decision.
 #include <algorithm>
 #include <cmath>
-#include <sstream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -83,22 +82,6 @@ RuntimeTaskType obstacles_runtime_task() {
       for (const char* key : {"path_cost", "path_horizon", "path_margin", "path_candidates"})
         if (task.values.find(key) == task.values.end())
           f.fail(std::string("task.path_filter is on but the file lacks task.") + key + " (the path filter's data)");
-    }
-    // Options of experiments that lost (docs/obstacles.md, "Retired options"), with the value
-    // the code now always has: a file written with another runs a rule this runtime no longer has.
-    static const std::pair<const char*, double> kRetired[] = {
-        {"bias_yields", 0}, {"observe_continuation", 0}, {"path_fan", 0}, {"previous_map_lag", 1}};
-    const auto format_number = [](double v) {
-      std::ostringstream out;
-      out << v;
-      return out.str();
-    };
-    for (const auto& [key, now] : kRetired) {
-      const auto it = task.values.find(key);
-      if (it != task.values.end() && it->second != now)
-        f.fail(std::string("task.") + key + " is " + format_number(it->second) + ": an experiment's option " +
-               "this runtime no longer has (it always runs " + format_number(now) +
-               "; docs/obstacles.md, \"Retired options\")");
     }
     // The escapes' nearest frames, found at export (optional: without it the table is built when
     // the controller loads, seconds for a large database).

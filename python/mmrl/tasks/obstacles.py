@@ -65,8 +65,6 @@ class ObstaclesConfig(TaskConfig):
     task_label = "moving-obstacles"
     training_only = ("train_path_filter",)
     policy_inputs = TaskConfig.policy_inputs + ("sensor_size", "sensor_forward")
-    retired = {"hit_played": False, "bias_yields": False, "observe_continuation": False, "path_fan": 0,
-               "previous_map_lag": 1}
 
     train_path_filter: bool = field(default=True, metadata={"doc": (
         "Whether the training envs run the collision-aware search too; false trains without it and keeps "

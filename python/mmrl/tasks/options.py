@@ -4,8 +4,9 @@
 declares only what the C++ core never sees (a trainer's option such as ``train_path_filter``,
 listed in ``training_only``); the option's range and doc are ``option_info(config, name)``.
 
-Retired options: an experiment's option that lost is removed from the code, and its config class
-lists it in ``retired`` (name -> the value the code now always has). A saved config that ran it
+Retired options: an experiment's option that lost is removed from the code, and its C++ config
+lists it in ``retired()`` (name -> the value the code now always has; the runtime's loader reads
+the same table), which :func:`task_options` copies into the Python config's ``retired``. A saved config that ran it
 with that value loads as before; any other value, or a new setting of it, is refused naming it
 (the task's docs, "Retired options", say what it did and measured)."""
 from __future__ import annotations
@@ -66,6 +67,7 @@ def task_options(core_config_type):
             annotations.setdefault(name, kind)
         cls.__annotations__ = annotations
         cls.core_type = core_config_type
+        cls.retired = {k: int(v) if float(v).is_integer() else v for k, v in core_config_type.retired.items()}
         cls.option_table = {row.name: row for row in table}
         return dataclasses.dataclass(cls)
 

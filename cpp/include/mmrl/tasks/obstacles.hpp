@@ -60,6 +60,11 @@ struct ObstacleTaskConfig : TaskConfig {
     success_bonus = 10.0f;
     max_steps = 1500;
   }
+  // docs/obstacles.md, "Retired options", says what each did and measured.
+  static std::vector<RetiredOption> retired() {
+    return {{"hit_played", 0, false}, {"bias_yields", 0}, {"observe_continuation", 0}, {"path_fan", 0},
+            {"previous_map_lag", 1}};
+  }
   float obstacle_max_speed = 0.5f;
   float speed_cap = 2.0f;
   bool hit_reward = true;

@@ -53,9 +53,19 @@ void check_options(const Config& c) {
   });
 }
 
+// An option of an experiment that lost, removed from the code: its name and the value the code
+// now always runs. A saved config or controller file with that value loads as before; any other
+// value is refused naming it (the Python configs and the runtime's loader read this one table).
+struct RetiredOption {
+  const char* name;
+  double now;
+  bool deployed = true;  // false: a training option (the reward's) that a controller file may hold with any value
+};
+
 // A task's config derives from this (a registered rule finds its task's own numbers by
-// dynamic_cast: rules.hpp).
+// dynamic_cast: rules.hpp). A config with retired options hides `retired`.
 struct TaskConfig {
+  static std::vector<RetiredOption> retired() { return {}; }
   TaskConfig() = default;
   TaskConfig(const TaskConfig&) = default;
   TaskConfig(TaskConfig&&) = default;
