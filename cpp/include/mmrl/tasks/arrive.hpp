@@ -33,8 +33,8 @@ struct ArriveTaskConfig : TaskConfig {
   float precision_weight = 1.0f;
   float stand_radius = 0.25f;
   float stand_exit = 2.0f;
-  float stand_idle_seconds = 2.0f;
-  float stand_idle_cost = 30.0f;
+  float stand_idle_seconds = 3.0f;
+  float stand_idle_cost = 120.0f;
   ArriveTaskConfig() {
     success_radius = 0.25f;
     max_steps = 150;
