@@ -180,7 +180,9 @@ def _coerce(value: str, like):
         try:
             number = float(value)
         except ValueError:
-            return None if value.lower() == "none" else value
+            if isinstance(like, float):
+                raise ValueError("expected a number") from None
+            return None if value.lower() == "none" else value  # an optional field: text or none
         if math.isnan(number):
             raise ValueError("expected a number, got NaN")
         return number
