@@ -7,7 +7,7 @@ a facing, and come to rest there, as a game character walks to a spot and faces 
 - reward: ``exp(-|g_t|) + facing_weight * exp(-|g_t| / success_radius) * (1 + cos e) / 2``
   per step (``e`` the facing error) plus ``success_bonus`` on success;
 - success (terminates): ``hold_time`` seconds of consecutive frames within ``success_radius``
-  (0.25 m) of the target, within ``facing_tolerance`` (0.2618 rad = 15 degrees) of its facing,
+  (0.15 m) of the target, within ``facing_tolerance`` (0.2618 rad = 15 degrees) of its facing,
   and slower than ``stop_speed`` (0.15 m/s). ``max_steps`` (150 = 30 s) truncates.
 
 Angles are radians at every interface (a facing is a world yaw about +Y: forward is
@@ -31,7 +31,7 @@ from .plane import PlaneEnv, PlaneVectorEnv
 @task_options(_core.ArriveTaskConfig)
 class ArriveConfig(TaskConfig):
     """Numbers of the arrive task: the shared ones of :class:`~mmrl.tasks.base.TaskConfig`
-    (``success_radius`` 0.25 m, ``max_steps`` 150 here) and the tolerances of a rest."""
+    (``success_radius`` 0.15 m, ``max_steps`` 150 here) and the tolerances of a rest."""
 
     task_label = "arrive-task"
 

@@ -31,12 +31,12 @@ struct ArriveTaskConfig : TaskConfig {
   float hold_time = 0.5f;
   float facing_weight = 1.0f;
   float precision_weight = 1.0f;
-  float stand_radius = 0.25f;
+  float stand_radius = 0.15f;
   float stand_exit = 2.0f;
   float stand_idle_seconds = 3.0f;
   float stand_idle_cost = 120.0f;
   ArriveTaskConfig() {
-    success_radius = 0.25f;
+    success_radius = 0.15f;
     max_steps = 150;
   }
   template <class Visit>
