@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <vector>
 
@@ -118,31 +120,48 @@ TaskStep ArriveVecEnv::advance(int i, const float* action) {
 
 namespace {
 
+// Seconds each frame of db goes on standing (0 for a frame that does not stand): one table per
+// database, shared by every env's and character's rule while any lives (a crowd of 1,000
+// characters holds one copy, not 1,000).
+std::shared_ptr<const std::vector<float>> standing_seconds(const Database& db) {
+  static std::mutex mutex;
+  static std::map<const Database*, std::weak_ptr<const std::vector<float>>> tables;
+  const std::lock_guard<std::mutex> lock(mutex);
+  for (auto it = tables.begin(); it != tables.end();) it = it->second.expired() ? tables.erase(it) : std::next(it);
+  auto& slot = tables[&db];
+  if (auto table = slot.lock(); table && table->size() == static_cast<size_t>(db.num_frames)) return table;
+  auto table = std::make_shared<std::vector<float>>(static_cast<size_t>(db.num_frames), 0.0f);
+  const int p = trajectory_position_column(2);
+  const float lookahead = static_cast<float>(kTrajectoryOffsets[2]);
+  for (int c = 0; c < db.num_clips(); ++c) {
+    float run = 0;  // idle frames from this one on, in this clip
+    for (int r = db.clip_ranges[2 * c + 1] - 1; r >= db.clip_ranges[2 * c]; --r) {
+      const float* f = &db.features[static_cast<size_t>(r) * kFeatureDim];
+      const bool idle = db.valid[static_cast<size_t>(r)] && std::hypot(f[p], f[p + 1]) < kIdleMeters;
+      run = idle ? run + 1 : 0;
+      if (idle) (*table)[static_cast<size_t>(r)] = (run - 1 + lookahead) / db.fps;
+    }
+  }
+  slot = table;
+  return table;
+}
+
 class StandIdleRule final : public CandidateRule {
  public:
   StandIdleRule(const Database& db, const ArriveTaskConfig& config)
-      : shortfall_(static_cast<size_t>(db.num_frames), config.stand_idle_cost) {
-    const int p = trajectory_position_column(2);
-    const float lookahead = static_cast<float>(kTrajectoryOffsets[2]);
-    for (int c = 0; c < db.num_clips(); ++c) {
-      float run = 0;  // idle frames from the next one on, in this clip
-      for (int r = db.clip_ranges[2 * c + 1] - 1; r >= db.clip_ranges[2 * c]; --r) {
-        const float* f = &db.features[static_cast<size_t>(r) * kFeatureDim];
-        const bool idle = db.valid[static_cast<size_t>(r)] && std::hypot(f[p], f[p + 1]) < kIdleMeters;
-        run = idle ? run + 1 : 0;
-        if (!idle) continue;
-        const float seconds = (run - 1 + lookahead) / db.fps;
-        shortfall_[static_cast<size_t>(r)] = config.stand_idle_cost * std::max(0.0f, 1.0f - seconds / config.stand_idle_seconds);
-      }
-    }
-  }
+      : seconds_(standing_seconds(db)), cost_(config.stand_idle_cost), horizon_(config.stand_idle_seconds) {}
   bool prepare(const RuleContext& context) override { return context.standing; }
 
  protected:
-  float cost(const Candidate& c) const override { return c.row >= 0 ? shortfall_[static_cast<size_t>(c.row)] : 0.0f; }
+  float cost(const Candidate& c) const override {
+    if (c.row < 0) return 0.0f;
+    const float t = (*seconds_)[static_cast<size_t>(c.row)];
+    return t > 0 ? cost_ * std::max(0.0f, 1.0f - t / horizon_) : cost_;
+  }
 
  private:
-  std::vector<float> shortfall_;  // each database frame's cost while standing
+  std::shared_ptr<const std::vector<float>> seconds_;
+  float cost_, horizon_;
 };
 
 }  // namespace
