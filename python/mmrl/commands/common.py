@@ -180,9 +180,11 @@ def _coerce(value: str, like):
         try:
             number = float(value)
         except ValueError:
+            if value.lower() == "none":
+                return None  # an optional number (RLlib's grad_clip=None)
             if isinstance(like, float):
                 raise ValueError("expected a number") from None
-            return None if value.lower() == "none" else value  # an optional field: text or none
+            return value  # an optional field's text
         if math.isnan(number):
             raise ValueError("expected a number, got NaN")
         return number

@@ -86,8 +86,16 @@ class TaskConfig:
                 value = clip_cost_array(value, db).tolist() if value else []
             elif f.name == "request_groups":
                 value = request_group_list(value)
-            setattr(c, f.name, value)
+            try:
+                setattr(c, f.name, value)
+            except TypeError:  # pybind11's list of signatures says nothing a user can act on
+                kind = self.option_table[f.name].kind if f.name in self.option_table else type(value).__name__
+                raise ValueError(f"{self.task_label} option {f.name}: expected {_KIND_WORDS.get(kind, kind)}, "
+                                 f"got {value!r}") from None
         return c
+
+
+_KIND_WORDS = {"float": "a number", "int": "a whole number", "bool": "true or false"}
 
 
 def make_config(config_type, config=None, overrides: Optional[Mapping[str, Any]] = None):
