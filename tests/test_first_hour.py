@@ -111,7 +111,8 @@ def test_db_info_reads_a_database_saved_under_another_extension(data, tmp_path, 
     (["train", "plane", "--steps", "64", "--set", "learning_rate=nan"], "learning_rate"),
     (["train", "arrive", "--steps", "64", "--set", "success_radius=0.15,stand_radius=0.15"],
      "--set success_radius=0.15,stand_radius=0.15: expected a number"),
-    (["train", "arrive", "--steps", "64", "--set", "success_radius=none"], "success_radius: expected a number, got None"),
+    (["train", "arrive", "--steps", "64", "--set", "success_radius=none"], "--set success_radius=none: expected a number"),
+    (["train", "plane", "--steps", "64", "--set", "learning_rate=none"], "--set learning_rate=none: expected a number"),
     (["eval", "--episodes", "0"], "--episodes"),
     (["render", "--length", "-2", "-o", "x.gif"], "--length"),
     (["view", "x", "--port", "70000"], "--port"),
@@ -307,3 +308,13 @@ def test_a_database_given_as_data_and_a_corrupt_checkpoint_say_what_to_do(small_
     shutil.copytree(small_run, broken)
     (broken / "latest.pt").write_bytes(b"PK\x03\x04 not a checkpoint")
     one_line_error(capsys, ["eval", broken, "--episodes", "1"], "latest.pt", "train again")
+
+
+def test_a_task_option_of_the_wrong_type_is_named():
+    """A config built in Python (or read from a config.json) with a wrong type reaches the C++
+    core as one error naming the option, not pybind11's list of signatures."""
+    import mmrl
+
+    config = mmrl.get_task("arrive").default_config().replace(success_radius=None)
+    with pytest.raises(ValueError, match="option success_radius: expected a number, got None"):
+        config.to_core()

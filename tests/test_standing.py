@@ -216,23 +216,24 @@ def stand_idle_costs(db, seconds, cost) -> np.ndarray:
     return out
 
 
-@pytest.mark.parametrize("which", ["synthetic", "mixamo"])
-def test_a_standing_match_prefers_frames_that_go_on_standing(which, tmp_path):
+@pytest.mark.parametrize("which, seconds", [("synthetic", 10.0), ("mixamo", 10.0), ("synthetic", 1.5)])
+def test_a_standing_match_prefers_frames_that_go_on_standing(which, seconds, tmp_path):
     """An arrived character (at rest at its target, facing its facing) on each of 40 still
     frames: its match is the brute-force decision with every frame's stand-idle cost added (and
     without it when the rule is off); the rule changes some matches and makes every changed one
-    stand longer."""
+    stand longer. With 1.5 s the long runs' frames cost nothing and the last 0.5 s of each run
+    costs, so a run length one frame off moves frames across that edge."""
     db = (mmrl.default_database() if which == "synthetic" else
           other_skeleton_database(tmp_path, clips=((1.4, 0.3), (0.0, 0.0), (1.2, -0.5), (3.0, 0.2))))
     features = np.asarray(db.features)
     still = np.flatnonzero(np.asarray(db.valid_mask, bool) & (np.hypot(features[:, 12], features[:, 14]) < 0.05))
     assert len(still) >= 40
     config = ARRIVE.default_config().replace(success_radius=0.3, stand_radius=0.1, facing_tolerance=0.5,
-                                             hold_time=5.0, transition_cost=2.0, stand_idle_seconds=10.0,
+                                             hold_time=5.0, transition_cost=2.0, stand_idle_seconds=seconds,
                                              stand_idle_cost=20.0)
     envs = {cost: ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_idle_cost=cost), num_threads=1)
             for cost in (20.0, 0.0)}
-    row_costs = {cost: stand_idle_costs(db, 10.0, cost) for cost in envs}
+    row_costs = {cost: stand_idle_costs(db, seconds, cost) for cost in envs}
     low, high = envs[0.0].single_action_space.low, envs[0.0].single_action_space.high
     rng = np.random.default_rng(1)
     walk = rng.normal(0, 1, (1, 12)).astype(np.float32)  # the stand overrides it
@@ -257,4 +258,40 @@ def test_a_standing_match_prefers_frames_that_go_on_standing(which, tmp_path):
         if matches[20.0] != matches[0.0]:
             changed += 1
             assert row_costs[20.0][matches[20.0]] <= row_costs[20.0][matches[0.0]] + 1e-6
-    assert checked >= 40 and changed >= 3
+    assert checked >= 40 and changed >= (3 if seconds > 5 else 1)
+
+
+def test_the_stand_idle_rule_waits_for_the_arrival():
+    """Within stand_radius but not yet arrived (still moving, or outside success_radius) the
+    stand asks for its query and the rule stays off: the same matches as with the rule off, step
+    by step up to the first arrival, over several stand decisions."""
+    db = mmrl.default_database()
+    features = np.asarray(db.features)
+    config = ARRIVE.default_config().replace(success_radius=0.15, stand_radius=0.6, facing_tolerance=0.6,
+                                             target_half_extent=2.0, min_target_distance=1.0, hold_time=3.0)
+    assert config.stand_idle_cost > 0
+    on = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
+    off = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_idle_cost=0.0), num_threads=1)
+    policy = JoystickPolicy(db, database_speeds(db)[0], arrive=True)
+    policy.bind_layout(on.observation_layout)
+    compared = stood = 0
+    for seed in range(6):
+        obs, _ = on.reset(seed=seed)
+        off.reset(seed=seed)
+        for _ in range(150):
+            st = on.env_state(0)
+            dist = math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"])
+            facing = abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi)
+            hips = features[st["frame"]]
+            if dist <= config.success_radius and facing <= config.facing_tolerance and \
+                    math.hypot(hips[12], hips[14]) < config.stop_speed:
+                break  # this decision arrives: the rule may price it
+            stood += dist <= config.stand_radius and facing <= config.facing_tolerance
+            action = policy.act(obs)
+            obs, _, terminated, truncated, _ = on.step(action)
+            off.step(action)
+            assert on.env_state(0)["last_step_match"] == off.env_state(0)["last_step_match"]
+            compared += 1
+            if terminated[0] or truncated[0]:
+                break
+    assert compared >= 100 and stood >= 5, (compared, stood)

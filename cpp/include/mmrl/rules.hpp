@@ -8,7 +8,8 @@
 // (CandidateRuleType::make), built once from the config. The builtin rules come first: the clip
 // costs (task.clip_costs), then the env's request (its clips only), the foot-jump limit and the
 // obstacles' collision-aware search (tasks/path_filter.hpp: a rule that reads the character's
-// obstacles from RuleContext and asks for a shortlist). Before each decision the env prepares
+// obstacles from RuleContext and asks for a shortlist) and the arrive task's stand on long idles
+// (tasks/arrive.hpp: it prices a decision only while RuleContext::standing). Before each decision the env prepares
 // every rule for the character (RuleContext) and chains the ones that price this decision, in
 // registration order, each over the ones before it (RuleChain below). The search then prices
 // candidates through extra_cost, so a rule only adds cost (>= 0; +inf refuses) and the search

@@ -106,8 +106,6 @@ struct RuntimeTaskType {
 const std::vector<RuntimeTaskType>& runtime_task_types();
 const RuntimeTaskType* find_runtime_task(const std::string& core);
 
-// The config of a task core from the file's task numbers (by Config::visit's field names; a
-// field the file lacks keeps its default) and its optional per-clip and text sections.
 // A number as a file's reader writes it (0, 1, 2.5).
 inline std::string format_number(double v) {
   std::ostringstream out;
@@ -115,6 +113,8 @@ inline std::string format_number(double v) {
   return out.str();
 }
 
+// The config of a task core from the file's task numbers (by Config::visit's field names; a
+// field the file lacks keeps its default) and its optional per-clip and text sections.
 // A retired option (Config::retired) with another value than the code now runs is refused: the
 // file was written for a rule this runtime no longer has.
 template <class Config>

@@ -6,6 +6,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <utility>
 #include <stdexcept>
 #include <vector>
 
@@ -125,10 +126,12 @@ namespace {
 // characters holds one copy, not 1,000).
 std::shared_ptr<const std::vector<float>> standing_seconds(const Database& db) {
   static std::mutex mutex;
-  static std::map<const Database*, std::weak_ptr<const std::vector<float>>> tables;
+  // Keyed by the database and its feature rows (a database freed and another built at its address
+  // finds its table expired: a rule never outlives the database it borrows).
+  static std::map<std::pair<const Database*, const float*>, std::weak_ptr<const std::vector<float>>> tables;
   const std::lock_guard<std::mutex> lock(mutex);
   for (auto it = tables.begin(); it != tables.end();) it = it->second.expired() ? tables.erase(it) : std::next(it);
-  auto& slot = tables[&db];
+  auto& slot = tables[{&db, db.features.data()}];
   if (auto table = slot.lock(); table && table->size() == static_cast<size_t>(db.num_frames)) return table;
   auto table = std::make_shared<std::vector<float>>(static_cast<size_t>(db.num_frames), 0.0f);
   const int p = trajectory_position_column(2);

@@ -155,8 +155,9 @@ def run_database(run, args: argparse.Namespace):
 
 
 # ---------------------------------------------------------------------- training options (both backends)
-def _coerce(value: str, like):
-    """``value`` read as the type of ``like`` (ValueError saying what was expected)."""
+def _coerce(value: str, like, optional: bool = False):
+    """``value`` read as the type of ``like`` (ValueError saying what was expected); "none" is
+    None only for an ``optional`` field (or one that is None now)."""
     if isinstance(like, bool):
         if value.lower() in ("1", "true", "yes", "on"):
             return True
@@ -180,7 +181,7 @@ def _coerce(value: str, like):
         try:
             number = float(value)
         except ValueError:
-            if value.lower() == "none":
+            if value.lower() == "none" and (optional or like is None):
                 return None  # an optional number (RLlib's grad_clip=None)
             if isinstance(like, float):
                 raise ValueError("expected a number") from None
@@ -199,9 +200,10 @@ def split_overrides(items, *dataclasses_) -> List[Dict[str, Any]]:
             raise InputError(f"--set expects KEY=VALUE, got {item!r}")
         k, v = item.split("=", 1)
         for d, o in zip(dataclasses_, out):
-            if k in {f.name for f in fields(d)}:
+            field_types = {f.name: str(f.type) for f in fields(d)}
+            if k in field_types:
                 try:
-                    o[k] = _coerce(v, getattr(d, k))
+                    o[k] = _coerce(v, getattr(d, k), optional="Optional" in field_types[k] or "None" in field_types[k])
                 except ValueError as e:
                     raise InputError(f"--set {k}={v}: {e}, got {v!r}") from None
                 break
