@@ -147,6 +147,7 @@ void bind_layout_constants(py::module_& m) {
   py::list path_frames;
   for (int s = 0; s < kPathSamples; ++s) path_frames.append(kPathSampleFrames[s]);
   m.attr("PATH_SAMPLE_FRAMES") = py::tuple(path_frames);  // frames ahead of Database::path_samples
+  m.attr("IDLE_METERS") = kIdleMeters;  // a frame whose +30-frame sample is nearer stands (features.hpp)
   m.attr("MATCH_EXCLUDE_WINDOW") = kMatchExcludeWindow;
   m.attr("MAX_FRAMES_PER_STEP") = kMaxFramesPerStep;
 }

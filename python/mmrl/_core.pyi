@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['ArriveTaskConfig', 'ArriveVecEnv', 'BVHError', 'Character', 'CharacterOptions', 'CompressedModel', 'ControllerFileError', 'Database', 'Decider', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'mlp_kernel', 'motion_from_pose', 'parse_request', 'runtime_task_cores', 'select_request', 'tags_available', 'trajectory_path']
+__all__: list[str] = ['ArriveTaskConfig', 'ArriveVecEnv', 'BVHError', 'Character', 'CharacterOptions', 'CompressedModel', 'ControllerFileError', 'Database', 'Decider', 'FEATURE_BLOCKS', 'FEATURE_DIM', 'IDLE_METERS', 'JointRoleError', 'KDTree', 'MATCH_EXCLUDE_WINDOW', 'MAX_FRAMES_PER_STEP', 'Matcher', 'Motion', 'OBSTACLE_MAP_SIDE', 'ObstacleTaskConfig', 'ObstacleVecEnv', 'PATH_SAMPLE_FRAMES', 'POSE_DIM', 'PlaneTaskConfig', 'PlaneVecEnv', 'RuntimeCharacter', 'RuntimeController', 'TRAJECTORY_DIM', 'TRAJECTORY_DIRECTION_COLUMNS', 'TRAJECTORY_OFFSETS', 'TRAJECTORY_POSITION_COLUMNS', 'TargetTaskConfig', 'bvh_load', 'bvh_parse', 'database_global_positions', 'ik_two_bone', 'joint_side', 'mlp_kernel', 'motion_from_pose', 'parse_request', 'runtime_task_cores', 'select_request', 'tags_available', 'trajectory_path']
 class BVHError(ValueError):
     """
     A malformed BVH file; the message names the file and the line. Attributes: file, line.
@@ -1690,6 +1690,7 @@ def trajectory_path(raw_trajectory: typing.Any) -> numpy.typing.NDArray[numpy.fl
     """
 FEATURE_BLOCKS: list = [('foot_position', [0, 1, 2, 3, 4, 5], 0.75), ('foot_velocity', [6, 7, 8, 9, 10, 11], 1.0), ('hips_velocity', [12, 13, 14], 1.0), ('trajectory_position', [15, 16, 19, 20, 23, 24], 1.0), ('trajectory_direction', [17, 18, 21, 22, 25, 26], 1.5)]
 FEATURE_DIM: int = 27
+IDLE_METERS: float = 0.15
 MATCH_EXCLUDE_WINDOW: int = 20
 MAX_FRAMES_PER_STEP: int = 30
 OBSTACLE_MAP_SIDE: int = 16

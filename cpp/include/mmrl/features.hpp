@@ -26,6 +26,9 @@ constexpr int kTrajectoryOffsets[3] = {10, 20, 30};
 constexpr int trajectory_position_column(int k) { return kPoseDim + 4 * k; }
 constexpr int trajectory_direction_column(int k) { return kPoseDim + 4 * k + 2; }
 constexpr int kNumBlocks = 5;
+// A frame stands (is idle) when its +30-frame trajectory sample is nearer than this (m): the
+// one measure of mmrl.motion.kinds (IDLE_METERS), mmrl db info and the arrive stand.
+constexpr double kIdleMeters = 0.15;
 
 // A block shares one normalisation scale and one weight. Columns need not be contiguous
 // (trajectory positions and directions interleave by horizon).

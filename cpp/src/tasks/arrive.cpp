@@ -140,7 +140,7 @@ std::shared_ptr<const std::vector<float>> standing_seconds(const Database& db) {
     float run = 0;  // idle frames from this one on, in this clip
     for (int r = db.clip_ranges[2 * c + 1] - 1; r >= db.clip_ranges[2 * c]; --r) {
       const float* f = &db.features[static_cast<size_t>(r) * kFeatureDim];
-      const bool idle = db.valid[static_cast<size_t>(r)] && std::hypot(f[p], f[p + 1]) < kIdleMeters;
+      const bool idle = db.valid[static_cast<size_t>(r)] && std::hypot(f[p], f[p + 1]) < static_cast<float>(kIdleMeters);
       run = idle ? run + 1 : 0;
       if (idle) (*table)[static_cast<size_t>(r)] = (run - 1 + lookahead) / db.fps;
     }

@@ -18,7 +18,7 @@ import numpy as np
 from .. import _core
 from .database import Database
 
-IDLE_METERS = 0.15
+IDLE_METERS = _core.IDLE_METERS  # features.hpp's kIdleMeters, the arrive stand's measure too
 TURN_IN_PLACE_DEGREES, TURN_IN_PLACE_METERS = 60.0, 0.5
 #: The share of idle frames below which a database "cannot stop" (the arrive task refuses it).
 MIN_IDLE_SHARE = 0.005

@@ -137,8 +137,5 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
 // both numbers above 0.
 std::unique_ptr<CandidateRule> make_stand_idle_rule(const RuleSetup& setup);
 
-// A frame stands (is idle) when its +30-frame trajectory sample is nearer than this (m): the
-// measure of mmrl.motion.kinds and mmrl db info.
-constexpr float kIdleMeters = 0.15f;
 
 }  // namespace mmrl
