@@ -195,13 +195,13 @@ def test_play_click_moves_the_target_and_the_character_follows(browser, plane_ru
 
 
 def test_play_shift_drag_places_the_target_and_turns_the_facing_along_the_drag(browser, tmp_path):
+    """Arrive task: a shift+drag puts the target where it began and the facing along it; the
+    same drag reversed on screen turns the facing around (by more than a right angle: the camera
+    only translates, but between the drags it follows the character)."""
     from mmrl.cli import main
 
     run = tmp_path / "arrive"
     assert main(["train", "arrive", "--steps", "1024", "--envs", "8", "--out", str(run), "--no-progress"]) == 0
-    """Arrive task: a shift+drag puts the target where it began and the facing along it; the
-    same drag reversed on screen turns the facing around (by more than a right angle: the camera
-    only translates, but between the drags it follows the character)."""
     trace = tmp_path / "trace.jsonl"
     server = Server("play", run, "--policy", "joystick", "--trace", trace)
     try:

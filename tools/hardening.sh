@@ -81,8 +81,9 @@ step_asan_python() {
 }
 
 step_tsan() {
-  cmake -S . -B "$tsan_build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DMMRL_TSAN=ON -DMMRL_PYTHON=OFF \
-    -DMMRL_BUILD_EXAMPLES=OFF >/dev/null
+  # -O1 -g1 as the ASan step: less compile time than -O2 -g, and line numbers in a report.
+  cmake -S . -B "$tsan_build" -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g1 -DNDEBUG" \
+    -DMMRL_TSAN=ON -DMMRL_PYTHON=OFF -DMMRL_BUILD_EXAMPLES=OFF >/dev/null
   cmake --build "$tsan_build" -j"$jobs" >/dev/null
   ctest --test-dir "$tsan_build" --output-on-failure
 }
