@@ -2,7 +2,8 @@
 to the joysticks with and without the collision-aware search, all on the same episodes.
 
     python bench/bench_obstacles_goals.py RUN [RUN ...] [--db FILE.npz] [--episodes 2000]
-        [--quality-episodes 200] [--seed 1000] [--peers joystick joystick+path ...] [--json OUT.json]
+        [--quality-episodes 200] [--seed 1000] [--peers joystick joystick+path ...]
+        [--peer-cost C] [--peer-speeds V ...] [--json OUT.json]
 
 Success comes from ``--episodes`` fast-path episodes (``mmrl.rollout.evaluate_fast``, the same
 episodes for every controller); motion from ``--quality-episodes`` full-path episodes
@@ -15,6 +16,10 @@ raw-mocap floor. Peers (``--peers``):
 - ``joystick+path-exact`` / ``joystick-run+path-exact``: the exact filtered search over the
   whole database (``path_candidates=0``), slow in crowds (tens of ms per decision);
   ``--peer-cost`` sets its path cost.
+
+A peer walks at its preset's speed (``database_speeds``: the data's walking or running speed),
+or at each of ``--peer-speeds``. On LAFAN1 that estimate is 0.27 m/s (its idle frames join the
+slow cluster), so measure its peers with ``--peer-speeds`` (docs/obstacles.md).
 
 Each RUN runs with its own options (its config.json), and once more per ``--set`` with those
 changed (e.g. ``--set transition_cost=30`` or ``--set path_escapes=20,path_cost=10000``). Prints a
@@ -42,6 +47,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1000)
     ap.add_argument("--peers", nargs="*", default=["joystick", "joystick+path"], choices=PEERS)
     ap.add_argument("--peer-cost", type=float, default=100.0, help="path_cost of the peers with the filter")
+    ap.add_argument("--peer-speeds", type=float, nargs="*", default=None, metavar="M_PER_S",
+                    help="run each peer at these speeds (m/s) instead of its preset's (the data's walking or "
+                         "running speed, mmrl.rl.policies.database_speeds, which is 0.27 m/s on LAFAN1)")
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="also run each RUN with these task options changed (one extra row per --set, "
@@ -70,7 +78,10 @@ def main(argv=None) -> int:
         if search:
             cfg = cfg.replace(path_filter=True, path_cost=args.peer_cost,
                               path_candidates=0 if search == "path-exact" else cfg.path_candidates)
-        controllers.append((peer, JoystickPolicy.preset(db, name), cfg))
+        if args.peer_speeds:
+            controllers += [(f"{peer} at {v:g} m/s", JoystickPolicy(db, v), cfg) for v in args.peer_speeds]
+        else:
+            controllers.append((peer, JoystickPolicy.preset(db, name), cfg))
     from mmrl.commands.common import split_overrides
 
     for run, path in zip(runs, args.runs):
