@@ -17,9 +17,8 @@ raw-mocap floor. Peers (``--peers``):
   whole database (``path_candidates=0``), slow in crowds (tens of ms per decision);
   ``--peer-cost`` sets its path cost.
 
-A peer walks at its preset's speed (``database_speeds``: the data's walking or running speed),
-or at each of ``--peer-speeds``. On LAFAN1 that estimate is 0.27 m/s (its idle frames join the
-slow cluster), so measure its peers with ``--peer-speeds`` (docs/obstacles.md).
+A peer walks at its preset's speed (``database_speeds``: the data's walking or running speed;
+LAFAN1 0.93 and 2.51 m/s, Bandai-Namco 1.15 and 2.76), or at each of ``--peer-speeds``.
 
 Each RUN runs with its own options (its config.json), and once more per ``--set`` with those
 changed (e.g. ``--set transition_cost=30`` or ``--set path_escapes=20,path_cost=10000``). Prints a
@@ -49,7 +48,7 @@ def main(argv=None) -> int:
     ap.add_argument("--peer-cost", type=float, default=100.0, help="path_cost of the peers with the filter")
     ap.add_argument("--peer-speeds", type=float, nargs="*", default=None, metavar="M_PER_S",
                     help="run each peer at these speeds (m/s) instead of its preset's (the data's walking or "
-                         "running speed, mmrl.rl.policies.database_speeds, which is 0.27 m/s on LAFAN1)")
+                         "running speed, mmrl.rl.policies.database_speeds)")
     ap.add_argument("--threads", type=int, default=0)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="also run each RUN with these task options changed (one extra row per --set, "

@@ -43,6 +43,18 @@ def require_shared_data() -> Path:
     return found
 
 
+def require_lafan1(probe: str = "") -> Path:
+    """The shared LAFAN1 directory (``../shared/data/lafan1``, or ``MMRL_LAFAN1``) holding
+    ``probe``; CI fails without it, elsewhere the test skips with one line."""
+    env = os.environ.get("MMRL_LAFAN1")
+    where = Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "data" / "lafan1"
+    if not (where / probe).exists() or not any(where.rglob("*.bvh")):
+        if os.environ.get("CI"):
+            pytest.fail(f"LAFAN1 is missing at {where}; CI must provide ../shared beside the checkout (or MMRL_LAFAN1)")
+        pytest.skip(f"needs LAFAN1 (../shared/data/lafan1, or MMRL_LAFAN1), not found at {where}")
+    return where
+
+
 _browser_skips = []
 
 

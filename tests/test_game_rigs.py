@@ -7,7 +7,6 @@ every role given for a rig whose names say nothing (the mirror pairs the legs by
 before, it paired them by name only and mirrored them onto themselves, 0.075 m off on LAFAN1).
 On the synthetic skeleton (Bandai-Namco's names) and on LAFAN1's (../shared/data/lafan1; those
 tests skip outside CI when it is missing)."""
-import os
 import re
 from pathlib import Path
 
@@ -16,6 +15,8 @@ import pytest
 
 import mmrl
 from mmrl import synth
+
+from conftest import require_lafan1
 
 SIDES = {"L": "Left", "R": "Right"}
 
@@ -191,19 +192,9 @@ def test_names_with_spaces_round_trip(synth_texts):
 
 
 # ------------------------------------------------------------------ LAFAN1's skeleton
-def lafan1_dir() -> Path:
-    env = os.environ.get("MMRL_LAFAN1")
-    where = Path(env) if env else Path(__file__).resolve().parents[2] / "shared" / "data" / "lafan1"
-    if not (where / LAFAN_CLIPS[0]).is_file():
-        if os.environ.get("CI"):
-            pytest.fail(f"LAFAN1 is missing at {where}; CI must provide ../shared beside the checkout (or MMRL_LAFAN1)")
-        pytest.skip(f"needs LAFAN1 (../shared/data/lafan1, or MMRL_LAFAN1), not found at {where}")
-    return where
-
-
 @pytest.fixture(scope="module")
 def lafan_texts():
-    d = lafan1_dir()
+    d = require_lafan1(LAFAN_CLIPS[0])
     return {Path(c).name: (d / c).read_text() for c in LAFAN_CLIPS}
 
 
