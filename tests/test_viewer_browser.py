@@ -103,7 +103,10 @@ def open_page(browser, url, **context):
 def canvas_image(page, name=None):
     import imageio.v3 as iio
 
-    png = page.locator("canvas").first.screenshot()
+    # A page screenshot clipped to the canvas: an element screenshot first waits for the element
+    # to be "stable" over animation frames, which timed out on a loaded machine.
+    box = page.locator("canvas").first.bounding_box()
+    png = page.screenshot(clip=box, timeout=60000)
     keep = os.environ.get("MMRL_SCREENSHOTS")
     if keep and name:
         Path(keep).mkdir(parents=True, exist_ok=True)
