@@ -103,12 +103,11 @@ class Scene:
     def __init__(self, host: str = LOCALHOST, port: int = 8080, *, title: str = "mmrl"):
         viser = _viser()
         check_port(port)
-        self.requested_port = port
         host = check_host(host)
         with contextlib.redirect_stdout(io.StringIO()):  # viser's banner; the command prints the address
             self.server = viser.ViserServer(host=host, port=port, label=title, verbose=False)
         # A client may ask for a share URL (a tunnel through viser's servers): never.
-        self.server.request_share_url = _no_share_url
+        self.server.request_share_url = lambda *_args, **_kwargs: None
         self.host = host
         self.port = int(self.server.get_port())
         self.server.scene.set_up_direction("+y")
@@ -128,9 +127,6 @@ class Scene:
     def atomic(self):
         """Updates inside ``with scene.atomic():`` reach the browser together (one frame)."""
         return self.server.atomic()
-
-    def client_count(self) -> int:
-        return len(self.server.get_clients())
 
     # ------------------------------------------------------------------ scene objects
     def ground(self, size: float = 60.0, name: str = "/ground") -> None:
@@ -316,10 +312,6 @@ class Scene:
     def recording(self):
         """``with scene.recording() as rec:`` records every scene update made inside (GUI excluded)."""
         yield Recording(self.server.get_scene_serializer())
-
-
-def _no_share_url(*_args, **_kwargs) -> None:
-    return None
 
 
 def ground_hit(origin: Sequence[float], direction: Sequence[float]) -> Optional[tuple]:
