@@ -269,6 +269,7 @@ class FullPath:
         res = self.playback.play(self.character, self.env, 0, match, cost, a[0])
         self.episode_steps += 1
         done = bool(term[0] or trunc[0])
+        self.obs = obs[0]
         shown = int(self.env.step_frames[0])
         out.update(res=res, reward=float(reward[0]), terminated=bool(term[0]), truncated=bool(trunc[0] and not term[0]),
                    done=done, step_frames=shown, shown=shown, success=False)
@@ -283,13 +284,10 @@ class FullPath:
             out["goal_error"] = self._goal_error(info["final_obs"][0, g], res.roots[shown - 1])
             if self.task.final_values is not None:
                 out.update(self.task.final_values(self.env.observation_layout, info["final_obs"][0]))
-            self.obs = obs[0]
             if not self.continuous:
                 if self.character._record:
                     self.last_recording = self.recording(trim=res.frames.size - shown)
                 self._start_episode()
-        else:
-            self.obs = obs[0]
         return out
 
     def _goal_error(self, goal: np.ndarray, root: np.ndarray) -> float:
