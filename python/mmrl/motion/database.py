@@ -162,11 +162,10 @@ class Database:
         files = find_bvh_files(paths)
         s, u, f = _bvh_options(scale, up, fps)
         workers = num_workers or os.cpu_count() or 1
-        bar = None
-        if progress:
-            from tqdm import tqdm
+        from tqdm import tqdm
 
-            bar = tqdm(total=len(files), unit="file", desc="parsing BVH", disable=None)  # None: only on a terminal
+        # disable None: a bar only on a terminal
+        bar = tqdm(total=len(files), unit="file", desc="parsing BVH", disable=None if progress else True)
 
         def load(path):  # runs in a worker thread; the C++ releases the GIL
             motion = _core.bvh_load(os.fspath(path), s, u, f)
@@ -178,11 +177,9 @@ class Database:
                 for m, problems in pool.map(load, files):
                     warn_if_implausible(m, problems, stacklevel=2)  # from this thread, in file order
                     motions.append(m)
-                    if bar is not None:
-                        bar.update(1)
+                    bar.update(1)
         finally:
-            if bar is not None:
-                bar.close()
+            bar.close()
         from .tags import TagRules, clip_tags_for_files
 
         roots = [Path(p) for p in ([paths] if isinstance(paths, (str, os.PathLike)) else list(paths))]
