@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Optional
@@ -225,8 +224,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     res["verdict"] = verdict(res, args.run)
     res["episode_results"] = res.pop("episode_results")  # keep the per-episode list last
     if args.json:
-        json.dump(res, sys.stdout)
-        sys.stdout.write("\n")
+        print(json.dumps(res))
         return 0
     print_evaluation(res, s, args.episodes)
     return 0
@@ -358,8 +356,7 @@ def _eval_per_request(args: argparse.Namespace, s: "Setup") -> int:
         res.pop("episode_results", None)
         rows.append(res)
     if args.json:
-        json.dump({"policy": s.policy_name, "env": s.task.name, "seed": args.seed, "per_request": rows}, sys.stdout)
-        sys.stdout.write("\n")
+        print(json.dumps({"policy": s.policy_name, "env": s.task.name, "seed": args.seed, "per_request": rows}))
         return 0
     print(f"{s.policy_name} on {s.task.name}: {args.episodes} episodes per request")
     print("| request | success | time to target (s) | mean speed (m/s) | sliding IK off | sliding IK on | "
