@@ -24,10 +24,6 @@ from ..errors import InputError, require_extra
 LOCALHOST = "127.0.0.1"
 
 
-def _viser():
-    return require_extra("viser", "viewer", "the browser viewer")
-
-
 def check_port(port: int) -> int:
     if not isinstance(port, int) or not 0 <= port <= 65535:
         raise InputError(f"--port must be an integer in 0..65535, got {port!r}")
@@ -101,7 +97,7 @@ class Scene:
     """A viser server drawing mmrl's scene. ``close()`` stops it."""
 
     def __init__(self, host: str = LOCALHOST, port: int = 8080, *, title: str = "mmrl"):
-        viser = _viser()
+        viser = require_extra("viser", "viewer", "the browser viewer")
         check_port(port)
         host = check_host(host)
         with contextlib.redirect_stdout(io.StringIO()):  # viser's banner; the command prints the address
