@@ -59,6 +59,13 @@ class StepResult:
     the fast path): the ankles of the same run with IK off, since IK changes nothing later."""
 
 
+def _query_or_zeros(trajectory_query: Optional[np.ndarray]) -> np.ndarray:
+    """A decision's (12,) trajectory query as recorded; zeros when none is given."""
+    if trajectory_query is None:
+        return np.zeros(TRAJECTORY_DIM, np.float32)
+    return np.asarray(trajectory_query, np.float32).reshape(TRAJECTORY_DIM)
+
+
 class Character:
     """A character driven by motion matching.
 
@@ -225,8 +232,7 @@ class Character:
             raise TypeError(f"match: expected an int frame, got {type(match).__name__}")
         if not (0 <= int(match) < self.db.num_frames and self.db.valid_mask[int(match)]):
             raise ValueError(f"match: frame {match} is not a valid match frame of the database")
-        q = np.zeros(TRAJECTORY_DIM, np.float32) if trajectory_query is None else \
-            np.asarray(trajectory_query, np.float32).reshape(TRAJECTORY_DIM)
+        q = _query_or_zeros(trajectory_query)
         self._core.play(int(match), float(cost))
         return self._played(q)
 
@@ -253,8 +259,7 @@ class Character:
         the env's ``compressed_rows`` (row 0 the chosen state's pose, rows 1.. shown)."""
         rows = np.ascontiguousarray(real_array(rows, "rows", (self.frames_per_step + 1, 9 * self.db.num_joints + 5),
                                                dtype=np.float32))
-        q = np.zeros(TRAJECTORY_DIM, np.float32) if trajectory_query is None else \
-            np.asarray(trajectory_query, np.float32).reshape(TRAJECTORY_DIM)
+        q = _query_or_zeros(trajectory_query)
         self._core.play_rows(rows, bool(transition), float(cost))
         if self._record and not self.fast:
             from .compress.model import natural_motion
@@ -274,16 +279,13 @@ class Character:
                          animated_feet=None if self.fast else np.array(c.animated_feet()))
         if self._record:
             r = self._rec
-            r["frames"].append(res.frames)
-            r["roots"].append(res.roots)
-            r["contacts"].append(res.contacts)
-            r["lock_weights"].append(res.lock_weights)
             r["transitions"].append(res.transition)
             r["queries"].append(q.copy())
             r["costs"].append(res.cost)
-            if not self.fast:
-                for key in ("positions", "rotations", "local_translations", "local_rotations", "animated_feet"):
-                    r[key].append(getattr(res, key))
+            pose_keys = () if self.fast else ("positions", "rotations", "local_translations", "local_rotations",
+                                              "animated_feet")
+            for key in ("frames", "roots", "contacts", "lock_weights") + pose_keys:
+                r[key].append(getattr(res, key))
         return res
 
     def recording(self) -> Dict[str, np.ndarray]:

@@ -86,12 +86,12 @@ class MetricsLogger:
         kept = [header] + [r for r in rows[1:] if _row_step(r, len(header)) <= resume_step]
         if len(kept) == 1:
             self.path.unlink()
-        elif len(kept) != len(rows) or torn:
-            self.columns = header
+            return
+        self.columns = header
+        if len(kept) != len(rows) or torn:
             with atomic_open(self.path, "w", newline="") as file:
                 csv.writer(file).writerows(kept)
-        else:
-            self.columns = header
+
     def write(self, row: dict) -> None:
         if self.writer is None:
             extra = [k for k in row if k not in self.BASE_COLUMNS]

@@ -269,6 +269,7 @@ class FullPath:
         res = self.playback.play(self.character, self.env, 0, match, cost, a[0])
         self.episode_steps += 1
         done = bool(term[0] or trunc[0])
+        self.obs = obs[0]
         shown = int(self.env.step_frames[0])
         out.update(res=res, reward=float(reward[0]), terminated=bool(term[0]), truncated=bool(trunc[0] and not term[0]),
                    done=done, step_frames=shown, shown=shown, success=False)
@@ -283,13 +284,10 @@ class FullPath:
             out["goal_error"] = self._goal_error(info["final_obs"][0, g], res.roots[shown - 1])
             if self.task.final_values is not None:
                 out.update(self.task.final_values(self.env.observation_layout, info["final_obs"][0]))
-            self.obs = obs[0]
             if not self.continuous:
                 if self.character._record:
                     self.last_recording = self.recording(trim=res.frames.size - shown)
                 self._start_episode()
-        else:
-            self.obs = obs[0]
         return out
 
     def _goal_error(self, goal: np.ndarray, root: np.ndarray) -> float:
@@ -503,9 +501,8 @@ class FollowLog:
         self.per_step["query_frames"].append(self.frames_so_far() - 1)
         self.per_step["query_points"].append(points.astype(np.float32))
         self.per_step["query_directions"].append(directions.astype(np.float32))
-        for key, value in self.run.playback.step_values(self.run.env, 0).items():
-            self.per_step.setdefault(key, []).append(value)
-        for key, value in out.get("scene_step", {}).items():
+        step_values = self.run.playback.step_values(self.run.env, 0)  # the motion source's, then the scene's
+        for key, value in [*step_values.items(), *out.get("scene_step", {}).items()]:
             self.per_step.setdefault(key, []).append(value)
         # A continuous run shows the whole step; a cut one only up to the ending frame.
         shown = out["res"].frames.size if self.run.continuous else out["step_frames"]

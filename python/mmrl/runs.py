@@ -161,13 +161,11 @@ class RunDir:
 
     def policy(self, device: str = "cpu"):
         """The run's trained policy (``latest.pt``)."""
-        from .rl.ppo import load_policy
+        from .rl.ppo import CheckpointError, load_policy
 
         if not self.checkpoint.is_file():
             raise not_a_run(self.path, f"no {CHECKPOINT_NAME} in it: it stopped before its first checkpoint"
                             if self.config else f"no {CONFIG_NAME} or {CHECKPOINT_NAME} in it")
-        from .rl.ppo import CheckpointError
-
         try:
             return load_policy(self.checkpoint, device=device)
         except CheckpointError as e:
@@ -175,7 +173,6 @@ class RunDir:
             hint = (f"; its newest snapshot {snapshots[-1].name} may still be good: copy it over {CHECKPOINT_NAME}"
                     if snapshots else "; train again, or restore latest.pt from a copy")
             raise CheckpointError(str(e).splitlines()[0][:300] + hint) from None
-
 
 
 def not_a_run(path: Path, why: str) -> InputError:

@@ -31,12 +31,18 @@ def read_number(text: str, kind, what: str):
     return value
 
 
+def _in_range(text: str, kind, what: str, ok, expected: str):
+    """``text`` read as ``kind`` (:func:`read_number`, naming ``what``), refused as not ``expected``
+    unless ``ok(value)``."""
+    v = read_number(text, kind, what)
+    if not ok(v):
+        raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}")
+    return v
+
+
 def positive_int(text: str, high: int = 10**12) -> int:
     """argparse type: a whole number 1..``high`` (``1e6`` reads as 1000000)."""
-    v = read_number(text, int, "a whole number >= 1")
-    if not 1 <= v <= high:
-        raise argparse.ArgumentTypeError(f"expected a whole number from 1 to {high:,}, got {text!r}")
-    return v
+    return _in_range(text, int, "a whole number >= 1", lambda v: 1 <= v <= high, f"a whole number from 1 to {high:,}")
 
 
 def bounded_int(high: int):
@@ -46,42 +52,28 @@ def bounded_int(high: int):
 
 def seed(text: str) -> int:
     """argparse type: a random seed, 0 to 2**32 - 1."""
-    v = read_number(text, int, "a seed, a whole number from 0 to 4294967295")
-    if not 0 <= v < 2**32:
-        raise argparse.ArgumentTypeError(f"expected a seed from 0 to 4294967295, got {text!r}")
-    return v
+    return _in_range(text, int, "a seed, a whole number from 0 to 4294967295", lambda v: 0 <= v < 2**32,
+                     "a seed from 0 to 4294967295")
 
 
 def count(text: str, high: int = 1024) -> int:
     """argparse type: a whole number 0..``high``."""
-    v = read_number(text, int, "a whole number >= 0")
-    if not 0 <= v <= high:
-        raise argparse.ArgumentTypeError(f"expected a whole number from 0 to {high}, got {text!r}")
-    return v
+    return _in_range(text, int, "a whole number >= 0", lambda v: 0 <= v <= high, f"a whole number from 0 to {high}")
 
 
 def positive_float(text: str, high: float = 1e7) -> float:
     """argparse type: a finite number in (0, ``high``] (seconds: 1e7 is four months)."""
-    v = read_number(text, float, "a number > 0")
-    if not 0 < v <= high:
-        raise argparse.ArgumentTypeError(f"expected a number > 0 and at most {high:g}, got {text!r}")
-    return v
+    return _in_range(text, float, "a number > 0", lambda v: 0 < v <= high, f"a number > 0 and at most {high:g}")
 
 
 def nonnegative_float(text: str, high: float = 1e7) -> float:
     """argparse type: a finite number in [0, ``high``] (0 switches a measurement off)."""
-    v = read_number(text, float, "a number >= 0")
-    if not 0 <= v <= high:
-        raise argparse.ArgumentTypeError(f"expected a number from 0 to {high:g}, got {text!r}")
-    return v
+    return _in_range(text, float, "a number >= 0", lambda v: 0 <= v <= high, f"a number from 0 to {high:g}")
 
 
 def port(text: str) -> int:
     """argparse type: a TCP port, 0 (any free one) to 65535."""
-    v = read_number(text, int, "a port number 0-65535")
-    if not 0 <= v <= 65535:
-        raise argparse.ArgumentTypeError(f"expected a port number 0-65535, got {text!r}")
-    return v
+    return _in_range(text, int, "a port number 0-65535", lambda v: 0 <= v <= 65535, "a port number 0-65535")
 
 
 def output_path(path, flag: str, suffixes=()) -> Path:
@@ -268,6 +260,17 @@ def deploy_config(task: Task, config, items: List[str], db, trained: bool = True
     except (ValueError, TypeError) as e:
         raise InputError(f"--set: {task.name} options: {e}") from None
     return config
+
+
+def apply_run_flags(cfg, args) -> None:
+    """The flags both training backends share, on their config: the budget (``--steps`` or
+    ``--seconds``), ``--device`` and ``--no-progress``."""
+    if args.steps is not None:
+        cfg.total_steps, cfg.max_seconds = args.steps, None
+    elif args.seconds is not None:
+        cfg.total_steps, cfg.max_seconds = 10**12, args.seconds
+    cfg.device = args.device
+    cfg.progress = not args.no_progress
 
 
 def apply_values(obj, values: Dict[str, Any]) -> None:

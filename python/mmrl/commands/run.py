@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 from typing import Optional
@@ -135,13 +134,7 @@ class Setup:
         self.options = dict(ik=not args.no_ik, foot_locking=not args.no_ik,
                             inertialization_halflife=0.0 if args.no_inertialization else 0.1)
         self.request = check_request(self.db, getattr(args, "request", "") or "")
-        self.compressed = None
-        if getattr(args, "compressed", None):
-            from ..compress.model import CompressedModel
-
-            if self.request:
-                raise InputError("--compressed: a compressed controller keeps to no tags; drop --request")
-            self.compressed = CompressedModel(args.compressed, self.db)
+        self.compressed = compressed_model(args, self.db, self.request)
 
     def _policy(self, args, run):
         from ..rl.policies import JoystickPolicy
@@ -163,6 +156,18 @@ def check_request(db, request: str) -> str:
         return _core.select_request(db._db, request)[0]
     except ValueError as e:
         raise InputError(f"--request: {e}") from None
+
+
+def compressed_model(args, db, request: str):
+    """The compressed controller ``--compressed FILE`` names, for ``db`` (None without the flag);
+    InputError with a ``request``: a compressed controller keeps to no tags."""
+    if not getattr(args, "compressed", None):
+        return None
+    from ..compress.model import CompressedModel
+
+    if request:
+        raise InputError("--compressed: a compressed controller keeps to no tags; drop --request")
+    return CompressedModel(args.compressed, db)
 
 
 def _check_stage(task, stage: Optional[int]) -> Optional[int]:
@@ -219,8 +224,7 @@ def cmd_eval(args: argparse.Namespace) -> int:
     res["verdict"] = verdict(res, args.run)
     res["episode_results"] = res.pop("episode_results")  # keep the per-episode list last
     if args.json:
-        json.dump(res, sys.stdout)
-        sys.stdout.write("\n")
+        print(json.dumps(res))
         return 0
     print_evaluation(res, s, args.episodes)
     return 0
@@ -352,10 +356,8 @@ def _eval_per_request(args: argparse.Namespace, s: "Setup") -> int:
         res.pop("episode_results", None)
         rows.append(res)
     if args.json:
-        json.dump({"policy": s.policy_name, "env": s.task.name, "seed": args.seed, "per_request": rows}, sys.stdout)
-        sys.stdout.write("\n")
+        print(json.dumps({"policy": s.policy_name, "env": s.task.name, "seed": args.seed, "per_request": rows}))
         return 0
-    f = lambda v, p=2: "n/a" if v is None else f"{v:.{p}f}"  # noqa: E731
     print(f"{s.policy_name} on {s.task.name}: {args.episodes} episodes per request")
     print("| request | success | time to target (s) | mean speed (m/s) | sliding IK off | sliding IK on | "
           "transitions/s | pose jump p99 (cm) | frames inside |")
@@ -364,10 +366,10 @@ def _eval_per_request(args: argparse.Namespace, s: "Setup") -> int:
         if "error" in r:
             print(f"| {r['request']} | {r['error']} |")
             continue
-        print(f"| {r['request']} | {100 * r['success_rate']:.0f}% | {f(r['mean_time_to_target_s'])} | "
-              f"{f(r.get('mean_speed_m_per_s'))} | {f(r.get('foot_sliding_ik_off_cm_per_s'), 1)} | "
-              f"{f(r.get('foot_sliding_cm_per_s'), 1)} | {f(r.get('transitions_per_s'))} | "
-              f"{f(r.get('pose_jump_p99_cm'), 1)} | {f(100 * r['request_fidelity'], 1) + '%' if r.get('request_fidelity') is not None else 'n/a'} |")
+        print(f"| {r['request']} | {100 * r['success_rate']:.0f}% | {_f(r['mean_time_to_target_s'])} | "
+              f"{_f(r.get('mean_speed_m_per_s'))} | {_f(r.get('foot_sliding_ik_off_cm_per_s'), 1)} | "
+              f"{_f(r.get('foot_sliding_cm_per_s'), 1)} | {_f(r.get('transitions_per_s'))} | "
+              f"{_f(r.get('pose_jump_p99_cm'), 1)} | {_f(100 * r['request_fidelity'], 1) + '%' if r.get('request_fidelity') is not None else 'n/a'} |")
     return 0
 
 

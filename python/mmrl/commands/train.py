@@ -10,9 +10,9 @@ from ..errors import InputError
 from ..rl.quality_log import MatchQualityLog
 from ..tasks import Task, get_task, task_names
 from ..tasks.options import check_retired
-from .common import (add_data_options, apply_values, bounded_int, check_ppo_overrides, count, deprecated_alias,
-                     positive_float, positive_int, report_training, resolve_run, seed, split_overrides,
-                     task_flag_options)
+from .common import (add_data_options, apply_run_flags, apply_values, bounded_int, check_ppo_overrides, count,
+                     deprecated_alias, positive_float, positive_int, report_training, resolve_run, seed,
+                     split_overrides, task_flag_options)
 
 
 def register_cli(sub) -> None:
@@ -175,12 +175,7 @@ def cmd_train(args: argparse.Namespace) -> int:
                          "mmrl db build DATA --mirror -o DB.npz")
     saved, out, data = resolve_run(task, args, f"runs/{task.name}-seed{args.seed}")
     task_cfg, cfg, options = _configs(task, args, saved)
-    if args.steps is not None:
-        cfg.total_steps, cfg.max_seconds = args.steps, None
-    elif args.seconds is not None:
-        cfg.total_steps, cfg.max_seconds = 10**12, args.seconds
-    cfg.device = args.device
-    cfg.progress = not args.no_progress
+    apply_run_flags(cfg, args)
     num_envs = args.envs or saved.get("num_envs") or 64
 
     from ..motion.sources import database_from_spec

@@ -7,7 +7,7 @@ from typing import Any, Dict
 
 from ..errors import InputError
 from ..tasks import Task
-from .common import apply_values, report_training, resolve_run, split_overrides, task_flag_options
+from .common import apply_run_flags, apply_values, report_training, resolve_run, split_overrides, task_flag_options
 
 # Our trainer's option names for the knobs RLlib also has (a task preset may set them).
 PPO_TO_RLLIB = {"gamma": "gamma", "learning_rate": "lr", "anneal_lr": "anneal_lr", "gae_lambda": "lambda_",
@@ -67,16 +67,11 @@ def cmd_train_rllib(args: argparse.Namespace, task: Task) -> int:
 
     saved, out, data = resolve_run(task, args, f"runs/{task.name}-rllib-seed{args.seed}")
     task_cfg, cfg, options = _configs(task, args, saved)
-    if args.steps is not None:
-        cfg.total_steps, cfg.max_seconds = args.steps, None
-    elif args.seconds is not None:
-        cfg.total_steps, cfg.max_seconds = 10**12, args.seconds
+    apply_run_flags(cfg, args)
     if args.workers is not None:
         cfg.workers = args.workers
     if args.envs_per_worker is not None:
         cfg.envs_per_worker = args.envs_per_worker
-    cfg.device = args.device
-    cfg.progress = not args.no_progress
     try:
         cfg.check()
     except ValueError as e:

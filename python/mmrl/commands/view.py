@@ -13,7 +13,6 @@ import signal
 import threading
 import webbrowser
 
-from ..errors import InputError
 from .common import (add_data_options, add_deploy_set, deploy_config, deprecated_alias, output_path, port,
                      positive_float, run_database, seed)
 
@@ -89,10 +88,8 @@ def _interrupt(_signum, _frame):
 
 def cmd_view(args: argparse.Namespace) -> int:
     from ..viewer.clips import load_playback
-    from ..viewer.scene import check_port
     from ..viewer.view_app import ViewApp
 
-    check_port(args.port)
     playback = load_playback(args.source, seconds=args.length, seed=args.seed, stage=args.stage)
     scene = _serve(args, f"mmrl view {playback.name}")
     app = ViewApp(scene, playback)
@@ -105,9 +102,6 @@ def cmd_play(args: argparse.Namespace) -> int:
     from ..viewer.live import LiveSession
     from ..viewer.play_app import PlayApp
 
-    from ..viewer.scene import check_port
-
-    check_port(args.port)
     import torch
 
     # One observation per decision: a second torch thread only adds hand-off and contention
@@ -116,18 +110,12 @@ def cmd_play(args: argparse.Namespace) -> int:
     run = RunDir(args.run, require_run=True)
     task = run.task
     _check_stage(task, args.stage)
-    from .run import check_request
+    from .run import check_request, compressed_model
 
     db = run_database(run, args)
     if args.trace:
         output_path(args.trace, "--trace")
-    compressed = None
-    if args.compressed:
-        from ..compress.model import CompressedModel
-
-        if args.request:
-            raise InputError("--compressed: a compressed controller keeps to no tags; drop --request")
-        compressed = CompressedModel(args.compressed, db)
+    compressed = compressed_model(args, db, args.request)
     config = deploy_config(task, run.task_config(task), args.set, db)
     session = LiveSession(task, db, run.policy(), config=config, stage=args.stage,
                           seed=args.seed, trace=args.trace, request=check_request(db, args.request),

@@ -22,10 +22,6 @@ def database_signature(db) -> Dict[str, Any]:
     return {"num_frames": int(db.num_frames), "joint_names": list(db.joint_names), "parents": list(db.parents)}
 
 
-def _plain_config(cfg) -> Dict[str, Any]:
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}
-
-
 def config_from(saved: Dict[str, Any]):
     """A file's CompressConfig (fields it lacks keep their defaults)."""
     cfg = CompressConfig()
@@ -43,7 +39,8 @@ def save_compressed(path, nets: Dict[str, Any], data, cfg, db,
 
     from ..io import atomic_open
 
-    payload = {"format": FORMAT, "version": VERSION, "config": _plain_config(cfg),
+    config = {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(cfg).items()}
+    payload = {"format": FORMAT, "version": VERSION, "config": config,
                "y_mean": torch.as_tensor(data.y_mean), "y_std": torch.as_tensor(data.y_std),
                "database": database_signature(db), **{k: v.state_dict() for k, v in nets.items()}, **state}
     Path(path).parent.mkdir(parents=True, exist_ok=True)

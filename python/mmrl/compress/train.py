@@ -236,11 +236,9 @@ def _train_stage(stage, nets, data, cfg, db, out, device, logger, step_offset, s
     if stage == "stepper" and windows.size == 0:
         raise ValueError(f"no clip has stepper_window={cfg.stepper_window} frames")
     matcher = db.matcher if stage == "projector" else None
-    bar = None
-    if progress:
-        from tqdm import tqdm
+    from tqdm import tqdm
 
-        bar = tqdm(total=iterations, initial=start, unit="it", desc=stage)
+    bar = tqdm(total=iterations, initial=start, unit="it", desc=stage, disable=not progress)
     t0, it, last = time.perf_counter(), start, {}
 
     def save(done: bool):
@@ -265,8 +263,7 @@ def _train_stage(stage, nets, data, cfg, db, out, device, logger, step_offset, s
             opt.step()
             sched.step()
             it += 1
-            if bar is not None:
-                bar.update(1)
+            bar.update(1)
             checkpoint = it % cfg.checkpoint_every == 0
             if checkpoint or it % 200 == 0 or it == iterations:
                 last = {k: float(v.detach()) for k, v in res.items()}
@@ -277,8 +274,7 @@ def _train_stage(stage, nets, data, cfg, db, out, device, logger, step_offset, s
                     save(False)
                 logger.write(last)
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
         for n in trained:
             nets[n].eval()
     last.update(stage_metrics(stage, nets, data, s_all, znorm, matcher, device))

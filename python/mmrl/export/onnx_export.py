@@ -81,23 +81,20 @@ def policy_graph_module(policy, action_low: Optional[np.ndarray] = None, action_
     return PolicyGraph().eval().to("cpu"), obs_dim
 
 
-class _WithRequest:
-    """``(obs, request) -> policy(cat(obs, request))``: the graph with the request as its own input."""
+def _with_request(module):
+    """``(obs, request) -> module(cat(obs, request))``: the graph with the request as its own input."""
+    import torch
+    from torch import nn
 
-    @staticmethod
-    def wrap(module):
-        from torch import nn
-        import torch
+    class Graph(nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.inner = module
 
-        class Graph(nn.Module):
-            def __init__(self):
-                super().__init__()
-                self.inner = module
+        def forward(self, obs, request):
+            return self.inner(torch.cat([obs, request], dim=1))
 
-            def forward(self, obs, request):
-                return self.inner(torch.cat([obs, request], dim=1))
-
-        return Graph().eval()
+    return Graph().eval()
 
 
 def export_onnx(policy, path: "str | os.PathLike[str]", action_low: Optional[np.ndarray] = None,
@@ -117,7 +114,7 @@ def export_onnx(policy, path: "str | os.PathLike[str]", action_low: Optional[np.
     args = (torch.zeros(1, obs_dim),)
     names = ["obs"]
     if r:
-        module = _WithRequest.wrap(module)
+        module = _with_request(module)
         args, names = (torch.zeros(1, obs_dim - r), torch.zeros(1, r)), ["obs", "request"]
     buffer = io.BytesIO()
     with warnings.catch_warnings():

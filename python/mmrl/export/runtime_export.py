@@ -93,12 +93,10 @@ def policy_sections(policy) -> Dict[str, Section]:
     header = [fields[0], obs_dim, act_dim, len(convs), len(dense)] + fields[1:]
     out["policy.header"] = np.array(header, np.int32)
     out["policy.activations"] = np.array([ACTIVATIONS[a] for _, a in convs + dense], np.int32)
-    for k, (conv, _) in enumerate(convs):
-        out[f"policy.conv{k}.weight"] = _f32(conv.weight)
-        out[f"policy.conv{k}.bias"] = _f32(conv.bias)
-    for k, (lin, _) in enumerate(dense):
-        out[f"policy.dense{k}.weight"] = _f32(lin.weight)
-        out[f"policy.dense{k}.bias"] = _f32(lin.bias)
+    for kind, layers in (("conv", convs), ("dense", dense)):
+        for k, (layer, _) in enumerate(layers):
+            out[f"policy.{kind}{k}.weight"] = _f32(layer.weight)
+            out[f"policy.{kind}{k}.bias"] = _f32(layer.bias)
     enabled = bool(norm.enabled)
     out["policy.obs_scale"] = _f32(norm.scale) if enabled else np.ones(obs_dim, np.float32)
     out["policy.obs_shift"] = _f32(norm.shift) if enabled else np.zeros(obs_dim, np.float32)

@@ -260,17 +260,3 @@ def _fetch_command(args) -> int:
         return 1
     print(f"{args.dataset}: ready in {root} (CC BY-NC 4.0, Bandai Namco Research Inc.; non-commercial use only)")
     return 0
-
-
-def _main(argv: Optional[Sequence[str]] = None) -> int:
-    """``python -m mmrl.motion.data fetch ...`` until the ``mmrl`` command wires ``register_cli``."""
-    import argparse
-
-    parser = argparse.ArgumentParser(prog="python -m mmrl")
-    register_cli(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(["data", *(sys.argv[1:] if argv is None else argv)])
-    return args.func(args)
-
-
-if __name__ == "__main__":
-    raise SystemExit(_main())

@@ -162,11 +162,10 @@ class Database:
         files = find_bvh_files(paths)
         s, u, f = _bvh_options(scale, up, fps)
         workers = num_workers or os.cpu_count() or 1
-        bar = None
-        if progress:
-            from tqdm import tqdm
+        from tqdm import tqdm
 
-            bar = tqdm(total=len(files), unit="file", desc="parsing BVH", disable=None)  # None: only on a terminal
+        # disable None: a bar only on a terminal
+        bar = tqdm(total=len(files), unit="file", desc="parsing BVH", disable=None if progress else True)
 
         def load(path):  # runs in a worker thread; the C++ releases the GIL
             motion = _core.bvh_load(os.fspath(path), s, u, f)
@@ -178,11 +177,9 @@ class Database:
                 for m, problems in pool.map(load, files):
                     warn_if_implausible(m, problems, stacklevel=2)  # from this thread, in file order
                     motions.append(m)
-                    if bar is not None:
-                        bar.update(1)
+                    bar.update(1)
         finally:
-            if bar is not None:
-                bar.close()
+            bar.close()
         from .tags import TagRules, clip_tags_for_files
 
         roots = [Path(p) for p in ([paths] if isinstance(paths, (str, os.PathLike)) else list(paths))]
@@ -256,33 +253,13 @@ class Database:
     def _state(self):
         return self._db.state()
 
-    @property
-    def clip_ranges(self) -> np.ndarray:
-        return self._state()["clip_ranges"]
-
-    @property
-    def clip_mirrored(self) -> np.ndarray:
-        return self._state()["clip_mirrored"].view(np.bool_)
-
-    @property
-    def root_positions(self) -> np.ndarray:
-        return self._state()["root_positions"]
-
-    @property
-    def root_yaws(self) -> np.ndarray:
-        return self._state()["root_yaws"]
-
-    @property
-    def root_deltas(self) -> np.ndarray:
-        return self._state()["root_deltas"]
-
-    @property
-    def bone_translations(self) -> np.ndarray:
-        return self._state()["bone_translations"]
-
-    @property
-    def bone_rotations(self) -> np.ndarray:
-        return self._state()["bone_rotations"]
+    clip_ranges = property(lambda self: self._state()["clip_ranges"])
+    clip_mirrored = property(lambda self: self._state()["clip_mirrored"].view(np.bool_))
+    root_positions = property(lambda self: self._state()["root_positions"])
+    root_yaws = property(lambda self: self._state()["root_yaws"])
+    root_deltas = property(lambda self: self._state()["root_deltas"])
+    bone_translations = property(lambda self: self._state()["bone_translations"])
+    bone_rotations = property(lambda self: self._state()["bone_rotations"])
 
     @property
     def weights(self) -> Dict[str, float]:
@@ -297,15 +274,10 @@ class Database:
         return Database(self._db.with_weights(_weights_list(weights, cur)), self._clip_source_fps,
                         self._clip_source_up)
 
-    @property
-    def clip_source_fps(self) -> np.ndarray:
-        """(C,) float32: each clip's frame rate in its file, before resampling to ``fps``."""
-        return self._clip_source_fps
-
-    @property
-    def clip_source_up(self) -> np.ndarray:
-        """(C,) str: each clip's up axis in its file, ``"y"`` or ``"z"`` (rotated to Y up)."""
-        return self._clip_source_up
+    clip_source_fps = property(lambda self: self._clip_source_fps,
+                               doc="(C,) float32: each clip's frame rate in its file, before resampling to ``fps``.")
+    clip_source_up = property(lambda self: self._clip_source_up,
+                              doc="(C,) str: each clip's up axis in its file, ``\"y\"`` or ``\"z\"`` (rotated to Y up).")
 
     def normalize(self, features: np.ndarray) -> np.ndarray:
         """Map raw features (..., 27) into the normalized, weighted search space (float32;
@@ -333,10 +305,8 @@ class Database:
         s = self._state()
         arrays = {k: np.asarray(v) for k, v in s.items()
                   if k not in ("joint_names", "channels", "clip_names", "tag_names", "roles", "fps", "source_scale")}
-        arrays["tag_names"] = np.array(s["tag_names"], dtype=np.str_).reshape(-1)
-        arrays["joint_names"] = np.array(s["joint_names"], dtype=np.str_)
-        arrays["channels"] = np.array(s["channels"], dtype=np.str_)
-        arrays["clip_names"] = np.array(s["clip_names"], dtype=np.str_)
+        for k in ("tag_names", "joint_names", "channels", "clip_names"):
+            arrays[k] = np.array(s[k], dtype=np.str_).reshape(-1)
         arrays["roles"] = np.array(s["roles"], dtype=np.int32)
         arrays["fps"] = np.array(s["fps"], dtype=np.float32)
         arrays["source_scale"] = np.array(s["source_scale"], dtype=np.float32)

@@ -48,24 +48,11 @@ class KDTree:
         """
         return self._tree.query(queries, k)
 
-    @property
-    def size(self) -> int:
-        """Number of rows (N)."""
-        return self._tree.size
-
-    @property
-    def dim(self) -> int:
-        """Row dimension (D)."""
-        return self._tree.dim
-
-    @property
-    def leaf_size(self) -> int:
-        return self._tree.leaf_size
-
-    @property
-    def num_threads(self) -> int:
-        """Threads that answer a batch of queries (the caller's included)."""
-        return self._tree.num_threads
+    size = property(lambda self: self._tree.size, doc="Number of rows (N).")
+    dim = property(lambda self: self._tree.dim, doc="Row dimension (D).")
+    leaf_size = property(lambda self: self._tree.leaf_size, doc="Rows per leaf.")
+    num_threads = property(lambda self: self._tree.num_threads,
+                           doc="Threads that answer a batch of queries (the caller's included).")
 
     def __repr__(self) -> str:
         return f"KDTree(size={self.size}, dim={self.dim}, leaf_size={self.leaf_size})"

@@ -31,7 +31,7 @@ import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -115,16 +115,6 @@ class TagRules:
     patterns: Sequence[str] = ()
     sidecars: Sequence[PathLike] = ()
     auto: bool = True
-
-    def to_spec(self) -> Dict[str, object]:
-        return {"folder": self.folder, "patterns": list(self.patterns),
-                "sidecars": [str(Path(p).resolve()) for p in self.sidecars], "auto": bool(self.auto)}
-
-    @classmethod
-    def from_spec(cls, spec: Optional[Mapping[str, object]]) -> "TagRules":
-        spec = dict(spec or {})
-        return cls(folder=spec.get("folder"), patterns=tuple(spec.get("patterns") or ()),
-                   sidecars=tuple(spec.get("sidecars") or ()), auto=bool(spec.get("auto", True)))
 
 
 def _names(path: Path, roots: Sequence[Path]) -> List[str]:

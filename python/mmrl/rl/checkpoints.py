@@ -23,8 +23,7 @@ from ..io import atomic_open, load_plain_torch_file
 from .networks import network_class, registered_networks
 
 __all__ = ["CHECKPOINT_FORMAT", "CHECKPOINT_VERSION", "CheckpointError", "save_checkpoint", "load_checkpoint",
-           "load_plain_torch_file",
-           "build_network", "capture_rng_state", "restore_rng_state", "save_due_checkpoints"]
+           "load_plain_torch_file", "build_network", "capture_rng_state", "restore_rng_state", "save_due_checkpoints"]
 
 CHECKPOINT_FORMAT = "mmrl-ppo-checkpoint"
 CHECKPOINT_VERSION = 1

@@ -208,13 +208,7 @@ class _ObstacleTower(nn.Module):
                 nn.init.orthogonal_(module.weight, math.sqrt(2))
                 nn.init.zeros_(module.bias)
         self.map_fc = nn.Sequential(_linear(conv_out, int(map_features)), nn.ReLU())
-        layers: list[nn.Module] = []
-        width_in = int(map_features) + vector_dim
-        for size in head:
-            layers += [_linear(width_in, int(size)), nn.ReLU()]
-            width_in = int(size)
-        layers.append(_linear(width_in, out_features, out_gain))
-        self.head = nn.Sequential(*layers)
+        self.head = _mlp(int(map_features) + vector_dim, tuple(int(h) for h in head), out_features, out_gain, nn.ReLU)
 
     def forward(self, maps: torch.Tensor, vector: torch.Tensor) -> torch.Tensor:
         features = self.map_fc(self.conv(maps))

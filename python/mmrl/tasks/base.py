@@ -337,9 +337,6 @@ class TargetVectorEnv(RequestMethods, VectorEnv):
         self._core.set_state(int(i), int(frame), float(x), float(z), float(yaw))
         return self.observe(i)
 
-    def seconds_per_step(self) -> float:
-        return self.config.frames_per_step / self.db.fps
-
 
 class SingleEnv(gym.Env):
     """One character of a task as a ``gymnasium.Env`` (the same C++ core with one env).

@@ -146,10 +146,7 @@ class ObstaclesVectorEnv(TargetVectorEnv):
                 "episode_stage": np.where(done, self._env_stage, 0).astype(np.int32)}
 
     def _on_reset(self, which: Optional[np.ndarray]) -> None:
-        if which is None:
-            self._env_stage[:] = self._stage_label
-        else:
-            self._env_stage[which] = self._stage_label
+        self._env_stage[... if which is None else which] = self._stage_label
 
     # -- curriculum -------------------------------------------------------------------------
     def set_stage(self, max_speed: float, target_half_extent: float, label: int = 0) -> None:
@@ -217,7 +214,6 @@ class ObstaclesVectorEnv(TargetVectorEnv):
     def sensor_positions(self, i: int) -> np.ndarray:
         """World (x, z) of env i's sensors, (16, 16, 2)."""
         return self._core.sensor_positions(int(i))
-
 
 
 class ObstaclesEnv(SingleEnv):

@@ -108,8 +108,6 @@ class LiveSession:
     def set_request(self, request: str) -> None:
         """A request over the database's tags ("" for every clip): checked now (ValueError listing
         the tags available), applied at the next decision, like a new target."""
-        from .. import _core
-
         self.run.playback.check_request(request)
         canon = _core.select_request(self.db._db, request)[0] if request.strip() else ""
         with self._lock:
@@ -225,16 +223,15 @@ class LiveSession:
     def _wrap_controller_timing(self) -> None:
         """Time the character's playback of each decision: the playback's ``play``, what the full
         path calls whatever the motion source."""
-        self.run.playback.play = self._timed(self.run.playback.play)
+        inner = self.run.playback.play
 
-    def _timed(self, inner):
         def timed(*args, **kwargs):
             t0 = time.perf_counter()
             res = inner(*args, **kwargs)
             self.timing["controller"].append(time.perf_counter() - t0)
             return res
 
-        return timed
+        self.run.playback.play = timed
 
     # ------------------------------------------------------------------ obstacles
     def _obstacle_corners(self) -> np.ndarray:
@@ -292,9 +289,7 @@ class LiveSession:
         return {"points": world.astype(np.float32), "inside": inside}
 
     def _sensors(self) -> Optional[Dict[str, np.ndarray]]:
-        if self._scene is None:
-            return None
-        return self._scene.sensors()
+        return None if self._scene is None else self._scene.sensors()
 
     # ------------------------------------------------------------------ quality, trace, timing
     def quality(self) -> Dict[str, Any]:

@@ -24,10 +24,6 @@ from ..errors import InputError, require_extra
 LOCALHOST = "127.0.0.1"
 
 
-def _viser():
-    return require_extra("viser", "viewer", "the browser viewer")
-
-
 def check_port(port: int) -> int:
     if not isinstance(port, int) or not 0 <= port <= 65535:
         raise InputError(f"--port must be an integer in 0..65535, got {port!r}")
@@ -101,14 +97,13 @@ class Scene:
     """A viser server drawing mmrl's scene. ``close()`` stops it."""
 
     def __init__(self, host: str = LOCALHOST, port: int = 8080, *, title: str = "mmrl"):
-        viser = _viser()
+        viser = require_extra("viser", "viewer", "the browser viewer")
         check_port(port)
-        self.requested_port = port
         host = check_host(host)
         with contextlib.redirect_stdout(io.StringIO()):  # viser's banner; the command prints the address
             self.server = viser.ViserServer(host=host, port=port, label=title, verbose=False)
         # A client may ask for a share URL (a tunnel through viser's servers): never.
-        self.server.request_share_url = _no_share_url
+        self.server.request_share_url = lambda *_args, **_kwargs: None
         self.host = host
         self.port = int(self.server.get_port())
         self.server.scene.set_up_direction("+y")
@@ -128,9 +123,6 @@ class Scene:
     def atomic(self):
         """Updates inside ``with scene.atomic():`` reach the browser together (one frame)."""
         return self.server.atomic()
-
-    def client_count(self) -> int:
-        return len(self.server.get_clients())
 
     # ------------------------------------------------------------------ scene objects
     def ground(self, size: float = 60.0, name: str = "/ground") -> None:
@@ -316,10 +308,6 @@ class Scene:
     def recording(self):
         """``with scene.recording() as rec:`` records every scene update made inside (GUI excluded)."""
         yield Recording(self.server.get_scene_serializer())
-
-
-def _no_share_url(*_args, **_kwargs) -> None:
-    return None
 
 
 def ground_hit(origin: Sequence[float], direction: Sequence[float]) -> Optional[tuple]:

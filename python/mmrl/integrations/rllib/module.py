@@ -39,7 +39,6 @@ class MMRLTorchModule(TorchRLModule, ValueFunctionAPI):
         return self.net.value(batch[Columns.OBS])
 
 
-
 class RangeMeanStdFilter(MeanStdFilter):
     """RLlib's MeanStdFilter, leaving the observation entries [a, b) of ``exclude`` as they
     are (the obstacles' binary sensor maps, which our trainer does not normalize either)."""
