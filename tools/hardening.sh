@@ -30,6 +30,10 @@ PY_SUBSET="test_bvh.py test_database.py test_core_envs.py test_search.py test_ob
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
 CPP_ASAN_OPTIONS=detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1:check_initialization_order=1
 
+# Both sanitizer builds: -O1 -g1 takes a third less compile time than -O2 -g (the build is most
+# of a sanitizer step's time) and keeps line numbers in the reports.
+SANITIZER_FLAGS="-O1 -g1 -DNDEBUG"
+
 timed() {
   local name=$1 t0=$SECONDS
   shift
@@ -44,9 +48,7 @@ step_asan() {
     echo "hardening: the ASan step builds mmrl._core and needs pybind11 in this Python: pip install 'pybind11>=2.12'" >&2
     exit 2
   }
-  # -O1 -g1: a third less compile time than -O2 -g (the build is most of this step's time),
-  # and line numbers in the reports.
-  cmake -S . -B "$asan_build" -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g1 -DNDEBUG" \
+  cmake -S . -B "$asan_build" -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS_RELEASE="$SANITIZER_FLAGS" \
     -DMMRL_SANITIZE=ON -DMMRL_PYTHON=ON \
     -DMMRL_BUILD_TESTS=ON -DMMRL_BUILD_EXAMPLES=OFF -Dpybind11_DIR="$pybind11_dir" >/dev/null
   cmake --build "$asan_build" -j"$jobs" >/dev/null
@@ -81,8 +83,7 @@ step_asan_python() {
 }
 
 step_tsan() {
-  # -O1 -g1 as the ASan step: less compile time than -O2 -g, and line numbers in a report.
-  cmake -S . -B "$tsan_build" -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS_RELEASE="-O1 -g1 -DNDEBUG" \
+  cmake -S . -B "$tsan_build" -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_FLAGS_RELEASE="$SANITIZER_FLAGS" \
     -DMMRL_TSAN=ON -DMMRL_PYTHON=OFF -DMMRL_BUILD_EXAMPLES=OFF >/dev/null
   cmake --build "$tsan_build" -j"$jobs" >/dev/null
   ctest --test-dir "$tsan_build" --output-on-failure
