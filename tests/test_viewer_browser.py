@@ -218,7 +218,7 @@ def test_play_shift_drag_places_the_target_and_turns_the_facing_along_the_drag(b
         page.keyboard.down("Shift")
         page.mouse.move(x0, y0)
         page.mouse.down()
-        facings = []
+        facings, first = [], read_trace(trace)[-1]
         for direction in (1, -1):
             old = read_trace(trace)[-1]
             page.mouse.move(x0 + direction * 120, y0, steps=8)
@@ -227,6 +227,7 @@ def test_play_shift_drag_places_the_target_and_turns_the_facing_along_the_drag(b
                                every=0.05)
             time.sleep(0.5)  # the drag's last updates reach a decision
             facings.append(read_trace(trace)[-1]["facing"])
+            assert changed[-1]["target"] != first["target"]  # the drag placed the target
             assert np.hypot(*(np.array(changed[-1]["target"]) - changed[-1]["root"][:2])) < 15.0
         page.mouse.up()
         page.keyboard.up("Shift")
