@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "mmrl/compressed_source.hpp"
 #include "mmrl/runtime.hpp"
 
 namespace {
@@ -83,8 +84,9 @@ int main(int argc, char** argv) {
     report_file("compressed", argv[2]);
     const auto db = mmrl::RuntimeController::load(argv[1]);
     const auto lmm = mmrl::RuntimeController::load(argv[2]);
-    const mmrl::CompressedModel* m = lmm->compressed();
-    if (m == nullptr) throw std::invalid_argument(std::string(argv[2]) + " is not a compressed controller");
+    const auto* source = dynamic_cast<const mmrl::CompressedSource*>(lmm->motion_source().get());
+    if (source == nullptr) throw std::invalid_argument(std::string(argv[2]) + " is not a compressed controller");
+    const mmrl::CompressedModel* m = &source->model();
     std::vector<double> a, b;
     for (int r = 0; r < rounds; ++r) {
       a.push_back(run_characters(db, chars, frames) * 1e6);
@@ -96,7 +98,7 @@ int main(int argc, char** argv) {
     // The split, each network on its own (the same sizes and call counts as update makes).
     const int F = lmm->task().frames_per_step, n = 20000;
     mmrl::CompressedScratch scratch = m->make_scratch();
-    std::vector<float> state(lmm->frame_states(), lmm->frame_states() + m->state_dim()), out(m->state_dim()),
+    std::vector<float> state(source->frame_states(), source->frame_states() + m->state_dim()), out(m->state_dim()),
         query(state.begin(), state.begin() + mmrl::kFeatureDim);
     std::vector<float> states, poses(static_cast<size_t>(F + 1) * m->pose_dim());
     for (int k = 0; k <= F; ++k) states.insert(states.end(), state.begin(), state.end());

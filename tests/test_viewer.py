@@ -350,3 +350,22 @@ def test_the_timing_report_measures_the_characters_playback(db):
     controller, whole = s.timing["controller"], s.timing["env_and_controller"]
     assert len(controller) == len(whole) == 5
     assert all(0 < c <= w for c, w in zip(controller, whole))
+
+
+def test_recorded_match_features_are_the_played_frames_own(db):
+    """Every motion source records the chosen trajectory (``match_features``); the database's is
+    the trajectory of the frame before the next one shown (the decision plays match + 1 ...)."""
+    from mmrl.motion.database import POSE_DIM, TRAJECTORY_DIM
+    from mmrl.rollout import follow
+    from mmrl.viewer.clips import add_matched_queries
+
+    task = mmrl.get_task("plane")
+    rec = follow(task, db, JoystickPolicy.preset(db, "joystick"), seconds=4.0, seed=3, config=task.default_config())
+    qf, frames = np.asarray(rec["query_frames"]), np.asarray(rec["frames"])
+    inside = qf + 1 < len(frames)
+    played = frames[qf[inside] + 1] - 1
+    want = np.asarray(db.normalized_features, np.float32)[played, POSE_DIM:POSE_DIM + TRAJECTORY_DIM]
+    np.testing.assert_array_equal(np.asarray(rec["match_features"])[inside], want)
+    assert inside.sum() >= 15
+    add_matched_queries(db, rec)
+    assert rec["match_points"].shape == (len(qf), 3, 2)

@@ -70,7 +70,7 @@ void bind_runtime(py::module_& m) {
           "The policy's observation, segment by segment: a tuple of (name, size).")
       .def_property_readonly("frames_per_step", [](const RuntimeController& c) { return c.task().frames_per_step; })
       .def_property_readonly("memory_bytes", &RuntimeController::memory_bytes)
-      .def_property_readonly("compressed", [](const RuntimeController& c) { return c.compressed() != nullptr; },
+      .def_property_readonly("compressed", [](const RuntimeController& c) { return c.motion_source() != nullptr; },
                              "True for a compressed controller (networks in place of the database).")
       .def(
           "act",

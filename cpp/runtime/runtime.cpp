@@ -163,7 +163,7 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
                   : "the loader requires the collision-aware search, which this file's task core ('" +
                         c->task_.core + "') does not have");
   if (c->policy_.act_dim() != kTrajectoryDim) file.fail("the policy must write 12 trajectory values");
-  if (file.has("lmm.header")) c->read_compressed(file);
+  c->source_ = read_motion_source(file, c->db_, c->task_, c->action_box_);
   const auto ch = numbers(file, "character");
   // The Character only plays: the decisions are the task env's (RuntimeCharacter::decide).
   c->options_.frames_per_step = c->task_.frames_per_step;
@@ -180,7 +180,7 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   c->times_.search_tree = seconds_since(t0);
   try {  // the task env's own checks of its config (and of the clip costs), once, at load
     const std::unique_ptr<RuntimeTaskEnv> env = c->task_type_->make_env(c->db_, *c->matcher_, c->task_);
-    if (c->source_) env->set_source(c->source_, c->action_box_);
+    env->set_source(c->source_, c->action_box());
     c->task_.layout = env->layout();
     Character(c->db_, c->options_);
   } catch (const std::invalid_argument& e) {
@@ -202,7 +202,7 @@ size_t RuntimeController::memory_bytes() const {
              4 * d.path_samples.size();
   n += matcher_->tree().memory_bytes();
   n += 4 * policy_.num_parameters();
-  if (compressed_) n += compressed_->memory_bytes() + 4 * frame_states_.size();
+  if (source_) n += source_->memory_bytes();
   return n;
 }
 
@@ -230,7 +230,7 @@ RuntimeCharacter::RuntimeCharacter(std::shared_ptr<const RuntimeController> cont
   angles_.assign(cap, 0.0f);
   // The env's motion source holds the character's place in its motion from now on (a
   // compressed controller's state, or the frame the character shows); the character shows it.
-  if (controller_->motion_source()) env_->set_source(controller_->motion_source(), controller_->action_box());
+  env_->set_source(controller_->motion_source(), controller_->action_box());
   env_->start(start_frame, yaw);
   env_->source().show(character_, env_->motion(), RootState{x, z, wrap_angle(yaw)});
   pose_.num_joints = controller_->num_joints();

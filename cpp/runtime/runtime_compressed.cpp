@@ -1,5 +1,5 @@
 // The compressed controller's sections of a runtime file (docs/runtime.md, "Compressed
-// controllers"): RuntimeController::read_compressed, apart from the rest of the loader.
+// controllers"): read_motion_source, the loader's one door to a source other than the database.
 #include <cmath>
 #include <memory>
 #include <string>
@@ -9,20 +9,33 @@
 
 namespace mmrl {
 
-// The compressed controller's sections (docs/runtime.md, "Compressed controllers").
-void RuntimeController::read_compressed(const ControllerFile& file) {
+namespace {
+
+// A compressed source with the networks and start states it reads (CompressedSource borrows them).
+struct OwnedCompressedSource {
+  CompressedModel model;
+  std::vector<float> frame_states;
+  std::unique_ptr<CompressedSource> source;
+};
+
+}  // namespace
+
+std::shared_ptr<const MotionSource> read_motion_source(const ControllerFile& file, const Database& db,
+                                                       const RuntimeTask& task, float* action_box) {
+  if (!file.has("lmm.header")) return nullptr;  // the database's own motion
   constexpr int32_t kVersion = 1;
   const auto header = file.ints("lmm.header", {6});
   if (header[0] != kVersion)
     file.fail("compressed sections of version " + std::to_string(header[0]) + "; this runtime reads version " +
               std::to_string(kVersion));
-  if (!task_.config->request_groups.empty()) file.fail("a compressed controller keeps to no tags (task.request_groups)");
-  auto model = std::make_unique<CompressedModel>();
+  if (!task.config->request_groups.empty()) file.fail("a compressed controller keeps to no tags (task.request_groups)");
+  auto owned = std::make_shared<OwnedCompressedSource>();
+  CompressedModel* model = &owned->model;
   model->num_joints = header[1];
   model->latent = header[2];
-  if (model->num_joints != db_.num_joints)
+  if (model->num_joints != db.num_joints)
     file.fail("the compressed networks are for " + std::to_string(header[1]) + " joints, the skeleton has " +
-              std::to_string(db_.num_joints));
+              std::to_string(db.num_joints));
   if (model->latent < 1 || model->latent > 4096) file.fail("lmm.header: latent size out of range");
   Mlp* nets[3] = {&model->decompressor, &model->stepper, &model->projector};
   const char* names[3] = {"decompressor", "stepper", "projector"};
@@ -59,15 +72,15 @@ void RuntimeController::read_compressed(const ControllerFile& file) {
   } catch (const std::invalid_argument& e) {
     file.fail(std::string("the compressed networks do not fit: ") + e.what());
   }
-  frame_states_ = file.floats("lmm.frame_states", {db_.num_frames, model->state_dim()});
-  for (float v : frame_states_)
+  owned->frame_states = file.floats("lmm.frame_states", {db.num_frames, model->state_dim()});
+  for (float v : owned->frame_states)
     if (!std::isfinite(v)) file.fail("section 'lmm.frame_states' is not finite");
   const auto box = file.floats("lmm.action_box", {2, kTrajectoryDim});
   for (int k = 0; k < kTrajectoryDim; ++k)
     if (!(box[k] <= box[kTrajectoryDim + k])) file.fail("section 'lmm.action_box': low must be <= high");
-  std::copy(box.begin(), box.end(), action_box_);
-  compressed_ = std::move(model);
-  source_ = std::make_shared<CompressedSource>(db_, *compressed_, frame_states_.data());
+  std::copy(box.begin(), box.end(), action_box);
+  owned->source = std::make_unique<CompressedSource>(db, *model, owned->frame_states.data());
+  return std::shared_ptr<const MotionSource>(owned, owned->source.get());  // keeps `owned` alive
 }
 
 }  // namespace mmrl

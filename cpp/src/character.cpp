@@ -306,7 +306,7 @@ void Character::lock_feet(const FramePose& fp, bool decay) {
 void Character::play(int64_t j, float cost) {
   if (j < 0 || j >= db_.num_frames || !db_.valid[j])
     throw std::invalid_argument("play: frame " + std::to_string(j) + " is not a valid match of the database");
-  if (frame_ < 0) throw std::invalid_argument("play: the character plays a compressed controller (play_rows)");
+  if (frame_ < 0) throw std::invalid_argument("play: the character shows no database frame (it played pose rows: play_rows)");
   last_cost_ = cost;
   last_transition_ = (j != frame_);
   last_match_ = j;

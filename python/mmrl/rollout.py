@@ -501,7 +501,7 @@ class FollowLog:
         self.per_step["query_frames"].append(self.frames_so_far() - 1)
         self.per_step["query_points"].append(points.astype(np.float32))
         self.per_step["query_directions"].append(directions.astype(np.float32))
-        step_values = self.run.playback.step_values(self.run.env, 0)  # the motion source's, then the scene's
+        step_values = self.run.playback.step_values(self.run.env, 0, out["res"].match)  # the source's, then the scene's
         for key, value in [*step_values.items(), *out.get("scene_step", {}).items()]:
             self.per_step.setdefault(key, []).append(value)
         # A continuous run shows the whole step; a cut one only up to the ending frame.

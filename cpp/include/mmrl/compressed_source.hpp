@@ -38,6 +38,10 @@ class CompressedSource final : public MotionSource {
   void play(Character& character, const MotionState& s, const Decision& d) const override;
   void show(Character& character, MotionState& s, const RootState& root) const override;
   int state_dim() const override { return model_->state_dim(); }
+  size_t memory_bytes() const override {
+    return model_->memory_bytes() + sizeof(float) * static_cast<size_t>(db_->num_frames) * model_->state_dim();
+  }
+  const float* frame_states() const { return frame_states_; }
   void set_state(MotionState& s, const float* state) const override;
 
  private:

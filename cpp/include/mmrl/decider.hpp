@@ -91,6 +91,9 @@ class MotionSource {
   // The floats of a state a caller may set (set_state): 0 when what is shown is a database
   // frame and nothing more.
   virtual int state_dim() const { return 0; }
+  // Bytes the source holds beyond the database and its search tree (a compressed controller's
+  // networks and start states).
+  virtual size_t memory_bytes() const { return 0; }
   // Sets what s shows from state_dim() floats (std::invalid_argument when not finite, or when
   // the source has no such state).
   virtual void set_state(MotionState& s, const float* state) const;

@@ -28,7 +28,6 @@
 #include <vector>
 
 #include "mmrl/character.hpp"
-#include "mmrl/compressed.hpp"
 #include "mmrl/policy_net.hpp"
 #include "mmrl/runtime_file.hpp"
 #include "mmrl/runtime_task.hpp"
@@ -70,17 +69,14 @@ class RuntimeController {
   int num_joints() const { return db_.num_joints; }
   float fps() const { return db_.fps; }
   const RuntimeLoadTimes& load_times() const { return times_; }
-  // A compressed controller (docs/compressed.md; the file's lmm.* sections), or null: its
-  // database then holds only the start frames, with their states (frame_states: num_frames x
-  // state_dim), and the characters decide by the projector and play by the stepper.
-  const CompressedModel* compressed() const { return compressed_.get(); }
-  const float* frame_states() const { return frame_states_.data(); }
-  const float* action_box() const { return action_box_; }  // low (12), high (12); compressed files
   // The motion source the characters decide over when it is not the database (a compressed
-  // controller's: compressed_source.hpp), or null.
+  // controller's: its database then holds only the start frames; read_motion_source), or null.
   const std::shared_ptr<const MotionSource>& motion_source() const { return source_; }
-  // Bytes held: the database's arrays, the search tree, the policy's weights and (compressed)
-  // the networks and start states.
+  // The box of the actions the policy was trained on (low 12, high 12), when the file carries
+  // one (a compressed controller's), else null: the database's own box.
+  const float* action_box() const { return source_ ? action_box_ : nullptr; }
+  // Bytes held: the database's arrays, the search tree, the policy's weights and the motion
+  // source's own (MotionSource::memory_bytes).
   size_t memory_bytes() const;
 
   RuntimeController(const RuntimeController&) = delete;
@@ -88,11 +84,8 @@ class RuntimeController {
 
  private:
   RuntimeController() = default;
-  void read_compressed(const ControllerFile& file);
   Database db_;
-  std::unique_ptr<CompressedModel> compressed_;
-  std::vector<float> frame_states_;
-  std::shared_ptr<const MotionSource> source_;  // over compressed_ and frame_states_, or null
+  std::shared_ptr<const MotionSource> source_;  // null: the database
   float action_box_[2 * kTrajectoryDim] = {};
   std::unique_ptr<Matcher> matcher_;  // borrows db_.normalized
   PolicyNet policy_;
@@ -101,6 +94,13 @@ class RuntimeController {
   CharacterOptions options_;
   RuntimeLoadTimes times_;
 };
+
+// A controller file's motion source other than the database (runtime_compressed.cpp: a
+// compressed controller's lmm.* sections, docs/runtime.md), or null when it has none; writes the
+// box of the actions its policy was trained on into action_box (12 + 12). ControllerFile::fail
+// on bad sections.
+std::shared_ptr<const MotionSource> read_motion_source(const ControllerFile& file, const Database& db,
+                                                       const RuntimeTask& task, float* action_box);
 
 // The pose shown now. Arrays point into the character and stay valid until its next update.
 struct RuntimePose {

@@ -61,8 +61,8 @@ class RuntimeTaskEnv {
   virtual const MotionSource& source() const = 0;
   virtual MotionState& motion() = 0;
   virtual const Decision& decision() const = 0;
-  // Another motion source instead of the database (a compressed controller's), with the
-  // training database's action box (12 + 12).
+  // The motion source (null: the database) and the box of the policy's actions (12 + 12; null:
+  // the database's own).
   virtual void set_source(std::shared_ptr<const MotionSource> source, const float* box) = 0;
   // Puts the env's character on database frame `frame` (-1 keeps a compressed state) facing yaw.
   virtual void start(int64_t frame, float yaw) = 0;
@@ -165,7 +165,7 @@ class RuntimeTaskEnvOf : public RuntimeTaskEnv {
   const Decision& decision() const override { return env_.state(0).decision; }
   void set_source(std::shared_ptr<const MotionSource> source, const float* box) override {
     env_.set_source(std::move(source));
-    env_.set_action_box(box, box + kTrajectoryDim);
+    if (box != nullptr) env_.set_action_box(box, box + kTrajectoryDim);
   }
   void start(int64_t frame, float yaw) override { env_.set_state(0, frame, 0.0f, 0.0f, wrap_angle(yaw)); }
   void set_request(const std::string& request) override { env_.set_request(0, request); }

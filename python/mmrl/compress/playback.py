@@ -48,8 +48,8 @@ class CompressedPlayback:
         """The state the decision chose: the projection, or the continuation."""
         return env._core.compressed_chosen(i)[:POSE_DIM + TRAJECTORY_DIM]
 
-    def step_values(self, env, i: int) -> Dict[str, np.ndarray]:
-        chosen = self.chosen_features(env, i, -1)
+    def step_values(self, env, i: int, match: int) -> Dict[str, np.ndarray]:
+        chosen = self.chosen_features(env, i, match)
         return {"match_features": chosen[POSE_DIM:POSE_DIM + TRAJECTORY_DIM].astype(np.float32)}
 
     def continuation(self, env, i: int) -> Optional[tuple]:

@@ -16,7 +16,7 @@ from typing import Dict, Optional
 
 import numpy as np
 
-from .database import Database
+from .database import POSE_DIM, TRAJECTORY_DIM, Database
 
 
 class DatabasePlayback:
@@ -50,9 +50,10 @@ class DatabasePlayback:
         """The normalized 27 features of what env i's last decision chose."""
         return self.db.normalized_features[int(match)]
 
-    def step_values(self, env, i: int) -> Dict[str, np.ndarray]:
-        """Per-step values a recording keeps of this source (the database: none)."""
-        return {}
+    def step_values(self, env, i: int, match: int) -> Dict[str, np.ndarray]:
+        """Per-step values a recording keeps of env i's last decision (``match``): the chosen
+        trajectory's normalized features (``match_features``, 12)."""
+        return {"match_features": self.chosen_features(env, i, match)[POSE_DIM:POSE_DIM + TRAJECTORY_DIM]}
 
     def continuation(self, env, i: int) -> Optional[tuple]:
         """The path env i's motion takes if it continues (character frame, (9, 2)) and the

@@ -154,21 +154,14 @@ def recording_playback(name: str, db, rec: Dict[str, Any], task, config) -> Play
 
 
 def add_matched_queries(db, rec: Dict[str, Any]) -> None:
-    """Per decision, the matched frame's own three future points and directions (S, 3, 2)
-    placed at the decision's root: what the match offered next to what the policy asked.
-
-    Decision q is made on shown frame ``query_frames[q]``; it plays match + 1, ... so the
-    match is the next shown frame's database frame minus one."""
-    from ..motion.database import POSE_DIM
+    """Per decision, the chosen motion's own three future points and directions (S, 3, 2)
+    placed at the decision's root: what the match offered next to what the policy asked
+    (``match_features``: the chosen trajectory's normalized features, whatever the source)."""
     from ..rollout import _world_query
 
     qf = np.asarray(rec["query_frames"], np.int64)
-    frames, roots = np.asarray(rec["frames"]), np.asarray(rec["roots"], np.float64)
-    if "match_features" in rec:  # a compressed controller's: the chosen states' trajectories (follow)
-        chosen = np.asarray(rec["match_features"], np.float32)
-    else:
-        nxt = np.minimum(qf + 1, len(frames) - 1)
-        chosen = np.asarray(db.normalized_features, np.float32)[np.maximum(frames[nxt] - 1, 0), POSE_DIM:]
+    roots = np.asarray(rec["roots"], np.float64)
+    chosen = np.asarray(rec["match_features"], np.float32)
     pts, dirs = [], []
     for q, m in enumerate(chosen):
         p, d = _world_query(db, m, roots[qf[q]])
