@@ -15,7 +15,10 @@ raw-mocap floor. Peers (``--peers``):
   search (``path_filter``, the task's defaults: the 16 nearest re-ranked);
 - ``joystick+path-exact`` / ``joystick-run+path-exact``: the exact filtered search over the
   whole database (``path_candidates=0``), slow in crowds (tens of ms per decision);
-  ``--peer-cost`` sets its path cost.
+  ``--peer-cost`` sets its path cost;
+- ``joystick+deployed`` / ``joystick-run+deployed``: the same queries through the first RUN's own
+  options (its deployed search: the ``mmrl`` preset's escapes and path cost, its transition
+  cost): the non-learned controller at the policy's own search and budget.
 
 A peer walks at its preset's speed (``database_speeds``: the data's walking or running speed;
 LAFAN1 0.93 and 2.51 m/s, Bandai-Namco 1.15 and 2.76), or at each of ``--peer-speeds``.
@@ -33,7 +36,7 @@ import time
 from pathlib import Path
 
 PEERS = ("joystick", "joystick-run", "joystick+path", "joystick-run+path", "joystick+path-exact",
-         "joystick-run+path-exact")
+         "joystick-run+path-exact", "joystick+deployed", "joystick-run+deployed")
 KEYS = ("foot_sliding_ik_off_cm_per_s", "foot_sliding_cm_per_s", "transitions_per_s", "pose_jump_p99_cm")
 
 
@@ -74,7 +77,11 @@ def main(argv=None) -> int:
     for peer in args.peers:
         name, _, search = peer.partition("+")
         cfg = task.default_config()
-        if search:
+        if search == "deployed":
+            if not runs:
+                ap.error(f"--peers {peer}: give a RUN (the peer takes its options)")
+            cfg = runs[0].task_config(task)
+        elif search:
             cfg = cfg.replace(path_filter=True, path_cost=args.peer_cost,
                               path_candidates=0 if search == "path-exact" else cfg.path_candidates)
         if args.peer_speeds:
