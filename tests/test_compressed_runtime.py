@@ -119,3 +119,20 @@ def test_the_file_holds_float16_weights_and_a_float32_one_plays_the_same(exporte
     write_sections(bad, huge)
     with pytest.raises(ValueError, match="huge.mmrl.*beyond float16's range"):
         _core.RuntimeController.load(str(bad))
+
+
+def test_the_loader_counts_the_networks_and_start_states_of_a_compressed_file(exported, tmp_path):
+    """The same file without its lmm.* sections is a database controller over the start frames:
+    it loads, is not compressed, and holds exactly the networks and the start states fewer bytes."""
+    run, cpt, path = exported
+    sections = read_sections(path)
+    plain_path = tmp_path / "plain.mmrl"
+    write_sections(plain_path, {k: v for k, v in sections.items() if not k.startswith("lmm.")})
+    compressed, plain = (_core.RuntimeController.load(str(p)) for p in (path, plain_path))
+    assert compressed.compressed and not plain.compressed
+    states = sections["lmm.frame_states"]
+    model = CompressedModel(cpt, RunDir(run).database())
+    assert compressed.memory_bytes - plain.memory_bytes == model.memory_bytes + 4 * states.size
+    ch = _core.RuntimeCharacter(plain, 0.0, 0.0, 0.0, 0)
+    for _ in range(30):
+        ch.advance_frame()  # the database controller plays its own frames
