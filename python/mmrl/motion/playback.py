@@ -53,7 +53,8 @@ class DatabasePlayback:
     def step_values(self, env, i: int, match: int) -> Dict[str, np.ndarray]:
         """Per-step values a recording keeps of env i's last decision (``match``): the chosen
         trajectory's normalized features (``match_features``, 12)."""
-        return {"match_features": self.chosen_features(env, i, match)[POSE_DIM:POSE_DIM + TRAJECTORY_DIM]}
+        return {"match_features": np.array(self.chosen_features(env, i, match)[POSE_DIM:POSE_DIM + TRAJECTORY_DIM],
+                                           np.float32)}
 
     def continuation(self, env, i: int) -> Optional[tuple]:
         """The path env i's motion takes if it continues (character frame, (9, 2)) and the
