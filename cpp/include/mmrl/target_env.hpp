@@ -72,6 +72,10 @@ inline int obs_segment_offset(const ObsLayout& layout, const std::string& name) 
   return -1;
 }
 
+// What a played frame did to an episode: nothing, reached the task's goal, or failed it (a
+// collision). A step's first event ends its episode.
+enum class FrameEvent : uint8_t { kNone, kSuccess, kFailure };
+
 // One task step's outcome (before truncation, which the template decides).
 struct TaskStep {
   float reward = 0;

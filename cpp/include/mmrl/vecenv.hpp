@@ -20,13 +20,18 @@
 //
 // A task is a class Task deriving from TargetVecEnv<Task, Config, State> (CRTP) that defines
 //   static constexpr int kObsDim, kActionDim;  (kObsDim: the base observation's size)
+//   static constexpr bool kStepEndsAtEvent;    (a step stops at its first event; false: it plays
+//                                               every frame, the paper's plane task)
 //   int obs_dim() const;                       (this env's, >= kObsDim with optional segments)
 //   ObsLayout task_obs_layout() const;         (its segments before the request code)
 //   void observe(int i, float* obs_row) const;        // env i's observation now
 //   void begin_episode(int i);                         // draws env i's episode (its RNG only)
-//   TaskStep advance(int i, const float* action);     // one RL step of env i, no autoreset
-// and nothing else of the loop. Config derives from TaskConfig (tasks/task_config.hpp);
-// State derives from TargetEnvState (target_env.hpp, with the step records and start rules).
+//   FrameEvent played_frame(int i, const RootState& before);  // after each played frame
+//   TaskStep end_step(int i, FrameEvent event);       // the step's whole reward and ending
+// and nothing else of the loop: the base decides, plays the decision's frames (play_step) and
+// asks the task what each frame did. A task may hide begin_step(i, action) (after the decision,
+// before any frame plays). Config derives from TaskConfig (tasks/task_config.hpp); State
+// derives from TargetEnvState (target_env.hpp, with the step records and start rules).
 //
 // The motion: each env decides through one Decider (decider.hpp) over the env's motion source,
 // the database (database_source.hpp) or another one set by set_source (compressed_source.hpp's);
@@ -287,9 +292,7 @@ class TargetVecEnv {
           after_step(env);
           continue;
         }
-        TaskStep r = task().advance(env, actions + i * Task::kActionDim);
-        r.reward -= config_.transition_pose_weight * s.decision.pose_jump;
-        if (s.decision.transition) r.reward -= config_.transition_penalty;
+        const TaskStep r = play_step(env, actions + i * Task::kActionDim);
         s.steps += 1;
         s.episode_return += r.reward;
         s.step_frames = r.step_frames;
@@ -325,6 +328,37 @@ class TargetVecEnv {
     }, grain);
   }
 
+  // One RL step of env i, no autoreset: the decision for `action`, then its frames played one
+  // by one, the task told of each (played_frame, with the root before it); the first event sets
+  // the step's frames played, and ends the step when the task says so (kStepEndsAtEvent).
+  TaskStep play_step(int i, const float* action) {
+    State& s = envs_[i];
+    decide(i, action);
+    task().begin_step(i, action);
+    FrameEvent event = FrameEvent::kNone;
+    int frames = config_.frames_per_step;
+    for (int k = 0; k < config_.frames_per_step; ++k) {
+      const RootState before = s.root;
+      root_advance(s.root, played_delta(s, k));
+      const FrameEvent e = task().played_frame(i, before);
+      if (e == FrameEvent::kNone || event != FrameEvent::kNone) continue;
+      event = e;
+      frames = k + 1;
+      if (Task::kStepEndsAtEvent) break;
+    }
+    end_playback(s);
+    TaskStep out = task().end_step(i, event);
+    out.step_frames = frames;
+    return out;
+  }
+  // A task's reward after what every task pays for its decision (task_config.hpp):
+  // transition_pose_weight times the pose jump, and transition_penalty for a transition.
+  float after_decision_penalty(const State& s, float reward) const {
+    reward -= config_.transition_pose_weight * s.decision.pose_jump;
+    if (s.decision.transition) reward -= config_.transition_penalty;
+    return reward;
+  }
+
   // The optional per-step rows of TargetStepBuffers.
   static void write_decision(const State& s, const TargetStepBuffers& out, int64_t i) {
     if (out.step_frames) out.step_frames[i] = s.step_frames;
@@ -340,6 +374,8 @@ class TargetVecEnv {
   }
 
 
+  // Hook of play_step after the decision, before any frame plays (a task hides it).
+  void begin_step(int, const float*) {}
   // Hook of set_state for tasks whose state depends on the root (a task hides it).
   void on_state_set(int) {}
   // Hook of set_source (a task hides it): after the source changed.

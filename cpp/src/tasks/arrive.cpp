@@ -86,25 +86,20 @@ void ArriveVecEnv::begin_episode(int i) {
   s.arrived = false;
 }
 
-TaskStep ArriveVecEnv::advance(int i, const float* action) {
+FrameEvent ArriveVecEnv::played_frame(int i, const RootState& before) {
   ArriveEnvState& s = envs_[i];
-  decide(i, action);
   const float fps = db_.fps;
+  s.vx += rest_smoothing_ * ((s.root.x - before.x) * fps - s.vx);
+  s.vz += rest_smoothing_ * ((s.root.z - before.z) * fps - s.vz);
+  const bool resting = std::hypot(s.vx, s.vz) < config_.stop_speed;
+  s.hold = resting && within(s, config_.success_radius) ? s.hold + 1 : 0;
+  return s.hold >= hold_frames_ ? FrameEvent::kSuccess : FrameEvent::kNone;
+}
+
+TaskStep ArriveVecEnv::end_step(int i, FrameEvent event) const {
+  const ArriveEnvState& s = envs_[i];  // the root stands where the hold completed (the episode ends there)
   TaskStep out;
-  out.step_frames = config_.frames_per_step;
-  for (int k = 0; k < config_.frames_per_step && !out.success; ++k) {
-    const float x0 = s.root.x, z0 = s.root.z;
-    root_advance(s.root, played_delta(s, k));
-    s.vx += rest_smoothing_ * ((s.root.x - x0) * fps - s.vx);
-    s.vz += rest_smoothing_ * ((s.root.z - z0) * fps - s.vz);
-    const bool resting = std::hypot(s.vx, s.vz) < config_.stop_speed;
-    s.hold = resting && within(s, config_.success_radius) ? s.hold + 1 : 0;
-    if (s.hold >= hold_frames_) {
-      out.success = true;
-      out.step_frames = k + 1;
-    }
-  }
-  end_playback(s);  // the root stops where the hold completed (the episode ends there)
+  out.success = out.terminated = event == FrameEvent::kSuccess;
   const float d = target_distance(s);
   const float error = std::abs(wrap_angle(s.target_yaw - s.root.yaw));
   const float facing = 0.5f * (1.0f + std::cos(error));
@@ -115,7 +110,7 @@ TaskStep ArriveVecEnv::advance(int i, const float* action) {
                                     std::max(0.0f, 1.0f - error / tolerance));
     out.reward += config_.success_bonus * (1.0f + config_.precision_weight * precision);
   }
-  out.terminated = out.success;
+  out.reward = after_decision_penalty(s, out.reward);
   return out;
 }
 

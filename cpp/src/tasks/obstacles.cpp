@@ -202,32 +202,33 @@ int ObstacleVecEnv::trajectory_hits(int i, const float* raw, float* points, uint
   return hits;
 }
 
-TaskStep ObstacleVecEnv::advance(int i, const float* action) {
-  ObstacleEnvState& s = envs_[i];
-  decide(i, action);
+void ObstacleVecEnv::begin_step(int i, const float* action) {
   // The hit test uses the root and the obstacles at the step's start, before anything moves.
+  ObstacleEnvState& s = envs_[i];
   s.last_hits = action_hits(i, action, s.hit_points, s.hit_inside);
-  const float r2 = config_.success_radius * config_.success_radius;
-  const bool moving = s.max_speed > 0;
-  bool success = false, collision = false;
-  int k = 0;
-  for (; k < config_.frames_per_step && !success && !collision; ++k) {
-    if (moving) field_.move(i, frame_dt_);
-    root_advance(s.root, played_delta(s, k));
-    collision = field_.disc_overlaps_any(i, s.root.x, s.root.z, config_.body_radius);
-    const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
-    success = !collision && dx * dx + dz * dz <= r2;
-  }
-  end_playback(s);
-  s.collided = collision;
+}
+
+FrameEvent ObstacleVecEnv::played_frame(int i, const RootState&) {
+  // The obstacles move with every played frame; then the body and the target are tested where
+  // both are now (a collision wins a tie).
+  const ObstacleEnvState& s = envs_[i];
+  if (s.max_speed > 0) field_.move(i, frame_dt_);
+  if (field_.disc_overlaps_any(i, s.root.x, s.root.z, config_.body_radius)) return FrameEvent::kFailure;
+  const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
+  return dx * dx + dz * dz <= config_.success_radius * config_.success_radius ? FrameEvent::kSuccess : FrameEvent::kNone;
+}
+
+TaskStep ObstacleVecEnv::end_step(int i, FrameEvent event) {
+  ObstacleEnvState& s = envs_[i];
+  s.collided = event == FrameEvent::kFailure;
   TaskStep out;
-  out.step_frames = k;
+  out.success = event == FrameEvent::kSuccess;
+  out.terminated = event != FrameEvent::kNone;
   out.reward = std::exp(-target_distance(s));
   if (config_.hit_reward)
     out.reward += config_.hit_weight * (std::exp(-static_cast<float>(s.last_hits)) - (config_.hit_penalty ? 1.0f : 0.0f));
-  if (success) out.reward += config_.success_bonus;
-  out.terminated = success || collision;
-  out.success = success;
+  if (out.success) out.reward += config_.success_bonus;
+  out.reward = after_decision_penalty(s, out.reward);
   // The observation after the step: the grid when due, and the sensor map at the new root.
   s.grid_age += 1;
   refresh(i, true, false);

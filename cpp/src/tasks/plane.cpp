@@ -19,23 +19,16 @@ void PlaneVecEnv::observe(int i, float* obs) const {
 
 void PlaneVecEnv::begin_episode(int i) { draw_start(i, config_.target_half_extent); }
 
-TaskStep PlaneVecEnv::advance(int i, const float* action) {
-  TargetEnvState& s = envs_[i];
-  decide(i, action);
-  const float r2 = config_.success_radius * config_.success_radius;
+FrameEvent PlaneVecEnv::played_frame(int i, const RootState&) const {
+  const TargetEnvState& s = envs_[i];
+  const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
+  return dx * dx + dz * dz <= config_.success_radius * config_.success_radius ? FrameEvent::kSuccess : FrameEvent::kNone;
+}
+
+TaskStep PlaneVecEnv::end_step(int i, FrameEvent event) const {
   TaskStep out;
-  out.step_frames = config_.frames_per_step;
-  for (int k = 0; k < config_.frames_per_step; ++k) {
-    root_advance(s.root, played_delta(s, k));
-    const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
-    if (dx * dx + dz * dz <= r2 && !out.success) {  // tested on every played frame
-      out.success = true;
-      out.step_frames = k + 1;
-    }
-  }
-  end_playback(s);
-  out.reward = std::exp(-target_distance(s)) + (out.success ? config_.success_bonus : 0.0f);
-  out.terminated = out.success;
+  out.success = out.terminated = event == FrameEvent::kSuccess;
+  out.reward = after_decision_penalty(envs_[i], std::exp(-target_distance(envs_[i])) + (out.success ? config_.success_bonus : 0.0f));
   return out;
 }
 

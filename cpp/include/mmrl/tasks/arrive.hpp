@@ -90,6 +90,7 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
  public:
   static constexpr int kObsDim = kPoseDim + 4;
   static constexpr int kActionDim = kTrajectoryDim;
+  static constexpr bool kStepEndsAtEvent = true;  // the step stops where the hold completed
   static constexpr const char* kCoreName = "arrive";  // the name a controller file gives this core
   int obs_dim() const { return kObsDim + request_dim(); }
   ObsLayout task_obs_layout() const { return {{"pose", kPoseDim, ""}, {"goal", 2, ""}, {"facing", 2, ""}}; }
@@ -110,7 +111,8 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
  private:
   friend class TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveEnvState>;
   void begin_episode(int i);
-  TaskStep advance(int i, const float* action);
+  FrameEvent played_frame(int i, const RootState& before);
+  TaskStep end_step(int i, FrameEvent event) const;
   void on_state_set(int i) { envs_[i].hold = 0; }
   // Once arrived (read after decision_action), the character stands: the stand-idle rule prices
   // the match.

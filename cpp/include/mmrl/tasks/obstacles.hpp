@@ -174,6 +174,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   int obs_dim() const { return kObsDim + request_dim(); }  // with request_groups: the request's code last
   ObsLayout task_obs_layout() const { return {{"maps", 2 * kMapCells, ""}, {"pose", kPoseDim, ""}, {"goal", 2, ""}}; }
   static constexpr int kActionDim = kTrajectoryDim;
+  static constexpr bool kStepEndsAtEvent = true;  // no frame plays after a success or a collision
   static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
 
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
@@ -276,7 +277,9 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
     return &scenes_[static_cast<size_t>(i)];
   }
   void begin_episode(int i);
-  TaskStep advance(int i, const float* action);
+  void begin_step(int i, const float* action);
+  FrameEvent played_frame(int i, const RootState& before);
+  TaskStep end_step(int i, FrameEvent event);
   // Steps between grid rebuilds for env i, and the margin that keeps the grid exact over them.
   int rebuild_interval(int i) const;
   float margin(int i) const;

@@ -31,6 +31,7 @@ class PlaneVecEnv : public TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvS
  public:
   static constexpr int kObsDim = kPoseDim + 2;
   static constexpr int kActionDim = kTrajectoryDim;
+  static constexpr bool kStepEndsAtEvent = false;  // the step plays on past the frame that succeeded
   static constexpr const char* kCoreName = "plane";  // the name a controller file gives this core
   int obs_dim() const { return kObsDim + request_dim(); }  // with request_groups: the request's code last
   ObsLayout task_obs_layout() const { return {{"pose", kPoseDim, ""}, {"goal", 2, ""}}; }
@@ -52,7 +53,8 @@ class PlaneVecEnv : public TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvS
  private:
   friend class TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvState>;
   void begin_episode(int i);
-  TaskStep advance(int i, const float* action);
+  FrameEvent played_frame(int i, const RootState& before) const;
+  TaskStep end_step(int i, FrameEvent event) const;
 };
 
 }  // namespace mmrl
