@@ -98,7 +98,7 @@ RuntimeTask read_task(const ControllerFile& f, int obs_dim, const Database& db) 
   } else if (find_runtime_task(t.name) != nullptr) {
     t.core = t.name;
   } else {
-    t.core = obs_dim == ObstacleVecEnv::kObsDim ? ObstacleVecEnv::kCoreName : PlaneVecEnv::kCoreName;
+    t.core = obs_dim == ObstacleTask::kObsDim ? ObstacleTask::kCoreName : PlaneTask::kCoreName;
   }
   const RuntimeTaskType* type = find_runtime_task(t.core);
   if (type == nullptr) {

@@ -62,7 +62,7 @@ class RuntimeController {
   const PolicyNet& policy() const { return policy_; }
   // The file's task (runtime_task.hpp): its registered core, numbers and observation layout.
   // The decision itself (observation, transition cost, candidate filters, match) is the
-  // training env's own: each character runs a one-env env of the core with this config.
+  // training task's own: each character holds a one-character task of the core with this config.
   const RuntimeTask& task() const { return task_; }
   const RuntimeTaskType& task_type() const { return *task_type_; }
   const CharacterOptions& character_options() const { return options_; }
@@ -204,9 +204,9 @@ class RuntimeCharacter {
   int64_t frames_shown_ = 0;
   RuntimePose pose_;
   RuntimeDecision decision_;
-  // The task's one-env env (runtime_task.hpp), whose observe and decide are training's own.
+  // The character's one-character task (runtime_task.hpp), whose observe and decide are training's own.
   std::unique_ptr<RuntimeTaskEnv> env_;
-  // Tasks with obstacles: the engine's obstacles (world meters), what sync hands the env.
+  // Tasks with obstacles: the engine's obstacles (world meters), what sync hands the task.
   std::vector<float> centres_, half_sizes_, angles_, velocities_;
   int num_obstacles_ = 0;
 };

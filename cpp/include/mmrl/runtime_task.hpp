@@ -1,14 +1,14 @@
 // Tasks in the engine runtime, by name. A controller file names its task's core (task.core:
-// "plane", "obstacles"); the runtime looks the core up here, reads the core's config from the
-// file's task numbers (its field table: task_config.hpp's visit), checks it by building the
-// core's env, and gives each character a RuntimeTaskEnv: a one-env instance of the task's env
-// behind one interface, so the runtime, the C interface and every binding drive any
-// registered task the same way (the observation, the rules and the decision stay the
-// training env's own).
+// "plane", "obstacles", "arrive"); the runtime looks the core up here, reads the core's config
+// from the file's task numbers (its field table: task_config.hpp's visit), checks it by building
+// the core's task, and gives each character a RuntimeTaskEnv: a one-character instance of the
+// task (vecenv.hpp's TargetTask: its observation, its rules and the decision engine, without
+// training's pool, RNGs or autoreset) behind one interface, so the runtime, the C interface and
+// every binding drive any registered task the same way.
 //
 // Adding a task to the runtime: a file under cpp/runtime/tasks/ with its RuntimeTaskType
-// (runtime_task_of<Env>() when the env and its option table are all it needs; a subclass of
-// RuntimeTaskEnvOf<Env> for the inputs it takes), and one line in runtime_task.cpp's builtin list.
+// (runtime_task_of<Task>() when the task and its option table are all it needs; a subclass of
+// RuntimeTaskEnvOf<Task> for the inputs it takes), and one line in runtime_task.cpp's builtin list.
 #pragma once
 
 #include <cmath>
@@ -53,8 +53,8 @@ struct RuntimeObstacles {
   const float* velocities = nullptr;  // n x 2
 };
 
-// One character's decision context: a one-env env of the task's core. The character stands at
-// the env's origin, facing its yaw; everything the engine gives is made relative to it.
+// One character's decision context: a one-character task of the task's core. The character
+// stands at the task's origin, facing its yaw; everything the engine gives is made relative to it.
 class RuntimeTaskEnv {
  public:
   virtual ~RuntimeTaskEnv() = default;
@@ -97,8 +97,8 @@ struct RuntimeTaskType {
   // on bad numbers. The shared fields (frames_per_step, success_radius, layout) are filled by
   // the loader.
   void (*read_config)(const ControllerFile& file, RuntimeTask& t, const Database& db);
-  // A one-env env of this core over db (borrowed) with t's config; throws std::invalid_argument
-  // when the env refuses the config.
+  // A one-character task of this core over db (borrowed) with t's config; throws
+  // std::invalid_argument when the task refuses the config.
   std::unique_ptr<RuntimeTaskEnv> (*make_env)(const Database& db, const Matcher& matcher, const RuntimeTask& t);
 };
 
@@ -147,56 +147,56 @@ Config runtime_task_config(const ControllerFile& f, const RuntimeTask& t, int64_
   return c;
 }
 
-// A core whose runtime needs nothing but its env and its option table: its registration
-// (Env: a TargetVecEnv task with kCoreName and a Config with visit).
-template <class Env>
+// A core whose runtime needs nothing but its task and its option table: its registration
+// (Task: a TargetTask with kCoreName and a Config with visit).
+template <class Task>
 RuntimeTaskType runtime_task_of();
 
-// What every core's RuntimeTaskEnv does with its env (Env: a TargetVecEnv task with N = 1); a
-// core adds its scene (sync, check_obstacles) in a subclass.
-template <class Env>
+// What every core's RuntimeTaskEnv does with its task (a TargetTask of one character); a core
+// adds its scene (sync, check_obstacles) in a subclass.
+template <class Task>
 class RuntimeTaskEnvOf : public RuntimeTaskEnv {
  public:
-  using Config = typename std::decay<decltype(std::declval<const Env&>().config())>::type;
+  using Config = typename Task::ConfigType;
   RuntimeTaskEnvOf(const Database& db, const Matcher& matcher, const RuntimeTask& t)
-      : env_(db, matcher, 1, static_cast<const Config&>(*t.config), 1) {}
-  const MotionSource& source() const override { return env_.source(); }
-  MotionState& motion() override { return env_.state(0); }
-  const Decision& decision() const override { return env_.state(0).decision; }
+      : task_(db, matcher, 1, static_cast<const Config&>(*t.config)) {}
+  const MotionSource& source() const override { return task_.source(); }
+  MotionState& motion() override { return task_.state(0); }
+  const Decision& decision() const override { return task_.state(0).decision; }
   void set_source(std::shared_ptr<const MotionSource> source, const float* box) override {
-    env_.set_source(std::move(source));
-    if (box != nullptr) env_.set_action_box(box, box + kTrajectoryDim);
+    task_.set_source(std::move(source));
+    if (box != nullptr) task_.set_action_box(box, box + kTrajectoryDim);
   }
-  void start(int64_t frame, float yaw) override { env_.set_state(0, frame, 0.0f, 0.0f, wrap_angle(yaw)); }
-  void set_request(const std::string& request) override { env_.set_request(0, request); }
-  const std::string& request() const override { return env_.request(0).request.text; }
+  void start(int64_t frame, float yaw) override { task_.set_state(0, frame, 0.0f, 0.0f, wrap_angle(yaw)); }
+  void set_request(const std::string& request) override { task_.set_request(0, request); }
+  const std::string& request() const override { return task_.request(0).request.text; }
   void check_obstacles(const RuntimeObstacles&) const override {
     throw std::invalid_argument("this controller's task has no obstacles");
   }
   void sync(const RootState& root, int64_t frame, float target_x, float target_z, const RuntimeObstacles&,
             int64_t) override {
-    env_.set_state(0, frame, 0.0f, 0.0f, root.yaw);  // frame -1 (compressed): the env's state
-    env_.set_target(0, target_x - root.x, target_z - root.z);
+    task_.set_state(0, frame, 0.0f, 0.0f, root.yaw);  // frame -1 (compressed): the task keeps its state
+    task_.set_target(0, target_x - root.x, target_z - root.z);
   }
-  void observe(float* obs) override { env_.observe(0, obs); }
-  void decide(const float* action) override { env_.decide(0, action); }
-  void end_playback() override { env_.end_playback(0); }
-  ObsLayout layout() const override { return env_.obs_layout(); }
+  void observe(float* obs) override { task_.observe(0, obs); }
+  void decide(const float* action) override { task_.decide(0, action); }
+  void end_playback() override { task_.end_playback(0); }
+  ObsLayout layout() const override { return task_.obs_layout(); }
 
  protected:
-  Env env_;
+  Task task_;  // the character's task
 };
 
-template <class Env>
+template <class Task>
 RuntimeTaskType runtime_task_of() {
-  using Config = typename RuntimeTaskEnvOf<Env>::Config;
+  using Config = typename Task::ConfigType;
   RuntimeTaskType t;
-  t.core = Env::kCoreName;
+  t.core = Task::kCoreName;
   t.read_config = [](const ControllerFile& f, RuntimeTask& task, const Database& db) {
     task.config = std::make_shared<Config>(runtime_task_config<Config>(f, task, db.num_clips()));
   };
   t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
-    return std::make_unique<RuntimeTaskEnvOf<Env>>(db, matcher, task);
+    return std::make_unique<RuntimeTaskEnvOf<Task>>(db, matcher, task);
   };
   return t;
 }

@@ -1,5 +1,5 @@
 // What every target task's environment keeps and reports, apart from the loop that steps it
-// (vecenv.hpp's TargetVecEnv): the per-environment state, one step's outcome and output
+// (vecenv.hpp's TargetTask and TargetVecEnv): the per-environment state, one step's outcome and output
 // buffers, the per-env decision statistics, and the episode-start rules (a start frame, a root
 // and a target) with the checks every task makes.
 #pragma once

@@ -1,24 +1,27 @@
 // The batched target-reaching environment, shared by every task (tasks/plane.hpp,
-// tasks/obstacles.hpp): N characters step in one call over a thread pool, writing
-// observations, rewards and flags into caller-owned buffers (numpy arrays in Python).
-// Nothing is allocated per step.
+// tasks/obstacles.hpp, tasks/arrive.hpp), in two layers as envpool splits them:
 //
-// What every task shares, and this template owns:
-//   - the database and matcher (borrowed), the config, one state per environment;
-//   - one RNG per environment, seeded from (seed, index): results never depend on the
-//     thread count or on scheduling;
-//   - the valid start frames and the action box (mean +- action_limit_std * std of the
-//     trajectory features over the valid frames, normalized units);
-//   - the constructor checks common to all tasks;
-//   - autoreset, in gymnasium's two modes. SAME_STEP (the default): an environment whose
-//     episode ended writes its last observation to final_obs, its return and length, and is
-//     reset at once, its first observation in obs. NEXT_STEP (what RLlib expects): the ending
-//     step writes the last observation to obs (and final_obs), and the env's next step ignores
-//     its action, resets it and returns the first observation with reward 0 and no flags.
-//     Each env draws its episodes from its own RNG, so both modes play the same episodes;
-//   - the bookkeeping: steps, truncation at max_steps, episode return, frames played.
+// TargetTask<Task, Config, State> is the task of N characters, what one decision and one step
+// need: the database and matcher (borrowed), the config, one state per character, the motion
+// source, the decision engine (a Decider and each character's rule chain), requests, the
+// episode starts, and the step: it decides, plays the decision's frames and asks the task
+// (play_step). The engine runtime holds a one-character TargetTask of its core
+// (runtime_task.hpp) and nothing more.
 //
-// A task is a class Task deriving from TargetVecEnv<Task, Config, State> (CRTP) that defines
+// TargetVecEnv<Task> is the pool over a task, what training adds: a thread pool stepping the N
+// environments in one call into caller-owned buffers (numpy arrays in Python), one RNG per
+// environment seeded from (seed, index) (results never depend on the thread count or on
+// scheduling), the bookkeeping (steps, truncation at max_steps, episode return, frames played,
+// the decisions' statistics) and autoreset, in gymnasium's two modes. SAME_STEP (the default):
+// an environment whose episode ended writes its last observation to final_obs, its return and
+// length, and is reset at once, its first observation in obs. NEXT_STEP (what RLlib expects):
+// the ending step writes the last observation to obs (and final_obs), and the env's next step
+// ignores its action, resets it and returns the first observation with reward 0 and no flags.
+// Each env draws its episodes from its own RNG, so both modes play the same episodes. Nothing
+// is allocated per step.
+//
+// A task is a class Task deriving from TargetTask<Task, Config, State> (CRTP) that defines
+//   Task(const Database&, const Matcher&, int num_envs, const Config&);
 //   static constexpr int kObsDim, kActionDim;  (kObsDim: the base observation's size)
 //   static constexpr bool kStepEndsAtEvent;    (a step stops at its first event; false: it plays
 //                                               every frame, the paper's plane task)
@@ -28,15 +31,16 @@
 //   void begin_episode(int i);                         // draws env i's episode (its RNG only)
 //   FrameEvent played_frame(int i, const RootState& before);  // after each played frame
 //   TaskStep end_step(int i, FrameEvent event);       // the step's whole reward and ending
-// and nothing else of the loop: the base decides, plays the decision's frames (play_step) and
-// asks the task what each frame did. A task may hide begin_step(i, action) (after the decision,
+// and nothing of the loop: the base decides, plays the decision's frames (play_step) and asks
+// the task what each frame did. A task may hide begin_step(i, action) (after the decision,
 // before any frame plays). Config derives from TaskConfig (tasks/task_config.hpp); State
-// derives from TargetEnvState (target_env.hpp, with the step records and start rules).
+// derives from TargetEnvState (target_env.hpp, with the step records and start rules). Its
+// environment is TargetVecEnv<Task> (a subclass when the step writes outputs of its own).
 //
-// The motion: each env decides through one Decider (decider.hpp) over the env's motion source,
-// the database (database_source.hpp) or another one set by set_source (compressed_source.hpp's);
-// a task reads what it needs of the motion through source() and the decision
-// record, never asking which source it has.
+// The motion: each character decides through one Decider (decider.hpp) over the task's motion
+// source, the database (database_source.hpp) or another one set by set_source
+// (compressed_source.hpp's); a task reads what it needs of the motion through source() and the
+// decision record, never asking which source it has.
 #pragma once
 
 #include <algorithm>
@@ -56,8 +60,10 @@ namespace mmrl {
 
 
 template <class Task, class Config, class State>
-class TargetVecEnv {
+class TargetTask {
  public:
+  using ConfigType = Config;
+  using StateType = State;
   int num_envs() const { return static_cast<int>(envs_.size()); }
   const Config& config() const { return config_; }
   const Database& database() const { return db_; }
@@ -67,23 +73,6 @@ class TargetVecEnv {
   const MotionSource& source() const { return *source_; }
   State& state(int i) { return envs_[i]; }
   const State& state(int i) const { return envs_[i]; }
-  // Autoreset mode (see the header comment): false = SAME_STEP, true = NEXT_STEP. Switching
-  // applies from the next step; an env whose reset is pending still gets it.
-  void set_autoreset_next_step(bool on) { next_step_autoreset_ = on; }
-  bool autoreset_next_step() const { return next_step_autoreset_; }
-
-  // Reseeds every environment's RNG from (seed, index) and resets all; obs: N x obs_dim() (or null).
-  void reset(uint64_t seed, float* obs) {
-    for (int i = 0; i < num_envs(); ++i) {
-      envs_[i].rng = Rng(seed, static_cast<uint64_t>(i));
-      envs_[i].step_frames = 0;
-      envs_[i].last_step = Decision{};
-    }
-    pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
-      for (int64_t i = b; i < e; ++i) reset_env(static_cast<int>(i), obs ? obs + i * task().obs_dim() : nullptr);
-    });
-  }
-
   // Resets environment i from its own RNG stream; writes its observation row (if not null).
   void reset_env(int i, float* obs_row) {
     State& s = envs_[i];
@@ -219,46 +208,13 @@ class TargetVecEnv {
     return rules;
   }
 
-  // Every env's MatchStats since the last call, summed; zeroes them.
-  MatchStats pop_match_stats() {
-    MatchStats total;
-    for (State& s : envs_) {
-      total.decisions += s.stats.decisions;
-      total.transitions += s.stats.transitions;
-      total.frames += s.stats.frames;
-      total.cost_sum += s.stats.cost_sum;
-      s.stats = MatchStats{};
-    }
-    return total;
-  }
-
-  // Each environment's current database frame (N).
-  void current_frames(int64_t* out) const {
-    for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].frame;
-  }
-  // Each environment's frames played in the last step (N; see TargetEnvState::step_frames).
-  void step_frames(int32_t* out) const {
-    for (int i = 0; i < num_envs(); ++i) out[i] = envs_[i].step_frames;
-  }
-  // Each environment's last step's decision (N each; see TargetEnvState::last_step):
-  // transitions[i] = 1 where the match was not the continuation of the current clip, costs[i]
-  // the match's squared distance to the query (normalized, weighted feature space). Training
-  // reads this after every step for its cheap motion-quality log.
-  void last_step_transitions(uint8_t* transitions, float* costs) const {
-    for (int i = 0; i < num_envs(); ++i) {
-      transitions[i] = envs_[i].last_step.transition;
-      costs[i] = envs_[i].last_step.cost;
-    }
-  }
-
  protected:
-  // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
-  TargetVecEnv(const Database& db, const Matcher& matcher, int num_envs, const Config& config, int num_threads)
+  // db and matcher are borrowed and must outlive the task.
+  TargetTask(const Database& db, const Matcher& matcher, int num_envs, const Config& config)
       : db_(db),
         matcher_(matcher),
         config_(config),
-        envs_(static_cast<size_t>(num_envs)),
-        pool_(num_threads) {
+        envs_(static_cast<size_t>(num_envs)) {
     check_options(config);  // every option against its range (task_config.hpp), then the cross-field rules
     target_env_check(db, matcher, num_envs, config);
     database_source_ = DatabaseSource(db, matcher);
@@ -270,62 +226,6 @@ class TargetVecEnv {
     request_mix_ = mmrl::request_mix(db, request_code_, config.request_any);
     every_clip_ = select_request(db, TagRequest{});
     for (int i = 0; i < num_envs; ++i) envs_[i].rng = Rng(0, static_cast<uint64_t>(i));
-  }
-
-  // The autoreset loop (see the header comment). actions: N x kActionDim. after_step(i) runs
-  // once per env after its step and before any reset (a task writes its extra outputs there).
-  // grain: the smallest chunk of envs per thread.
-  template <class AfterStep>
-  void step_envs(const float* actions, const TargetStepBuffers& out, int64_t grain, AfterStep&& after_step) {
-    pool_.parallel_for(num_envs(), [&](int64_t b, int64_t e, int) {
-      for (int64_t i = b; i < e; ++i) {
-        const int env = static_cast<int>(i);
-        State& s = envs_[i];
-        float* row = out.obs + i * task().obs_dim();
-        if (s.autoreset_pending) {  // NEXT_STEP: this step is the reset; the action is ignored
-          reset_env(env, row);
-          s.step_frames = 0;
-          s.last_step = Decision{};
-          out.rewards[i] = 0;
-          out.terminated[i] = out.truncated[i] = out.success[i] = 0;
-          write_decision(s, out, i);
-          after_step(env);
-          continue;
-        }
-        const TaskStep r = play_step(env, actions + i * Task::kActionDim);
-        s.steps += 1;
-        s.episode_return += r.reward;
-        s.step_frames = r.step_frames;
-        s.last_step = s.decision;
-        s.episode_frames += r.step_frames;
-        s.stats.decisions += 1;
-        s.stats.transitions += s.decision.transition;
-        s.stats.cost_sum += s.decision.cost;
-        s.stats.frames += r.step_frames;
-        const bool truncated = !r.terminated && s.steps >= config_.max_steps;
-        out.rewards[i] = r.reward;
-        out.terminated[i] = r.terminated;
-        out.truncated[i] = truncated;
-        out.success[i] = r.success;
-        write_decision(s, out, i);
-        after_step(env);
-        if (r.terminated || truncated) {
-          float* final_row = out.final_obs + i * task().obs_dim();
-          task().observe(env, final_row);
-          out.episode_return[i] = static_cast<float>(s.episode_return);
-          out.episode_length[i] = s.steps;
-          if (out.episode_frames) out.episode_frames[i] = s.episode_frames;
-          if (next_step_autoreset_) {
-            std::copy(final_row, final_row + task().obs_dim(), row);
-            s.autoreset_pending = true;
-          } else {
-            reset_env(env, row);
-          }
-        } else {
-          task().observe(env, row);
-        }
-      }
-    }, grain);
   }
 
   // One RL step of env i, no autoreset: the decision for `action`, then its frames played one
@@ -357,13 +257,6 @@ class TargetVecEnv {
     reward -= config_.transition_pose_weight * s.decision.pose_jump;
     if (s.decision.transition) reward -= config_.transition_penalty;
     return reward;
-  }
-
-  // The optional per-step rows of TargetStepBuffers.
-  static void write_decision(const State& s, const TargetStepBuffers& out, int64_t i) {
-    if (out.step_frames) out.step_frames[i] = s.step_frames;
-    if (out.transitions) out.transitions[i] = s.last_step.transition;
-    if (out.costs) out.costs[i] = s.last_step.cost;
   }
 
   // Draws env i's episode start (frame, root, target in the square of half_extent meters).
@@ -447,12 +340,139 @@ class TargetVecEnv {
   RequestCode request_code_;
   RequestMix request_mix_;
   RequestSelection every_clip_;  // the request of an env without one: every clip
-  bool next_step_autoreset_ = false;
-  ThreadPool pool_;
 
  private:
   Task& task() { return static_cast<Task&>(*this); }
   const Task& task() const { return static_cast<const Task&>(*this); }
+};
+
+
+// The pool over a task (see the header comment): threads, per-env RNGs, bookkeeping and
+// autoreset. Task: a TargetTask subclass.
+template <class Task>
+class TargetVecEnv : public Task {
+ public:
+  // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
+  // Throws std::invalid_argument on a bad config.
+  TargetVecEnv(const Database& db, const Matcher& matcher, int num_envs, const typename Task::ConfigType& config,
+               int num_threads = 0)
+      : Task(db, matcher, num_envs, config), pool_(num_threads) {}
+
+  // Autoreset mode (see the header comment): false = SAME_STEP, true = NEXT_STEP. Switching
+  // applies from the next step; an env whose reset is pending still gets it.
+  void set_autoreset_next_step(bool on) { next_step_autoreset_ = on; }
+  bool autoreset_next_step() const { return next_step_autoreset_; }
+
+  // Reseeds every environment's RNG from (seed, index) and resets all; obs: N x obs_dim() (or null).
+  void reset(uint64_t seed, float* obs) {
+    for (int i = 0; i < this->num_envs(); ++i) {
+      this->envs_[i].rng = Rng(seed, static_cast<uint64_t>(i));
+      this->envs_[i].step_frames = 0;
+      this->envs_[i].last_step = Decision{};
+    }
+    pool_.parallel_for(this->num_envs(), [&](int64_t b, int64_t e, int) {
+      for (int64_t i = b; i < e; ++i) this->reset_env(static_cast<int>(i), obs ? obs + i * this->obs_dim() : nullptr);
+    });
+  }
+
+  // Every env's MatchStats since the last call, summed; zeroes them.
+  MatchStats pop_match_stats() {
+    MatchStats total;
+    for (auto& s : this->envs_) {
+      total.decisions += s.stats.decisions;
+      total.transitions += s.stats.transitions;
+      total.frames += s.stats.frames;
+      total.cost_sum += s.stats.cost_sum;
+      s.stats = MatchStats{};
+    }
+    return total;
+  }
+
+  // Each environment's current database frame (N).
+  void current_frames(int64_t* out) const {
+    for (int i = 0; i < this->num_envs(); ++i) out[i] = this->envs_[i].frame;
+  }
+  // Each environment's frames played in the last step (N; see TargetEnvState::step_frames).
+  void step_frames(int32_t* out) const {
+    for (int i = 0; i < this->num_envs(); ++i) out[i] = this->envs_[i].step_frames;
+  }
+  // Each environment's last step's decision (N each; see TargetEnvState::last_step):
+  // transitions[i] = 1 where the match was not the continuation of the current clip, costs[i]
+  // the match's squared distance to the query (normalized, weighted feature space). Training
+  // reads this after every step for its cheap motion-quality log.
+  void last_step_transitions(uint8_t* transitions, float* costs) const {
+    for (int i = 0; i < this->num_envs(); ++i) {
+      transitions[i] = this->envs_[i].last_step.transition;
+      costs[i] = this->envs_[i].last_step.cost;
+    }
+  }
+
+ protected:
+  // The autoreset loop (see the header comment). actions: N x kActionDim. after_step(i) runs
+  // once per env after its step and before any reset (a task writes its extra outputs there).
+  // grain: the smallest chunk of envs per thread.
+  template <class AfterStep>
+  void step_envs(const float* actions, const TargetStepBuffers& out, int64_t grain, AfterStep&& after_step) {
+    pool_.parallel_for(this->num_envs(), [&](int64_t b, int64_t e, int) {
+      for (int64_t i = b; i < e; ++i) {
+        const int env = static_cast<int>(i);
+        typename Task::StateType& s = this->envs_[i];
+        float* row = out.obs + i * this->obs_dim();
+        if (s.autoreset_pending) {  // NEXT_STEP: this step is the reset; the action is ignored
+          this->reset_env(env, row);
+          s.step_frames = 0;
+          s.last_step = Decision{};
+          out.rewards[i] = 0;
+          out.terminated[i] = out.truncated[i] = out.success[i] = 0;
+          write_decision(s, out, i);
+          after_step(env);
+          continue;
+        }
+        const TaskStep r = this->play_step(env, actions + i * Task::kActionDim);
+        s.steps += 1;
+        s.episode_return += r.reward;
+        s.step_frames = r.step_frames;
+        s.last_step = s.decision;
+        s.episode_frames += r.step_frames;
+        s.stats.decisions += 1;
+        s.stats.transitions += s.decision.transition;
+        s.stats.cost_sum += s.decision.cost;
+        s.stats.frames += r.step_frames;
+        const bool truncated = !r.terminated && s.steps >= this->config_.max_steps;
+        out.rewards[i] = r.reward;
+        out.terminated[i] = r.terminated;
+        out.truncated[i] = truncated;
+        out.success[i] = r.success;
+        write_decision(s, out, i);
+        after_step(env);
+        if (r.terminated || truncated) {
+          float* final_row = out.final_obs + i * this->obs_dim();
+          this->observe(env, final_row);
+          out.episode_return[i] = static_cast<float>(s.episode_return);
+          out.episode_length[i] = s.steps;
+          if (out.episode_frames) out.episode_frames[i] = s.episode_frames;
+          if (next_step_autoreset_) {
+            std::copy(final_row, final_row + this->obs_dim(), row);
+            s.autoreset_pending = true;
+          } else {
+            this->reset_env(env, row);
+          }
+        } else {
+          this->observe(env, row);
+        }
+      }
+    }, grain);
+  }
+
+  // The optional per-step rows of TargetStepBuffers.
+  static void write_decision(const typename Task::StateType& s, const TargetStepBuffers& out, int64_t i) {
+    if (out.step_frames) out.step_frames[i] = s.step_frames;
+    if (out.transitions) out.transitions[i] = s.last_step.transition;
+    if (out.costs) out.costs[i] = s.last_step.cost;
+  }
+
+  bool next_step_autoreset_ = false;
+  ThreadPool pool_;
 };
 
 }  // namespace mmrl

@@ -10,7 +10,7 @@ namespace mmrl {
 
 namespace {
 
-class ArriveRuntimeEnv final : public RuntimeTaskEnvOf<ArriveVecEnv> {
+class ArriveRuntimeEnv final : public RuntimeTaskEnvOf<ArriveTask> {
  public:
   using RuntimeTaskEnvOf::RuntimeTaskEnvOf;
   bool takes_facing() const override { return true; }
@@ -23,7 +23,7 @@ class ArriveRuntimeEnv final : public RuntimeTaskEnvOf<ArriveVecEnv> {
     if (!std::isfinite(facing_))
       throw std::invalid_argument("this controller's task (arrive) needs a facing: set it with set_facing (radians)");
     RuntimeTaskEnvOf::sync(root, frame, target_x, target_z, o, decision);
-    env_.set_facing(0, facing_);  // the env's frame is the world's turned by nothing: a world yaw
+    task_.set_facing(0, facing_);  // the env's frame is the world's turned by nothing: a world yaw
   }
 
  private:
@@ -33,7 +33,7 @@ class ArriveRuntimeEnv final : public RuntimeTaskEnvOf<ArriveVecEnv> {
 }  // namespace
 
 RuntimeTaskType arrive_runtime_task() {
-  RuntimeTaskType t = runtime_task_of<ArriveVecEnv>();
+  RuntimeTaskType t = runtime_task_of<ArriveTask>();
   t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
     return std::make_unique<ArriveRuntimeEnv>(db, matcher, task);
   };

@@ -14,17 +14,17 @@ namespace mmrl {
 
 namespace {
 
-class ObstaclesRuntimeEnv final : public RuntimeTaskEnvOf<ObstacleVecEnv> {
+class ObstaclesRuntimeEnv final : public RuntimeTaskEnvOf<ObstacleTask> {
  public:
   ObstaclesRuntimeEnv(const Database& db, const Matcher& matcher, const RuntimeTask& t)
       : RuntimeTaskEnvOf(db, matcher, t) {
-    const size_t cap = static_cast<size_t>(env_.config().num_obstacles);
+    const size_t cap = static_cast<size_t>(task_.config().num_obstacles);
     for (auto* v : {&centres_, &half_sizes_, &velocities_}) v->assign(cap * 2, 0.0f);
     angles_.assign(cap, 0.0f);
   }
 
   void check_obstacles(const RuntimeObstacles& o) const override {
-    const ObstacleTaskConfig& tc = env_.config();
+    const ObstacleTaskConfig& tc = task_.config();
     if (o.n < 0 || o.n > tc.num_obstacles)
       throw std::invalid_argument("obstacles: at most " + std::to_string(tc.num_obstacles) + " (the task's num_obstacles)");
     for (int k = 0; k < o.n; ++k) {
@@ -41,7 +41,7 @@ class ObstaclesRuntimeEnv final : public RuntimeTaskEnvOf<ObstacleVecEnv> {
 
   void sync(const RootState& r, int64_t frame, float target_x, float target_z, const RuntimeObstacles& o,
             int64_t decision) override {
-    const float square_half = env_.config().obstacle_square_half;
+    const float square_half = task_.config().obstacle_square_half;
     int n = 0;
     for (int k = 0; k < o.n; ++k) {
       const float dx = o.centres[2 * k] - r.x, dz = o.centres[2 * k + 1] - r.z;
@@ -57,10 +57,10 @@ class ObstaclesRuntimeEnv final : public RuntimeTaskEnvOf<ObstacleVecEnv> {
     }
     // One new sensor map per decision: observing again before it recomputes the map in place;
     // the first decision's previous map is a copy of its current one, as at a training reset.
-    using Maps = ObstacleVecEnv::MapUpdate;
+    using Maps = ObstacleTask::MapUpdate;
     const Maps maps = decision == 0 ? Maps::kReset : maps_decision_ == decision ? Maps::kReplace : Maps::kPush;
     maps_decision_ = decision;
-    env_.set_scene(0, frame, r.yaw, target_x - r.x, target_z - r.z, n, centres_.data(), half_sizes_.data(),
+    task_.set_scene(0, frame, r.yaw, target_x - r.x, target_z - r.z, n, centres_.data(), half_sizes_.data(),
                    angles_.data(), velocities_.data(), maps);
   }
 
@@ -74,7 +74,7 @@ class ObstaclesRuntimeEnv final : public RuntimeTaskEnvOf<ObstacleVecEnv> {
 
 RuntimeTaskType obstacles_runtime_task() {
   RuntimeTaskType t;
-  t.core = ObstacleVecEnv::kCoreName;
+  t.core = ObstacleTask::kCoreName;
   t.searches_paths = true;
   t.read_config = [](const ControllerFile& f, RuntimeTask& task, const Database& db) {
     auto config = std::make_shared<ObstacleTaskConfig>(runtime_task_config<ObstacleTaskConfig>(f, task, db.num_clips()));

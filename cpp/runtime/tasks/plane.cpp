@@ -5,6 +5,6 @@
 
 namespace mmrl {
 
-RuntimeTaskType plane_runtime_task() { return runtime_task_of<PlaneVecEnv>(); }
+RuntimeTaskType plane_runtime_task() { return runtime_task_of<PlaneTask>(); }
 
 }  // namespace mmrl

@@ -14,9 +14,8 @@
 
 namespace mmrl {
 
-ArriveVecEnv::ArriveVecEnv(const Database& db, const Matcher& matcher, int num_envs, const ArriveTaskConfig& config,
-                           int num_threads)
-    : TargetVecEnv(db, matcher, num_envs, config, num_threads),
+ArriveTask::ArriveTask(const Database& db, const Matcher& matcher, int num_envs, const ArriveTaskConfig& config)
+    : TargetTask(db, matcher, num_envs, config),
       hold_frames_(std::max(1, static_cast<int>(std::lround(config.hold_time * db.fps)))),
       rest_smoothing_(1.0f - std::exp(-1.0f / (kRestSmoothingSeconds * db.fps))) {
   const std::array<float, kFeatureDim> scale = db.normalization.column_scale();
@@ -30,7 +29,7 @@ ArriveVecEnv::ArriveVecEnv(const Database& db, const Matcher& matcher, int num_e
   }
 }
 
-void ArriveVecEnv::observe(int i, float* obs) const {
+void ArriveTask::observe(int i, float* obs) const {
   const ArriveEnvState& s = envs_[i];
   observe_pose(s, obs);
   observe_goal(s, obs + kPoseDim);
@@ -40,7 +39,7 @@ void ArriveVecEnv::observe(int i, float* obs) const {
   observe_request(i, obs + kObsDim);
 }
 
-void ArriveVecEnv::set_facing(int i, float yaw) {
+void ArriveTask::set_facing(int i, float yaw) {
   if (!std::isfinite(yaw)) throw std::invalid_argument("facing must be finite (radians)");
   ArriveEnvState& s = envs_[i];
   if (wrap_angle(yaw) == s.target_yaw) return;  // the runtime sets it before every decision
@@ -49,12 +48,12 @@ void ArriveVecEnv::set_facing(int i, float yaw) {
   s.arrived = false;
 }
 
-bool ArriveVecEnv::within(const ArriveEnvState& s, float radius, float tolerance) const {
+bool ArriveTask::within(const ArriveEnvState& s, float radius, float tolerance) const {
   const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
   return dx * dx + dz * dz <= radius * radius && std::abs(wrap_angle(s.target_yaw - s.root.yaw)) <= tolerance;
 }
 
-const float* ArriveVecEnv::decision_action(int i, const float* action, float* scratch) {
+const float* ArriveTask::decision_action(int i, const float* action, float* scratch) {
   ArriveEnvState& s = envs_[i];
   if (config_.stand_radius <= 0) return action;
   if (s.arrived) {
@@ -77,7 +76,7 @@ const float* ArriveVecEnv::decision_action(int i, const float* action, float* sc
   return scratch;
 }
 
-void ArriveVecEnv::begin_episode(int i) {
+void ArriveTask::begin_episode(int i) {
   ArriveEnvState& s = envs_[i];
   draw_start(i, config_.target_half_extent);
   s.target_yaw = s.rng.uniform(-kPi, kPi);
@@ -86,7 +85,7 @@ void ArriveVecEnv::begin_episode(int i) {
   s.arrived = false;
 }
 
-FrameEvent ArriveVecEnv::played_frame(int i, const RootState& before) {
+FrameEvent ArriveTask::played_frame(int i, const RootState& before) {
   ArriveEnvState& s = envs_[i];
   const float fps = db_.fps;
   s.vx += rest_smoothing_ * ((s.root.x - before.x) * fps - s.vx);
@@ -96,7 +95,7 @@ FrameEvent ArriveVecEnv::played_frame(int i, const RootState& before) {
   return s.hold >= hold_frames_ ? FrameEvent::kSuccess : FrameEvent::kNone;
 }
 
-TaskStep ArriveVecEnv::end_step(int i, FrameEvent event) const {
+TaskStep ArriveTask::end_step(int i, FrameEvent event) const {
   const ArriveEnvState& s = envs_[i];  // the root stands where the hold completed (the episode ends there)
   TaskStep out;
   out.success = out.terminated = event == FrameEvent::kSuccess;

@@ -73,9 +73,8 @@ std::unique_ptr<CandidateRule> make_path_filter_rule(const RuleSetup& setup) {
   return rule;
 }
 
-ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int num_envs,
-                               const ObstacleTaskConfig& config, int num_threads)
-    : TargetVecEnv(db, matcher, num_envs, config, num_threads),
+ObstacleTask::ObstacleTask(const Database& db, const Matcher& matcher, int num_envs, const ObstacleTaskConfig& config)
+    : TargetTask(db, matcher, num_envs, config),
       field_(num_envs, field_config(db, config)),
       maps_(static_cast<size_t>(num_envs) * 2 * kMapCells, 0),
       stage_max_speed_(config.obstacle_max_speed),
@@ -86,7 +85,7 @@ ObstacleVecEnv::ObstacleVecEnv(const Database& db, const Matcher& matcher, int n
   for (ObstaclePathFilter& f : path_filters_) f.init(db, config.num_obstacles, path_filter_config(config));
 }
 
-void ObstacleVecEnv::path_hits(int i, const int64_t* rows, int n, int32_t* first_hit_frames) {
+void ObstacleTask::path_hits(int i, const int64_t* rows, int n, int32_t* first_hit_frames) {
   for (int k = 0; k < n; ++k)
     if (rows[k] < 0 || rows[k] >= db_.num_frames || !db_.valid[rows[k]])
       throw std::invalid_argument("rows: " + std::to_string(rows[k]) + " is not a valid database frame");
@@ -99,7 +98,7 @@ void ObstacleVecEnv::path_hits(int i, const int64_t* rows, int n, int32_t* first
   }
 }
 
-void ObstacleVecEnv::state_path_hits(int i, const float* features, int n, int32_t* first_hit_frames) {
+void ObstacleTask::state_path_hits(int i, const float* features, int n, int32_t* first_hit_frames) {
   if (!source().rowless_candidates())
     throw std::invalid_argument("state_path_hits: no compressed controller is set (the env plays the database)");
   for (int64_t k = 0; k < static_cast<int64_t>(n) * kFeatureDim; ++k)
@@ -113,7 +112,7 @@ void ObstacleVecEnv::state_path_hits(int i, const float* features, int n, int32_
   }
 }
 
-void ObstacleVecEnv::set_stage(float max_speed, float target_half_extent) {
+void ObstacleTask::set_stage(float max_speed, float target_half_extent) {
   if (!(max_speed >= 0) || !(max_speed <= config_.speed_cap))
     throw std::invalid_argument("max_speed must be in [0, speed_cap = " + std::to_string(config_.speed_cap) + "]");
   if (!(target_half_extent > config_.min_target_distance) || !std::isfinite(target_half_extent))
@@ -122,19 +121,19 @@ void ObstacleVecEnv::set_stage(float max_speed, float target_half_extent) {
   stage_half_extent_ = target_half_extent;
 }
 
-int ObstacleVecEnv::rebuild_interval(int i) const {
+int ObstacleTask::rebuild_interval(int i) const {
   const float step_travel = envs_[i].max_speed * static_cast<float>(config_.frames_per_step) * frame_dt_;
   if (!(step_travel > 0)) return 1 << 30;  // static obstacles: the reset's grid stays exact
   return std::max(1, std::min(kMaxRebuildInterval, static_cast<int>(kRebuildTravel / step_travel)));
 }
 
-float ObstacleVecEnv::margin(int i) const {
+float ObstacleTask::margin(int i) const {
   const float step_travel = envs_[i].max_speed * static_cast<float>(config_.frames_per_step) * frame_dt_;
   const int interval = rebuild_interval(i);
   return config_.body_radius + (step_travel > 0 ? step_travel * static_cast<float>(interval) : 0.0f) + 0.005f;
 }
 
-void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
+void ObstacleTask::refresh(int i, MapUpdate maps, bool force_rebuild) {
   ObstacleEnvState& st = envs_[i];
   if (force_rebuild || st.grid_age >= rebuild_interval(i)) {
     field_.rebuild(i, margin(i));
@@ -148,7 +147,7 @@ void ObstacleVecEnv::refresh(int i, MapUpdate maps, bool force_rebuild) {
   if (maps == MapUpdate::kReset) std::copy(cur, cur + kMapCells, map_slot(i, st.map_head ^ 1));
 }
 
-void ObstacleVecEnv::observe(int i, float* obs) const {
+void ObstacleTask::observe(int i, float* obs) const {
   const ObstacleEnvState& s = envs_[i];
   const uint8_t* cur = sensor_map(i);
   const uint8_t* prev = previous_sensor_map(i);
@@ -159,7 +158,7 @@ void ObstacleVecEnv::observe(int i, float* obs) const {
   observe_request(i, obs + kObsDim);
 }
 
-void ObstacleVecEnv::begin_episode(int i) {
+void ObstacleTask::begin_episode(int i) {
   ObstacleEnvState& s = envs_[i];
   s.max_speed = stage_max_speed_;
   s.target_half_extent = stage_half_extent_;
@@ -174,7 +173,7 @@ void ObstacleVecEnv::begin_episode(int i) {
   refresh(i, false, true);
 }
 
-int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8_t* inside) const {
+int ObstacleTask::action_hits(int i, const float* action, float* points, uint8_t* inside) const {
   float clipped[kTrajectoryDim], raw[kTrajectoryDim];
   const float* low = action_low();
   const float* high = action_high();
@@ -183,7 +182,7 @@ int ObstacleVecEnv::action_hits(int i, const float* action, float* points, uint8
   return trajectory_hits(i, raw, points, inside);
 }
 
-int ObstacleVecEnv::trajectory_hits(int i, const float* raw, float* points, uint8_t* inside) const {
+int ObstacleTask::trajectory_hits(int i, const float* raw, float* points, uint8_t* inside) const {
   const ObstacleEnvState& s = envs_[i];
   int hits = 0;
   for (int k = 0; k < 3; ++k) {
@@ -202,13 +201,13 @@ int ObstacleVecEnv::trajectory_hits(int i, const float* raw, float* points, uint
   return hits;
 }
 
-void ObstacleVecEnv::begin_step(int i, const float* action) {
+void ObstacleTask::begin_step(int i, const float* action) {
   // The hit test uses the root and the obstacles at the step's start, before anything moves.
   ObstacleEnvState& s = envs_[i];
   s.last_hits = action_hits(i, action, s.hit_points, s.hit_inside);
 }
 
-FrameEvent ObstacleVecEnv::played_frame(int i, const RootState&) {
+FrameEvent ObstacleTask::played_frame(int i, const RootState&) {
   // The obstacles move with every played frame; then the body and the target are tested where
   // both are now (a collision wins a tie).
   const ObstacleEnvState& s = envs_[i];
@@ -218,7 +217,7 @@ FrameEvent ObstacleVecEnv::played_frame(int i, const RootState&) {
   return dx * dx + dz * dz <= config_.success_radius * config_.success_radius ? FrameEvent::kSuccess : FrameEvent::kNone;
 }
 
-TaskStep ObstacleVecEnv::end_step(int i, FrameEvent event) {
+TaskStep ObstacleTask::end_step(int i, FrameEvent event) {
   ObstacleEnvState& s = envs_[i];
   s.collided = event == FrameEvent::kFailure;
   TaskStep out;
@@ -250,12 +249,12 @@ void ObstacleVecEnv::step(const float* actions, const TargetStepBuffers& out, ui
   });
 }
 
-void ObstacleVecEnv::sensor_map_bruteforce(int i, uint8_t* map) const {
+void ObstacleTask::sensor_map_bruteforce(int i, uint8_t* map) const {
   const ObstacleEnvState& s = envs_[i];
   field_.sensor_map_bruteforce(i, s.root.x, s.root.z, s.root.yaw, map);
 }
 
-void ObstacleVecEnv::sensor_positions(int i, float* out) const {
+void ObstacleTask::sensor_positions(int i, float* out) const {
   const ObstacleEnvState& s = envs_[i];
   for (int r = 0; r < kMapSide; ++r)
     for (int c = 0; c < kMapSide; ++c) {
@@ -265,12 +264,12 @@ void ObstacleVecEnv::sensor_positions(int i, float* out) const {
     }
 }
 
-bool ObstacleVecEnv::collides(int i, float x, float z) const {
+bool ObstacleTask::collides(int i, float x, float z) const {
   if (!std::isfinite(x) || !std::isfinite(z)) throw std::invalid_argument("position must be finite");
   return field_.disc_overlaps_any(i, x, z, config_.body_radius);
 }
 
-void ObstacleVecEnv::obstacles(int i, float* centres, float* half_sizes, float* angles, float* velocities) const {
+void ObstacleTask::obstacles(int i, float* centres, float* half_sizes, float* angles, float* velocities) const {
   for (int k = 0; k < field_.count(i); ++k) {
     if (centres) centres[2 * k] = field_.centre(i, k).x(), centres[2 * k + 1] = field_.centre(i, k).y();
     if (half_sizes) half_sizes[2 * k] = field_.half_size(i, k).x(), half_sizes[2 * k + 1] = field_.half_size(i, k).y();
@@ -279,13 +278,13 @@ void ObstacleVecEnv::obstacles(int i, float* centres, float* half_sizes, float* 
   }
 }
 
-void ObstacleVecEnv::obstacles_after(int i, int frames, float* centres, float* velocities) const {
+void ObstacleTask::obstacles_after(int i, int frames, float* centres, float* velocities) const {
   if (frames < 0) throw std::invalid_argument("frames must be >= 0");
   // Static episodes never move (advance skips move() when the stage's max speed is 0).
   field_.moved(i, envs_[i].max_speed > 0 ? frames : 0, frame_dt_, centres, velocities);
 }
 
-void ObstacleVecEnv::set_root(int i, float x, float z, float yaw) {
+void ObstacleTask::set_root(int i, float x, float z, float yaw) {
   if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw)) throw std::invalid_argument("root must be finite");
   envs_[i].root.x = x;
   envs_[i].root.z = z;
@@ -303,13 +302,13 @@ void check_finite(const float* v, int n, const char* name) {
 
 }  // namespace
 
-void ObstacleVecEnv::set_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
+void ObstacleTask::set_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
                                    const float* velocities) {
   envs_[i].max_speed = put_obstacles(i, n, centres, half_sizes, angles, velocities);
   refresh(i, MapUpdate::kReset, true);
 }
 
-void ObstacleVecEnv::set_scene(int i, int64_t frame, float yaw, float target_x, float target_z, int n,
+void ObstacleTask::set_scene(int i, int64_t frame, float yaw, float target_x, float target_z, int n,
                                const float* centres, const float* half_sizes, const float* angles,
                                const float* velocities, MapUpdate maps) {
   // set_state's rule: frame -1 keeps a compressed state.
@@ -324,7 +323,7 @@ void ObstacleVecEnv::set_scene(int i, int64_t frame, float yaw, float target_x, 
   refresh(i, maps, true);
 }
 
-float ObstacleVecEnv::put_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
+float ObstacleTask::put_obstacles(int i, int n, const float* centres, const float* half_sizes, const float* angles,
                                     const float* velocities) {
   if (n < 0 || n > config_.num_obstacles)
     throw std::invalid_argument("centres: at most num_obstacles = " + std::to_string(config_.num_obstacles) +

@@ -6,26 +6,25 @@
 namespace mmrl {
 
 
-PlaneVecEnv::PlaneVecEnv(const Database& db, const Matcher& matcher, int num_envs, const PlaneTaskConfig& config,
-                         int num_threads)
-    : TargetVecEnv(db, matcher, num_envs, config, num_threads) {}
+PlaneTask::PlaneTask(const Database& db, const Matcher& matcher, int num_envs, const PlaneTaskConfig& config)
+    : TargetTask(db, matcher, num_envs, config) {}
 
-void PlaneVecEnv::observe(int i, float* obs) const {
+void PlaneTask::observe(int i, float* obs) const {
   const TargetEnvState& s = envs_[i];
   observe_pose(s, obs);
   observe_goal(s, obs + kPoseDim);
   observe_request(i, obs + kObsDim);
 }
 
-void PlaneVecEnv::begin_episode(int i) { draw_start(i, config_.target_half_extent); }
+void PlaneTask::begin_episode(int i) { draw_start(i, config_.target_half_extent); }
 
-FrameEvent PlaneVecEnv::played_frame(int i, const RootState&) const {
+FrameEvent PlaneTask::played_frame(int i, const RootState&) const {
   const TargetEnvState& s = envs_[i];
   const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
   return dx * dx + dz * dz <= config_.success_radius * config_.success_radius ? FrameEvent::kSuccess : FrameEvent::kNone;
 }
 
-TaskStep PlaneVecEnv::end_step(int i, FrameEvent event) const {
+TaskStep PlaneTask::end_step(int i, FrameEvent event) const {
   TaskStep out;
   out.success = out.terminated = event == FrameEvent::kSuccess;
   out.reward = after_decision_penalty(envs_[i], std::exp(-target_distance(envs_[i])) + (out.success ? config_.success_bonus : 0.0f));

@@ -86,7 +86,7 @@ struct ArriveEnvState : TargetEnvState {
 // (44% of LAFAN1's idle frames move faster than 0.15 m/s from one frame to the next).
 constexpr float kRestSmoothingSeconds = 0.25f;
 
-class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveEnvState> {
+class ArriveTask : public TargetTask<ArriveTask, ArriveTaskConfig, ArriveEnvState> {
  public:
   static constexpr int kObsDim = kPoseDim + 4;
   static constexpr int kActionDim = kTrajectoryDim;
@@ -95,12 +95,10 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   int obs_dim() const { return kObsDim + request_dim(); }
   ObsLayout task_obs_layout() const { return {{"pose", kPoseDim, ""}, {"goal", 2, ""}, {"facing", 2, ""}}; }
 
-  // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
-  // Throws std::invalid_argument on a bad config.
-  ArriveVecEnv(const Database& db, const Matcher& matcher, int num_envs, const ArriveTaskConfig& config,
-               int num_threads = 0);
+  // db and matcher are borrowed and must outlive the task. Throws std::invalid_argument on a
+  // bad config.
+  ArriveTask(const Database& db, const Matcher& matcher, int num_envs, const ArriveTaskConfig& config);
 
-  void step(const float* actions, const TargetStepBuffers& out);
   void observe(int i, float* obs_row) const;
   // Sets env i's target facing (world yaw, radians; finite, else std::invalid_argument). A new
   // facing starts a new arrival (the hold and the arrival's stand); the same one changes nothing.
@@ -108,8 +106,8 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   // The frames a hold lasts: hold_time in frames (at least 1).
   int hold_frames() const { return hold_frames_; }
 
- private:
-  friend class TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveEnvState>;
+ protected:
+  friend class TargetTask<ArriveTask, ArriveTaskConfig, ArriveEnvState>;
   void begin_episode(int i);
   FrameEvent played_frame(int i, const RootState& before);
   TaskStep end_step(int i, FrameEvent event) const;
@@ -129,6 +127,13 @@ class ArriveVecEnv : public TargetVecEnv<ArriveVecEnv, ArriveTaskConfig, ArriveE
   std::array<float, kTrajectoryDim> stand_mean_{}, stand_scale_{};
   // The hips velocity columns' (x, z) normalization, for the rest test of an arrival.
   float hips_mean_[2] = {}, hips_scale_[2] = {1, 1};
+};
+
+// The arrive task's batched environments (vecenv.hpp's pool).
+class ArriveVecEnv : public TargetVecEnv<ArriveTask> {
+ public:
+  using TargetVecEnv::TargetVecEnv;
+  void step(const float* actions, const TargetStepBuffers& out);
 };
 
 // The arrive task's candidate rule "stand-idle" (rules.cpp registers it): while the character

@@ -164,7 +164,7 @@ struct ObstacleEnvState : TargetEnvState {
   int map_head = 0;  // slot (0 or 1) of the current sensor map; the previous one is in the other
 };
 
-class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState> {
+class ObstacleTask : public TargetTask<ObstacleTask, ObstacleTaskConfig, ObstacleEnvState> {
  public:
   static constexpr int kMapOffset = 0;
   static constexpr int kPrevMapOffset = kMapCells;
@@ -177,24 +177,15 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   static constexpr bool kStepEndsAtEvent = true;  // no frame plays after a success or a collision
   static constexpr const char* kCoreName = "obstacles";  // the name a controller file gives this core
 
-  // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
-  // Throws std::invalid_argument on a bad config.
-  ObstacleVecEnv(const Database& db, const Matcher& matcher, int num_envs, const ObstacleTaskConfig& config,
-                 int num_threads = 0);
+  // db and matcher are borrowed and must outlive the task. Throws std::invalid_argument on a
+  // bad config.
+  ObstacleTask(const Database& db, const Matcher& matcher, int num_envs, const ObstacleTaskConfig& config);
 
   // The stage for every environment's next reset. 0 <= max_speed <= speed_cap,
   // target_half_extent > min_target_distance.
   void set_stage(float max_speed, float target_half_extent);
   float stage_max_speed() const { return stage_max_speed_; }
   float stage_target_half_extent() const { return stage_half_extent_; }
-
-  // actions: N x 12 (finite; checked by the caller). final_obs, episode_return and
-  // episode_length rows are written only where an episode ended.
-  void step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
-            uint8_t* success, uint8_t* collision, int32_t* hits, float* final_obs, float* episode_return,
-            int32_t* episode_length);
-  // The same with the shared outputs in one record (and its optional per-step rows, vecenv.hpp).
-  void step(const float* actions, const TargetStepBuffers& out, uint8_t* collision, int32_t* hits);
 
   void observe(int i, float* obs_row) const;
   const ObstacleField& field() const { return field_; }
@@ -237,7 +228,7 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
 
   // Scene editing (tests, evaluation, rendering). set_root and set_obstacles rebuild the
   // grid and recompute the sensor map; both maps become the new one, as at a reset.
-  // set_target (TargetVecEnv) changes no map. Bad values throw std::invalid_argument
+  // set_target (TargetTask) changes no map. Bad values throw std::invalid_argument
   // naming the argument.
   void set_root(int i, float x, float z, float yaw);
   // centres, half_sizes, velocities: n x 2; angles: n; 0 <= n <= num_obstacles; all finite,
@@ -260,8 +251,8 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   void set_scene(int i, int64_t frame, float yaw, float target_x, float target_z, int n, const float* centres,
                  const float* half_sizes, const float* angles, const float* velocities, MapUpdate maps);
 
- private:
-  friend class TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, ObstacleEnvState>;
+ protected:
+  friend class TargetTask<ObstacleTask, ObstacleTaskConfig, ObstacleEnvState>;
   // After set_state: rebuild the grid and both sensor maps around the new root.
   void on_state_set(int i) { refresh(i, false, true); }
   // After the motion source changed (set_source): path_hits' filters are ready for its
@@ -303,6 +294,20 @@ class ObstacleVecEnv : public TargetVecEnv<ObstacleVecEnv, ObstacleTaskConfig, O
   std::vector<uint8_t> maps_;  // per env: two maps, the current one in slot map_head, the previous one in the other
   float stage_max_speed_, stage_half_extent_;
   float frame_dt_;
+};
+
+// The obstacles task's batched environments (vecenv.hpp's pool); a step also reports each
+// env's collision and hits.
+class ObstacleVecEnv : public TargetVecEnv<ObstacleTask> {
+ public:
+  using TargetVecEnv::TargetVecEnv;
+  // actions: N x 12 (finite; checked by the caller). final_obs, episode_return and
+  // episode_length rows are written only where an episode ended.
+  void step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
+            uint8_t* success, uint8_t* collision, int32_t* hits, float* final_obs, float* episode_return,
+            int32_t* episode_length);
+  // The same with the shared outputs in one record (and its optional per-step rows, vecenv.hpp).
+  void step(const float* actions, const TargetStepBuffers& out, uint8_t* collision, int32_t* hits);
 };
 
 }  // namespace mmrl

@@ -27,7 +27,7 @@ struct PlaneTaskConfig : TaskConfig {
 };
 using TargetTaskConfig = PlaneTaskConfig;  // the old name, deprecated: kept for one release
 
-class PlaneVecEnv : public TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvState> {
+class PlaneTask : public TargetTask<PlaneTask, PlaneTaskConfig, TargetEnvState> {
  public:
   static constexpr int kObsDim = kPoseDim + 2;
   static constexpr int kActionDim = kTrajectoryDim;
@@ -36,25 +36,29 @@ class PlaneVecEnv : public TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvS
   int obs_dim() const { return kObsDim + request_dim(); }  // with request_groups: the request's code last
   ObsLayout task_obs_layout() const { return {{"pose", kPoseDim, ""}, {"goal", 2, ""}}; }
 
-  // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
-  // Throws std::invalid_argument on a bad config.
-  PlaneVecEnv(const Database& db, const Matcher& matcher, int num_envs, const PlaneTaskConfig& config,
-              int num_threads = 0);
+  // db and matcher are borrowed and must outlive the task. Throws std::invalid_argument on a
+  // bad config.
+  PlaneTask(const Database& db, const Matcher& matcher, int num_envs, const PlaneTaskConfig& config);
 
+  void observe(int i, float* obs_row) const;
+
+ protected:
+  friend class TargetTask<PlaneTask, PlaneTaskConfig, TargetEnvState>;
+  void begin_episode(int i);
+  FrameEvent played_frame(int i, const RootState& before) const;
+  TaskStep end_step(int i, FrameEvent event) const;
+};
+
+// The plane task's batched environments (vecenv.hpp's pool).
+class PlaneVecEnv : public TargetVecEnv<PlaneTask> {
+ public:
+  using TargetVecEnv::TargetVecEnv;
   // actions: N x 12 (finite; checked by the caller). Outputs are N rows each. final_obs rows
   // are written only where an episode ended; episode_return/length likewise.
   void step(const float* actions, float* obs, float* rewards, uint8_t* terminated, uint8_t* truncated,
             uint8_t* success, float* final_obs, float* episode_return, int32_t* episode_length);
   // The same with every output in one record (and the optional per-step rows, vecenv.hpp).
   void step(const float* actions, const TargetStepBuffers& out);
-
-  void observe(int i, float* obs_row) const;
-
- private:
-  friend class TargetVecEnv<PlaneVecEnv, PlaneTaskConfig, TargetEnvState>;
-  void begin_episode(int i);
-  FrameEvent played_frame(int i, const RootState& before) const;
-  TaskStep end_step(int i, FrameEvent event) const;
 };
 
 }  // namespace mmrl
