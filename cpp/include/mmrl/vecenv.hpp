@@ -58,7 +58,8 @@
 
 namespace mmrl {
 
-
+// The task of N characters (see the header comment): everything a decision and a step need,
+// nothing of training's pool. Task: the CRTP task class.
 template <class Task, class Config, class State>
 class TargetTask {
  public:
@@ -73,6 +74,7 @@ class TargetTask {
   const MotionSource& source() const { return *source_; }
   State& state(int i) { return envs_[i]; }
   const State& state(int i) const { return envs_[i]; }
+
   // Resets environment i from its own RNG stream; writes its observation row (if not null).
   void reset_env(int i, float* obs_row) {
     State& s = envs_[i];
