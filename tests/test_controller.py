@@ -129,6 +129,24 @@ def test_bad_inputs_are_refused(synth_db):
         ctrl.recording()
 
 
+def test_a_character_showing_no_database_frame_refuses_to_observe_or_step(synth_db):
+    """A character started on a compressed controller's pose row (frame -1) has no database pose
+    features: observation and step refuse it (observation used to read the last database row)."""
+    from mmrl.compress.pose import pose_targets
+
+    ctrl = mmrl.Character(synth_db)
+    frame = int(np.flatnonzero(synth_db.valid_mask)[0])
+    ctrl.reset(frame)
+    expected = np.concatenate([synth_db.normalized_features[frame, :15], [3.0, 4.0]])  # at the origin, yaw 0
+    np.testing.assert_allclose(ctrl.observation((3.0, 4.0)), expected, rtol=1e-6, atol=1e-6)
+    ctrl.reset_row(pose_targets(synth_db)[frame])
+    assert ctrl.frame == -1
+    with pytest.raises(ValueError, match="compressed controller's rows"):
+        ctrl.observation((3.0, 4.0))
+    with pytest.raises(ValueError, match="compressed controller's rows"):
+        ctrl.step(np.zeros(12, np.float32))
+
+
 def test_ik_binding(synth_db):
     f32 = lambda *v: np.array(v, np.float32)  # noqa: E731
     r = _core.ik_two_bone(f32(0, 1, 0), f32(0, 0.5, 0.05), f32(0, 0, 0), f32(0, 0.2, 0))

@@ -193,8 +193,13 @@ class Character:
         return np.array(gp), np.array(gr)
 
     def observation(self, target: Sequence[float]) -> np.ndarray:
-        """The plane task's observation (17,) for a world target (x, z): pose features + target in the character frame."""
+        """The plane task's observation (17,) for a world target (x, z): pose features + target in the character frame.
+        ValueError for a character that shows no database frame (a compressed controller's rows:
+        its pose features are the env's, ``env.observe``)."""
         target = real_array(target, "target", (2,), dtype=np.float64, finite=True)
+        if self.frame < 0:
+            raise ValueError("observation: this character shows a compressed controller's rows, not a database "
+                             "frame; read the observation from the env that decides for it")
         x, z, yaw = self.root
         dx, dz = float(target[0]) - x, float(target[1]) - z
         c, s = np.cos(yaw), np.sin(yaw)
