@@ -178,10 +178,10 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   c->matcher_ = std::make_unique<Matcher>(c->db_.normalized.data(), c->db_.num_frames, kFeatureDim,
                                           c->db_.valid.data());
   c->times_.search_tree = seconds_since(t0);
-  try {  // the task env's own checks of its config (and of the clip costs), once, at load
-    const std::unique_ptr<RuntimeTaskEnv> env = c->task_type_->make_env(c->db_, *c->matcher_, c->task_);
-    env->set_source(c->source_, c->action_box());
-    c->task_.layout = env->layout();
+  try {  // the task's own checks of its config (and of the clip costs), once, at load
+    const std::unique_ptr<CharacterTask> task = c->task_type_->make_task(c->db_, *c->matcher_, c->task_);
+    task->set_source(c->source_, c->action_box());
+    c->task_.layout = task->layout();
     Character(c->db_, c->options_);
   } catch (const std::invalid_argument& e) {
     file.fail(std::string("the task's numbers are refused: ") + e.what());
@@ -224,22 +224,22 @@ RuntimeCharacter::RuntimeCharacter(std::shared_ptr<const RuntimeController> cont
   target_z_ = z;
   const RuntimeTask& task = controller_->task();
   k_ = task.frames_per_step;  // the first frame decides
-  env_ = controller_->task_type().make_env(db, controller_->matcher(), task);
+  character_task_ = controller_->task_type().make_task(db, controller_->matcher(), task);
   const size_t cap = static_cast<size_t>(task.num_obstacles);
   for (auto* v : {&centres_, &half_sizes_, &velocities_}) v->assign(cap * 2, 0.0f);
   angles_.assign(cap, 0.0f);
   // The env's motion source holds the character's place in its motion from now on (a
   // compressed controller's state, or the frame the character shows); the character shows it.
-  env_->set_source(controller_->motion_source(), controller_->action_box());
-  env_->start(start_frame, yaw);
-  env_->source().show(character_, env_->motion(), RootState{x, z, wrap_angle(yaw)});
+  character_task_->set_source(controller_->motion_source(), controller_->action_box());
+  character_task_->start(start_frame, yaw);
+  character_task_->source().show(character_, character_task_->motion(), RootState{x, z, wrap_angle(yaw)});
   pose_.num_joints = controller_->num_joints();
   fill_pose(-1);
 }
 
-void RuntimeCharacter::set_request(const std::string& request) { env_->set_request(request); }
+void RuntimeCharacter::set_request(const std::string& request) { character_task_->set_request(request); }
 
-const std::string& RuntimeCharacter::request() const { return env_->request(); }
+const std::string& RuntimeCharacter::request() const { return character_task_->request(); }
 
 void RuntimeCharacter::set_target(float x, float z) {
   if (!std::isfinite(x) || !std::isfinite(z)) throw std::invalid_argument("target must be finite");
@@ -279,7 +279,7 @@ void RuntimeCharacter::stick_action(float* out) const {
 
 void RuntimeCharacter::set_obstacles(int n, const float* centres, const float* half_sizes, const float* angles,
                                      const float* velocities) {
-  env_->check_obstacles(RuntimeObstacles{n, centres, half_sizes, angles, velocities});
+  character_task_->check_obstacles(RuntimeObstacles{n, centres, half_sizes, angles, velocities});
   std::copy(centres, centres + 2 * n, centres_.begin());
   std::copy(half_sizes, half_sizes + 2 * n, half_sizes_.begin());
   std::copy(angles, angles + n, angles_.begin());
@@ -291,10 +291,10 @@ void RuntimeCharacter::set_obstacles(int n, const float* centres, const float* h
 }
 
 const float* RuntimeCharacter::observe() {
-  env_->sync(character_.root(), character_.frame(), target_x_, target_z_,
+  character_task_->sync(character_.root(), character_.frame(), target_x_, target_z_,
              RuntimeObstacles{num_obstacles_, centres_.data(), half_sizes_.data(), angles_.data(), velocities_.data()},
              decision_.count);
-  env_->observe(obs_.data());
+  character_task_->observe(obs_.data());
   return obs_.data();
 }
 
@@ -311,9 +311,9 @@ void RuntimeCharacter::decide() {
     c.policy().act(obs_.data(), action_.data(), scratch_);
   // The training env's own decision (transition cost, candidate filters); its
   // motion source plays it on the character.
-  env_->decide(action_.data());
-  env_->source().play(character_, env_->motion(), env_->decision());
-  env_->end_playback();
+  character_task_->decide(action_.data());
+  character_task_->source().play(character_, character_task_->motion(), character_task_->decision());
+  character_task_->end_playback();
   decision_.count += 1;
   decision_.match = character_.last_match();
   decision_.transition = character_.last_transition();

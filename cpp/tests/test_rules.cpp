@@ -111,7 +111,7 @@ TEST(CandidateRules, TheRuntimesDecisionContextHonoursARegisteredRule) {
   RuntimeTask task;
   task.name = task.core = "plane";
   task.config = std::make_shared<PlaneTaskConfig>();
-  RuntimeTaskEnvOf<PlaneTask> runtime(db, matcher(), task);  // what a RuntimeCharacter decides with
+  CharacterTaskOf<PlaneTask> runtime(db, matcher(), task);  // what a RuntimeCharacter decides with
   g_weight = 0.0f;
   FootRule rule(kWeight);
   PlaneVecEnv box(db, matcher(), 1, PlaneTaskConfig{}, 1);

@@ -139,8 +139,8 @@ class RuntimeCharacter {
   // world yaw in radians (0 faces +Z), used from the next decision on; such a task refuses to
   // decide until it is set. Throws std::invalid_argument when not finite, or for a task that
   // reads no facing.
-  void set_facing(float yaw) { env_->set_facing(yaw); }
-  bool takes_facing() const { return env_->takes_facing(); }
+  void set_facing(float yaw) { character_task_->set_facing(yaw); }
+  bool takes_facing() const { return character_task_->takes_facing(); }
   // A stick in place of the target and the policy, from the next decision on: the player's
   // direction (world x, z; any length > 0, normalized) and speed (m/s, > 0). Each decision's
   // action is then the scripted joystick's (mmrl.rl.policies.JoystickPolicy, arrive off): the
@@ -205,7 +205,7 @@ class RuntimeCharacter {
   RuntimePose pose_;
   RuntimeDecision decision_;
   // The character's one-character task (runtime_task.hpp), whose observe and decide are training's own.
-  std::unique_ptr<RuntimeTaskEnv> env_;
+  std::unique_ptr<CharacterTask> character_task_;
   // Tasks with obstacles: the engine's obstacles (world meters), what sync hands the task.
   std::vector<float> centres_, half_sizes_, angles_, velocities_;
   int num_obstacles_ = 0;

@@ -1,14 +1,14 @@
 // Tasks in the engine runtime, by name. A controller file names its task's core (task.core:
 // "plane", "obstacles", "arrive"); the runtime looks the core up here, reads the core's config
 // from the file's task numbers (its field table: task_config.hpp's visit), checks it by building
-// the core's task, and gives each character a RuntimeTaskEnv: a one-character instance of the
+// the core's task, and gives each character a CharacterTask: a one-character instance of the
 // task (vecenv.hpp's TargetTask: its observation, its rules and the decision engine, without
 // training's pool, RNGs or autoreset) behind one interface, so the runtime, the C interface and
 // every binding drive any registered task the same way.
 //
 // Adding a task to the runtime: a file under cpp/runtime/tasks/ with its RuntimeTaskType
 // (runtime_task_of<Task>() when the task and its option table are all it needs; a subclass of
-// RuntimeTaskEnvOf<Task> for the inputs it takes), and one line in runtime_task.cpp's builtin list.
+// CharacterTaskOf<Task> for the inputs it takes), and one line in runtime_task.cpp's builtin list.
 #pragma once
 
 #include <cmath>
@@ -55,9 +55,9 @@ struct RuntimeObstacles {
 
 // One character's decision context: a one-character task of the task's core. The character
 // stands at the task's origin, facing its yaw; everything the engine gives is made relative to it.
-class RuntimeTaskEnv {
+class CharacterTask {
  public:
-  virtual ~RuntimeTaskEnv() = default;
+  virtual ~CharacterTask() = default;
   virtual const MotionSource& source() const = 0;
   virtual MotionState& motion() = 0;
   virtual const Decision& decision() const = 0;
@@ -99,7 +99,7 @@ struct RuntimeTaskType {
   void (*read_config)(const ControllerFile& file, RuntimeTask& t, const Database& db);
   // A one-character task of this core over db (borrowed) with t's config; throws
   // std::invalid_argument when the task refuses the config.
-  std::unique_ptr<RuntimeTaskEnv> (*make_env)(const Database& db, const Matcher& matcher, const RuntimeTask& t);
+  std::unique_ptr<CharacterTask> (*make_task)(const Database& db, const Matcher& matcher, const RuntimeTask& t);
 };
 
 // The registered cores (plane, obstacles), in registration order; null for an unknown name.
@@ -152,13 +152,13 @@ Config runtime_task_config(const ControllerFile& f, const RuntimeTask& t, int64_
 template <class Task>
 RuntimeTaskType runtime_task_of();
 
-// What every core's RuntimeTaskEnv does with its task (a TargetTask of one character); a core
+// What every core's CharacterTask does with its task (a TargetTask of one character); a core
 // adds its scene (sync, check_obstacles) in a subclass.
 template <class Task>
-class RuntimeTaskEnvOf : public RuntimeTaskEnv {
+class CharacterTaskOf : public CharacterTask {
  public:
   using Config = typename Task::ConfigType;
-  RuntimeTaskEnvOf(const Database& db, const Matcher& matcher, const RuntimeTask& t)
+  CharacterTaskOf(const Database& db, const Matcher& matcher, const RuntimeTask& t)
       : task_(db, matcher, 1, static_cast<const Config&>(*t.config)) {}
   const MotionSource& source() const override { return task_.source(); }
   MotionState& motion() override { return task_.state(0); }
@@ -195,8 +195,8 @@ RuntimeTaskType runtime_task_of() {
   t.read_config = [](const ControllerFile& f, RuntimeTask& task, const Database& db) {
     task.config = std::make_shared<Config>(runtime_task_config<Config>(f, task, db.num_clips()));
   };
-  t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
-    return std::make_unique<RuntimeTaskEnvOf<Task>>(db, matcher, task);
+  t.make_task = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<CharacterTask> {
+    return std::make_unique<CharacterTaskOf<Task>>(db, matcher, task);
   };
   return t;
 }

@@ -10,9 +10,9 @@ namespace mmrl {
 
 namespace {
 
-class ArriveRuntimeEnv final : public RuntimeTaskEnvOf<ArriveTask> {
+class ArriveCharacterTask final : public CharacterTaskOf<ArriveTask> {
  public:
-  using RuntimeTaskEnvOf::RuntimeTaskEnvOf;
+  using CharacterTaskOf::CharacterTaskOf;
   bool takes_facing() const override { return true; }
   void set_facing(float yaw) override {
     if (!std::isfinite(yaw)) throw std::invalid_argument("facing must be finite (radians)");
@@ -22,7 +22,7 @@ class ArriveRuntimeEnv final : public RuntimeTaskEnvOf<ArriveTask> {
             int64_t decision) override {
     if (!std::isfinite(facing_))
       throw std::invalid_argument("this controller's task (arrive) needs a facing: set it with set_facing (radians)");
-    RuntimeTaskEnvOf::sync(root, frame, target_x, target_z, o, decision);
+    CharacterTaskOf::sync(root, frame, target_x, target_z, o, decision);
     task_.set_facing(0, facing_);  // the env's frame is the world's turned by nothing: a world yaw
   }
 
@@ -34,8 +34,8 @@ class ArriveRuntimeEnv final : public RuntimeTaskEnvOf<ArriveTask> {
 
 RuntimeTaskType arrive_runtime_task() {
   RuntimeTaskType t = runtime_task_of<ArriveTask>();
-  t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
-    return std::make_unique<ArriveRuntimeEnv>(db, matcher, task);
+  t.make_task = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<CharacterTask> {
+    return std::make_unique<ArriveCharacterTask>(db, matcher, task);
   };
   return t;
 }

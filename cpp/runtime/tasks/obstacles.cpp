@@ -14,10 +14,10 @@ namespace mmrl {
 
 namespace {
 
-class ObstaclesRuntimeEnv final : public RuntimeTaskEnvOf<ObstacleTask> {
+class ObstaclesCharacterTask final : public CharacterTaskOf<ObstacleTask> {
  public:
-  ObstaclesRuntimeEnv(const Database& db, const Matcher& matcher, const RuntimeTask& t)
-      : RuntimeTaskEnvOf(db, matcher, t) {
+  ObstaclesCharacterTask(const Database& db, const Matcher& matcher, const RuntimeTask& t)
+      : CharacterTaskOf(db, matcher, t) {
     const size_t cap = static_cast<size_t>(task_.config().num_obstacles);
     for (auto* v : {&centres_, &half_sizes_, &velocities_}) v->assign(cap * 2, 0.0f);
     angles_.assign(cap, 0.0f);
@@ -99,12 +99,12 @@ RuntimeTaskType obstacles_runtime_task() {
     task.path_filter = config->path_filter;
     task.config = std::move(config);
   };
-  t.make_env = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<RuntimeTaskEnv> {
+  t.make_task = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<CharacterTask> {
     if (task.escape_table) {  // the env finds the file's table where it would keep the one it builds
       const auto& c = static_cast<const ObstacleTaskConfig&>(*task.config);
       EscapeTable::shared(db, matcher, c.path_escapes, c.path_fan_candidates, task.escape_table);
     }
-    return std::make_unique<ObstaclesRuntimeEnv>(db, matcher, task);
+    return std::make_unique<ObstaclesCharacterTask>(db, matcher, task);
   };
   return t;
 }
