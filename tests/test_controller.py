@@ -133,11 +133,12 @@ def test_a_character_showing_no_database_frame_refuses_to_observe_or_step(synth_
     """A character started on a compressed controller's pose row (frame -1) has no database pose
     features: observation and step refuse it (observation used to read the last database row)."""
     from mmrl.compress.pose import pose_targets
+    from mmrl.motion.database import POSE_DIM
 
     ctrl = mmrl.Character(synth_db)
     frame = int(np.flatnonzero(synth_db.valid_mask)[0])
     ctrl.reset(frame)
-    expected = np.concatenate([synth_db.normalized_features[frame, :15], [3.0, 4.0]])  # at the origin, yaw 0
+    expected = np.concatenate([synth_db.normalized_features[frame, :POSE_DIM], [3.0, 4.0]])  # at the origin, yaw 0
     np.testing.assert_allclose(ctrl.observation((3.0, 4.0)), expected, rtol=1e-6, atol=1e-6)
     ctrl.reset_row(pose_targets(synth_db)[frame])
     assert ctrl.frame == -1

@@ -165,7 +165,7 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
   if (c->policy_.act_dim() != kTrajectoryDim) file.fail("the policy must write 12 trajectory values");
   c->source_ = read_motion_source(file, c->db_, c->task_, c->action_box_);
   const auto ch = numbers(file, "character");
-  // The Character only plays: the decisions are the task env's (RuntimeCharacter::decide).
+  // The Character only plays: the decisions are the character's task's (RuntimeCharacter::decide).
   c->options_.frames_per_step = c->task_.frames_per_step;
   c->options_.inertialization_halflife = static_cast<float>(number(file, ch, "character", "inertialization_halflife"));
   c->options_.ik = number(file, ch, "character", "ik") != 0.0;
@@ -179,9 +179,9 @@ std::shared_ptr<const RuntimeController> RuntimeController::from_file(Controller
                                           c->db_.valid.data());
   c->times_.search_tree = seconds_since(t0);
   try {  // the task's own checks of its config (and of the clip costs), once, at load
-    const std::unique_ptr<CharacterTask> task = c->task_type_->make_task(c->db_, *c->matcher_, c->task_);
-    task->set_source(c->source_, c->action_box());
-    c->task_.layout = task->layout();
+    const std::unique_ptr<CharacterTask> character_task = c->task_type_->make_task(c->db_, *c->matcher_, c->task_);
+    character_task->set_source(c->source_, c->action_box());
+    c->task_.layout = character_task->layout();
     Character(c->db_, c->options_);
   } catch (const std::invalid_argument& e) {
     file.fail(std::string("the task's numbers are refused: ") + e.what());
@@ -228,7 +228,7 @@ RuntimeCharacter::RuntimeCharacter(std::shared_ptr<const RuntimeController> cont
   const size_t cap = static_cast<size_t>(task.num_obstacles);
   for (auto* v : {&centres_, &half_sizes_, &velocities_}) v->assign(cap * 2, 0.0f);
   angles_.assign(cap, 0.0f);
-  // The env's motion source holds the character's place in its motion from now on (a
+  // The task's motion source holds the character's place in its motion from now on (a
   // compressed controller's state, or the frame the character shows); the character shows it.
   character_task_->set_source(controller_->motion_source(), controller_->action_box());
   character_task_->start(start_frame, yaw);
@@ -309,7 +309,7 @@ void RuntimeCharacter::decide() {
     stick_action(action_.data());
   else
     c.policy().act(obs_.data(), action_.data(), scratch_);
-  // The training env's own decision (transition cost, candidate filters); its
+  // The training task's own decision (transition cost, candidate filters); its
   // motion source plays it on the character.
   character_task_->decide(action_.data());
   character_task_->source().play(character_, character_task_->motion(), character_task_->decision());

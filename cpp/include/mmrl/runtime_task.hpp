@@ -64,7 +64,7 @@ class CharacterTask {
   // The motion source (null: the database) and the box of the policy's actions (12 + 12; null:
   // the database's own).
   virtual void set_source(std::shared_ptr<const MotionSource> source, const float* box) = 0;
-  // Puts the env's character on database frame `frame` (-1 keeps a compressed state) facing yaw.
+  // Puts the character on database frame `frame` (-1 keeps a compressed state) facing yaw.
   virtual void start(int64_t frame, float yaw) = 0;
   virtual void set_request(const std::string& request) = 0;
   // Whether the task reads a target facing (the arrive task), set by set_facing (world yaw,
@@ -102,7 +102,7 @@ struct RuntimeTaskType {
   std::unique_ptr<CharacterTask> (*make_task)(const Database& db, const Matcher& matcher, const RuntimeTask& t);
 };
 
-// The registered cores (plane, obstacles), in registration order; null for an unknown name.
+// The registered cores (plane, obstacles, arrive), in registration order; null for an unknown name.
 const std::vector<RuntimeTaskType>& runtime_task_types();
 const RuntimeTaskType* find_runtime_task(const std::string& core);
 

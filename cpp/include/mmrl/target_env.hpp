@@ -76,7 +76,7 @@ inline int obs_segment_offset(const ObsLayout& layout, const std::string& name) 
 // collision). A step's first event ends its episode.
 enum class FrameEvent : uint8_t { kNone, kSuccess, kFailure };
 
-// One task step's outcome (before truncation, which the template decides).
+// One task step's outcome (before truncation, which the pool decides: vecenv.hpp).
 struct TaskStep {
   float reward = 0;
   bool terminated = false;

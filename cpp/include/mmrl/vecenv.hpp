@@ -2,17 +2,18 @@
 // tasks/obstacles.hpp, tasks/arrive.hpp), in two layers as envpool splits them:
 //
 // TargetTask<Task, Config, State> is the task of N characters, what one decision and one step
-// need: the database and matcher (borrowed), the config, one state per character, the motion
-// source, the decision engine (a Decider and each character's rule chain), requests, the
-// episode starts, and the step: it decides, plays the decision's frames and asks the task
-// (play_step). The engine runtime holds a one-character TargetTask of its core
-// (runtime_task.hpp) and nothing more.
+// need: the database and matcher (borrowed), the config, one state per character (its root,
+// target, motion, decision, RNG and episode counters: target_env.hpp), the motion source, the
+// decision engine (a Decider and each character's rule chain), requests, the episode starts
+// (reset_env), and the step: it decides, plays the decision's frames, asks the task what each
+// did and for its reward, and takes the decision's penalties off (play_step). The engine
+// runtime holds a one-character TargetTask of its core (runtime_task.hpp) and nothing more.
 //
 // TargetVecEnv<Task> is the pool over a task, what training adds: a thread pool stepping the N
-// environments in one call into caller-owned buffers (numpy arrays in Python), one RNG per
-// environment seeded from (seed, index) (results never depend on the thread count or on
-// scheduling), the bookkeeping (steps, truncation at max_steps, episode return, frames played,
-// the decisions' statistics) and autoreset, in gymnasium's two modes. SAME_STEP (the default):
+// environments in one call into caller-owned buffers (numpy arrays in Python), reseeding each
+// environment's RNG from (seed, index) (results never depend on the thread count or on
+// scheduling), counting each step (steps, truncation at max_steps, episode return, frames
+// played, the decisions' statistics) and autoreset, in gymnasium's two modes. SAME_STEP (the default):
 // an environment whose episode ended writes its last observation to final_obs, its return and
 // length, and is reset at once, its first observation in obs. NEXT_STEP (what RLlib expects):
 // the ending step writes the last observation to obs (and final_obs), and the env's next step
@@ -30,7 +31,7 @@
 //   void observe(int i, float* obs_row) const;        // env i's observation now
 //   void begin_episode(int i);                         // draws env i's episode (its RNG only)
 //   FrameEvent played_frame(int i, const RootState& before);  // after each played frame
-//   TaskStep end_step(int i, FrameEvent event);       // the step's whole reward and ending
+//   TaskStep end_step(int i, FrameEvent event);       // the step's reward and ending
 // and nothing of the loop: the base decides, plays the decision's frames (play_step) and asks
 // the task what each frame did. A task may hide begin_step(i, action) (after the decision,
 // before any frame plays). Config derives from TaskConfig (tasks/task_config.hpp); State
@@ -50,6 +51,7 @@
 #include <vector>
 
 #include <memory>
+#include <type_traits>
 
 #include "mmrl/database_source.hpp"
 #include "mmrl/rules.hpp"
@@ -193,8 +195,8 @@ class TargetTask {
   // The decision of env i now for `action` (12 normalized floats, finite): the Decider with
   // the task's rules (decision_rules: its transition cost, candidate filters and shortlists).
   // Records it as env i's decision (with the playback its source prepares); changes
-  // nothing else. A step calls it first; the engine runtime calls it on a one-env env to decide
-  // as training did. Returns the database frame to play from (-1 for a candidate without a row).
+  // nothing else. play_step calls it first; the engine runtime calls it on its one-character
+  // task to decide as training did. Returns the database frame to play from (-1 for a candidate without a row).
   int64_t decide(int i, const float* action) {
     State& s = envs_[i];
     float query[kTrajectoryDim];
@@ -232,7 +234,10 @@ class TargetTask {
 
   // One RL step of env i, no autoreset: the decision for `action`, then its frames played one
   // by one, the task told of each (played_frame, with the root before it); the first event sets
-  // the step's frames played, and ends the step when the task says so (kStepEndsAtEvent).
+  // the step's frames played, and ends the step when the task says so (kStepEndsAtEvent). The
+  // reward is the task's (end_step) minus what every task pays for its decision
+  // (task_config.hpp): transition_pose_weight times the pose jump, and transition_penalty for a
+  // transition.
   TaskStep play_step(int i, const float* action) {
     State& s = envs_[i];
     decide(i, action);
@@ -246,19 +251,14 @@ class TargetTask {
       if (e == FrameEvent::kNone || event != FrameEvent::kNone) continue;
       event = e;
       frames = k + 1;
-      if (Task::kStepEndsAtEvent) break;
+      if constexpr (Task::kStepEndsAtEvent) break;
     }
     end_playback(s);
     TaskStep out = task().end_step(i, event);
+    out.reward -= config_.transition_pose_weight * s.decision.pose_jump;
+    if (s.decision.transition) out.reward -= config_.transition_penalty;
     out.step_frames = frames;
     return out;
-  }
-  // A task's reward after what every task pays for its decision (task_config.hpp):
-  // transition_pose_weight times the pose jump, and transition_penalty for a transition.
-  float after_decision_penalty(const State& s, float reward) const {
-    reward -= config_.transition_pose_weight * s.decision.pose_jump;
-    if (s.decision.transition) reward -= config_.transition_penalty;
-    return reward;
   }
 
   // Draws env i's episode start (frame, root, target in the square of half_extent meters).
@@ -353,6 +353,9 @@ class TargetTask {
 // autoreset. Task: a TargetTask subclass.
 template <class Task>
 class TargetVecEnv : public Task {
+  static_assert(std::is_base_of<TargetTask<Task, typename Task::ConfigType, typename Task::StateType>, Task>::value,
+                "TargetVecEnv<Task>: Task must derive from TargetTask<Task, Config, State>");
+
  public:
   // db and matcher are borrowed and must outlive the env. num_threads 0 = all cores.
   // Throws std::invalid_argument on a bad config.

@@ -1,4 +1,4 @@
-// The arrive task in the engine runtime (runtime_task.hpp): the env's own observation and
+// The arrive task in the engine runtime (runtime_task.hpp): the task's own observation and
 // decision; the character's target and its facing (set_facing, radians), relative to it.
 #include <cmath>
 #include <stdexcept>
@@ -23,7 +23,7 @@ class ArriveCharacterTask final : public CharacterTaskOf<ArriveTask> {
     if (!std::isfinite(facing_))
       throw std::invalid_argument("this controller's task (arrive) needs a facing: set it with set_facing (radians)");
     CharacterTaskOf::sync(root, frame, target_x, target_z, o, decision);
-    task_.set_facing(0, facing_);  // the env's frame is the world's turned by nothing: a world yaw
+    task_.set_facing(0, facing_);  // the task's frame is the world's turned by nothing: a world yaw
   }
 
  private:

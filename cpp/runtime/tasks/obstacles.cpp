@@ -1,5 +1,5 @@
 // The moving-obstacles task in the engine runtime (runtime_task.hpp): the engine's obstacles,
-// made relative to the character (the env's obstacle square is centred on it), feed the env's
+// made relative to the character (the task's obstacle square is centred on it), feed the task's
 // own sensor maps, rules and decision.
 #include <algorithm>
 #include <cmath>
@@ -65,7 +65,7 @@ class ObstaclesCharacterTask final : public CharacterTaskOf<ObstacleTask> {
   }
 
  private:
-  // The obstacles relative to the character (the env's square is centred on it).
+  // The obstacles relative to the character (the task's square is centred on it).
   std::vector<float> centres_, half_sizes_, angles_, velocities_;
   int64_t maps_decision_ = -1;  // the decision the newest sensor map was made for
 };
@@ -100,7 +100,7 @@ RuntimeTaskType obstacles_runtime_task() {
     task.config = std::move(config);
   };
   t.make_task = [](const Database& db, const Matcher& matcher, const RuntimeTask& task) -> std::unique_ptr<CharacterTask> {
-    if (task.escape_table) {  // the env finds the file's table where it would keep the one it builds
+    if (task.escape_table) {  // the task finds the file's table where it would keep the one it builds
       const auto& c = static_cast<const ObstacleTaskConfig&>(*task.config);
       EscapeTable::shared(db, matcher, c.path_escapes, c.path_fan_candidates, task.escape_table);
     }

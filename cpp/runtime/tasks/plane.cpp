@@ -1,4 +1,4 @@
-// The plane task in the engine runtime (runtime_task.hpp): the env's own observation and
+// The plane task in the engine runtime (runtime_task.hpp): the task's own observation and
 // decision; the character's target, relative to it, is all it needs.
 #include "mmrl/runtime_task.hpp"
 #include "mmrl/tasks/plane.hpp"

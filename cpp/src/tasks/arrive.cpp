@@ -109,7 +109,6 @@ TaskStep ArriveTask::end_step(int i, FrameEvent event) const {
                                     std::max(0.0f, 1.0f - error / tolerance));
     out.reward += config_.success_bonus * (1.0f + config_.precision_weight * precision);
   }
-  out.reward = after_decision_penalty(s, out.reward);
   return out;
 }
 

@@ -16,7 +16,7 @@ constexpr int kMaxRebuildInterval = 16;
 
 // Validates the task config and derives the obstacle field's config from it.
 ObstacleFieldConfig field_config(const Database& db, const ObstacleTaskConfig& c) {
-  // Every option's range is checked by the env template (check_options); the rules between them here.
+  // Every option's range is checked by the task template (check_options); the rules between them here.
   if (!(c.obstacle_max_speed <= c.speed_cap))
     throw std::invalid_argument("obstacle_max_speed must be in [0, speed_cap], got " + std::to_string(c.obstacle_max_speed) +
                                 " with speed_cap " + std::to_string(c.speed_cap));
@@ -227,7 +227,6 @@ TaskStep ObstacleTask::end_step(int i, FrameEvent event) {
   if (config_.hit_reward)
     out.reward += config_.hit_weight * (std::exp(-static_cast<float>(s.last_hits)) - (config_.hit_penalty ? 1.0f : 0.0f));
   if (out.success) out.reward += config_.success_bonus;
-  out.reward = after_decision_penalty(s, out.reward);
   // The observation after the step: the grid when due, and the sensor map at the new root.
   s.grid_age += 1;
   refresh(i, true, false);
@@ -280,7 +279,7 @@ void ObstacleTask::obstacles(int i, float* centres, float* half_sizes, float* an
 
 void ObstacleTask::obstacles_after(int i, int frames, float* centres, float* velocities) const {
   if (frames < 0) throw std::invalid_argument("frames must be >= 0");
-  // Static episodes never move (advance skips move() when the stage's max speed is 0).
+  // Static episodes never move (played_frame skips move() when the stage's max speed is 0).
   field_.moved(i, envs_[i].max_speed > 0 ? frames : 0, frame_dt_, centres, velocities);
 }
 

@@ -27,7 +27,7 @@ FrameEvent PlaneTask::played_frame(int i, const RootState&) const {
 TaskStep PlaneTask::end_step(int i, FrameEvent event) const {
   TaskStep out;
   out.success = out.terminated = event == FrameEvent::kSuccess;
-  out.reward = after_decision_penalty(envs_[i], std::exp(-target_distance(envs_[i])) + (out.success ? config_.success_bonus : 0.0f));
+  out.reward = std::exp(-target_distance(envs_[i])) + (out.success ? config_.success_bonus : 0.0f);
   return out;
 }
 

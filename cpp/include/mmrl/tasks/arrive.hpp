@@ -106,7 +106,7 @@ class ArriveTask : public TargetTask<ArriveTask, ArriveTaskConfig, ArriveEnvStat
   // The frames a hold lasts: hold_time in frames (at least 1).
   int hold_frames() const { return hold_frames_; }
 
- protected:
+ private:
   friend class TargetTask<ArriveTask, ArriveTaskConfig, ArriveEnvState>;
   void begin_episode(int i);
   FrameEvent played_frame(int i, const RootState& before);

@@ -251,7 +251,7 @@ class ObstacleTask : public TargetTask<ObstacleTask, ObstacleTaskConfig, Obstacl
   void set_scene(int i, int64_t frame, float yaw, float target_x, float target_z, int n, const float* centres,
                  const float* half_sizes, const float* angles, const float* velocities, MapUpdate maps);
 
- protected:
+ private:
   friend class TargetTask<ObstacleTask, ObstacleTaskConfig, ObstacleEnvState>;
   // After set_state: rebuild the grid and both sensor maps around the new root.
   void on_state_set(int i) { refresh(i, false, true); }

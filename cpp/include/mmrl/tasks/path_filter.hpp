@@ -3,7 +3,7 @@
 // time, so the match prefers clips that stay clear. The idea is environment-aware motion
 // matching (Ponton, Andrews, Andujar, Pelechano 2025: collision costs inside the search), here as
 // one rule that the training env, the full path, the engine runtime and mmrl play all run
-// through ObstacleVecEnv::decide.
+// through TargetTask::decide.
 //
 // The rule, for a character at root (x, z, yaw) and a candidate frame j:
 //   - j's path: the root positions that playing from j reaches kPathSampleFrames[s] frames

@@ -42,7 +42,7 @@ class PlaneTask : public TargetTask<PlaneTask, PlaneTaskConfig, TargetEnvState> 
 
   void observe(int i, float* obs_row) const;
 
- protected:
+ private:
   friend class TargetTask<PlaneTask, PlaneTaskConfig, TargetEnvState>;
   void begin_episode(int i);
   FrameEvent played_frame(int i, const RootState& before) const;
