@@ -3,7 +3,7 @@
 // from the file's task numbers (its field table: task_config.hpp's visit), checks it by building
 // the core's task, and gives each character a CharacterTask: a one-character instance of the
 // task (vecenv.hpp's TargetTask: its observation, its rules and the decision engine, without
-// training's pool, RNGs or autoreset) behind one interface, so the runtime, the C interface and
+// training's pool, reseeding or autoreset) behind one interface, so the runtime, the C interface and
 // every binding drive any registered task the same way.
 //
 // Adding a task to the runtime: a file under cpp/runtime/tasks/ with its RuntimeTaskType

@@ -302,6 +302,11 @@ class TargetTask {
 
   // Distance (meters) from env i's root to its target.
   float target_distance(const State& s) const { return std::hypot(s.target_x - s.root.x, s.target_z - s.root.z); }
+  // Whether env i's root is within success_radius of its target (tested on every played frame).
+  bool within_success_radius(const State& s) const {
+    const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
+    return dx * dx + dz * dz <= config_.success_radius * config_.success_radius;
+  }
 
   // The goal g_t: the target in the character frame (meters), written to two floats.
   void observe_goal(const State& s, float* out) const {

@@ -213,8 +213,7 @@ FrameEvent ObstacleTask::played_frame(int i, const RootState&) {
   const ObstacleEnvState& s = envs_[i];
   if (s.max_speed > 0) field_.move(i, frame_dt_);
   if (field_.disc_overlaps_any(i, s.root.x, s.root.z, config_.body_radius)) return FrameEvent::kFailure;
-  const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
-  return dx * dx + dz * dz <= config_.success_radius * config_.success_radius ? FrameEvent::kSuccess : FrameEvent::kNone;
+  return within_success_radius(s) ? FrameEvent::kSuccess : FrameEvent::kNone;
 }
 
 TaskStep ObstacleTask::end_step(int i, FrameEvent event) {

@@ -19,9 +19,7 @@ void PlaneTask::observe(int i, float* obs) const {
 void PlaneTask::begin_episode(int i) { draw_start(i, config_.target_half_extent); }
 
 FrameEvent PlaneTask::played_frame(int i, const RootState&) const {
-  const TargetEnvState& s = envs_[i];
-  const float dx = s.target_x - s.root.x, dz = s.target_z - s.root.z;
-  return dx * dx + dz * dz <= config_.success_radius * config_.success_radius ? FrameEvent::kSuccess : FrameEvent::kNone;
+  return within_success_radius(envs_[i]) ? FrameEvent::kSuccess : FrameEvent::kNone;
 }
 
 TaskStep PlaneTask::end_step(int i, FrameEvent event) const {
