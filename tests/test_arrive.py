@@ -112,18 +112,27 @@ def test_the_runtime_needs_a_facing_in_radians():
 
 
 def test_motion_kinds_on_clips_of_known_kind(tmp_path):
-    """Standing, turning in place and walking clips of the synthetic data give the kinds they are."""
+    """Standing, turning in place and walking clips of the synthetic data give the kinds they are:
+    the fast turn in place (1.5 rad/s, 86 degrees a second) turns in place, the slow one (0.5
+    rad/s, under the measure's 60 degrees) only stands."""
     from mmrl.motion import synth
 
     src = synth.default_dataset_dir()
     kinds = {}
     for name in ("stand", "turn-in-place-left", "walk"):
         files = sorted(src.glob(f"synth_*_{name}.bvh"))
+        if name == "turn-in-place-left":
+            assert len(files) == 2  # the plan's fast one first, the slow one last
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", MotionImportWarning)
+                kinds["slow-turn"] = motion_kinds(mmrl.Database.from_bvh(files[1:]))
+            files = files[:1]
         with warnings.catch_warnings():  # a standing clip alone is slower than a person walks: the scale warning
             warnings.simplefilter("ignore", MotionImportWarning)
             kinds[name] = motion_kinds(mmrl.Database.from_bvh(files))
     assert kinds["stand"]["idle"] > 0.95
-    assert kinds["turn-in-place-left"]["turn_in_place"] > 0.5
+    assert kinds["turn-in-place-left"]["turn_in_place"] > 0.9
+    assert kinds["slow-turn"]["idle"] > 0.9 and kinds["slow-turn"]["turn_in_place"] == 0.0
     assert kinds["walk"]["idle"] == 0.0 and kinds["walk"]["turn_in_place"] == 0.0
     assert kinds["walk"]["backwards"] == 0.0
 

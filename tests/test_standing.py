@@ -114,7 +114,7 @@ def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance
     within stand_radius and facing_tolerance (by hand), or once arrived (a decision at rest, the
     shown frame's hips slower than stop_speed, within success_radius and facing_tolerance) within
     stand_exit times those, it gets the stand by hand: the same matches, roots and rewards for
-    300 steps."""
+    900 steps."""
     db = mmrl.default_database()
     features = np.asarray(db.features)
     config = ARRIVE.default_config().replace(success_radius=0.5, stand_radius=0.3, facing_tolerance=0.5,
@@ -134,7 +134,7 @@ def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance
         return (math.hypot(st["target"][0] - st["x"], st["target"][1] - st["z"]) <= radius
                 and abs((st["facing"] - st["yaw"] + math.pi) % (2 * math.pi) - math.pi) <= tolerance)
 
-    for _ in range(300):
+    for _ in range(900):
         st = standing.env_state(0)
         if arrived:
             arrived = within(st, stand_exit * config.success_radius, stand_exit * config.facing_tolerance)
@@ -201,11 +201,16 @@ def test_an_arrived_character_keeps_standing_within_stand_exit(stand_exit):
         decide(0.7, False)
 
 
-def stand_idle_costs(db, seconds, cost) -> np.ndarray:
+def stand_idle_costs(db, seconds, cost, still=False) -> np.ndarray:
     """Each frame's cost in a stand by hand (arrive.hpp's stand-idle rule): an idle frame (the
     motion kinds' measure) that goes on standing t seconds (its run of idle frames in its clip,
-    to the last one's next second) costs cost * max(0, 1 - t / seconds); any other frame cost."""
+    to the last one's next second) costs cost * max(0, 1 - t / seconds); any other frame cost.
+    ``still``: the same over the idle frames that also turn less than 20 degrees over their next
+    second (what the rule prices once the facing is within 5 degrees)."""
     idle = idle_frames(db)
+    if still:
+        f, d = np.asarray(db.features, np.float64), mmrl._core.TRAJECTORY_DIRECTION_COLUMNS[2]
+        idle = idle & (np.degrees(np.abs(np.arctan2(f[:, d], f[:, d + 1]))) < 20.0)
     out = np.full(db.num_frames, cost, np.float64)
     for a, b in np.asarray(db.clip_ranges):
         run = 0
@@ -216,13 +221,16 @@ def stand_idle_costs(db, seconds, cost) -> np.ndarray:
     return out
 
 
+@pytest.mark.parametrize("turn", [0.1, 0.05])
 @pytest.mark.parametrize("which, seconds", [("synthetic", 10.0), ("mixamo", 10.0), ("synthetic", 1.5)])
-def test_a_standing_match_prefers_frames_that_go_on_standing(which, seconds, tmp_path):
-    """An arrived character (at rest at its target, facing its facing) on each of 40 still
-    frames: its match is the brute-force decision with every frame's stand-idle cost added (and
-    without it when the rule is off); the rule changes some matches and makes every changed one
-    stand longer. With 1.5 s the long runs' frames cost nothing and the last 0.5 s of each run
-    costs, so a run length one frame off moves frames across that edge."""
+def test_a_standing_match_prefers_frames_that_go_on_standing(which, seconds, turn, tmp_path):
+    """An arrived character (at rest at its target, `turn` radians short of its facing) on each
+    of 40 still frames: its match is the brute-force decision with every frame's stand-idle cost
+    added (and without it when the rule is off); the rule changes some matches and makes every
+    changed one stand longer. 0.1 rad (5.7 degrees) is farther than the rule's 5 degrees, so idle
+    frames that turn in place count as standing; 0.05 rad is within, so only still ones do. With
+    1.5 s the long runs' frames cost nothing and the last 0.5 s of each run costs, so a run length
+    one frame off moves frames across that edge."""
     db = (mmrl.default_database() if which == "synthetic" else
           other_skeleton_database(tmp_path, clips=((1.4, 0.3), (0.0, 0.0), (1.2, -0.5), (3.0, 0.2))))
     features = np.asarray(db.features)
@@ -233,7 +241,7 @@ def test_a_standing_match_prefers_frames_that_go_on_standing(which, seconds, tmp
                                              stand_idle_cost=20.0)
     envs = {cost: ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_idle_cost=cost), num_threads=1)
             for cost in (20.0, 0.0)}
-    row_costs = {cost: stand_idle_costs(db, seconds, cost) for cost in envs}
+    row_costs = {cost: stand_idle_costs(db, seconds, cost, still=turn < math.radians(5)) for cost in envs}
     low, high = envs[0.0].single_action_space.low, envs[0.0].single_action_space.high
     rng = np.random.default_rng(1)
     walk = rng.normal(0, 1, (1, 12)).astype(np.float32)  # the stand overrides it
@@ -244,7 +252,7 @@ def test_a_standing_match_prefers_frames_that_go_on_standing(which, seconds, tmp
         for cost, env in envs.items():
             env.reset(seed=0)
             env.set_state(0, int(frame), 1.0, 2.0, yaw)
-            env.set_facing(0, yaw + 0.1)
+            env.set_facing(0, yaw + turn)
             env.set_target(0, 1.0 + 0.05 * math.sin(yaw), 2.0 + 0.05 * math.cos(yaw))
             query = _stand_query(db, env.env_state(0))
             env.step(walk)

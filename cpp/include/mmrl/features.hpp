@@ -11,6 +11,7 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -27,8 +28,17 @@ constexpr int trajectory_position_column(int k) { return kPoseDim + 4 * k; }
 constexpr int trajectory_direction_column(int k) { return kPoseDim + 4 * k + 2; }
 constexpr int kNumBlocks = 5;
 // A frame stands (is idle) when its +30-frame trajectory sample is nearer than this (m): the
-// one measure of mmrl.motion.kinds (IDLE_METERS), mmrl db info and the arrive stand.
+// measure of mmrl.motion.kinds (IDLE_METERS), mmrl db info and the raw idle frames' floor.
 constexpr double kIdleMeters = 0.15;
+// The arrive stand's long idles also turn less than this over that second (degrees): an idle
+// frame may turn in place, a frame that stands still does not (docs/arrive.md).
+constexpr double kIdleDegrees = 20.0;
+// Whether a feature row (raw, kFeatureDim floats) stands still: kIdleMeters and kIdleDegrees.
+inline bool feature_row_stands_still(const float* f) {
+  const int p = trajectory_position_column(2), d = trajectory_direction_column(2);
+  return std::hypot(f[p], f[p + 1]) < static_cast<float>(kIdleMeters) &&
+         std::abs(std::atan2(f[d], f[d + 1])) < static_cast<float>(kIdleDegrees) * (kPi / 180.0f);
+}
 
 // A block shares one normalisation scale and one weight. Columns need not be contiguous
 // (trajectory positions and directions interleave by horizon).

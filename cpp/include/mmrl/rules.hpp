@@ -53,6 +53,7 @@ struct RuleContext {
   const RequestSelection& request;  // the clips it keeps to now (restricts(): some only)
   const ObstacleScene* obstacles = nullptr;  // the character's obstacles (tasks that have them), or null
   bool standing = false;  // the task asks the character to stand still (the arrive task once arrived)
+  float stand_turn = 0;   // standing: the turn left to the facing it stands with (radians, + = left)
 };
 
 class CandidateRule : public CandidateFilter {

@@ -208,7 +208,8 @@ class TargetTask {
   DecisionRules decision_rules(int i) {
     DecisionRules rules;
     rules.transition_cost = task().decision_transition_cost(i);
-    rules_[static_cast<size_t>(i)].prepare(RuleContext{*source_, envs_[i], request(i), task().scene(i), task().standing(i)}, rules);
+    rules_[static_cast<size_t>(i)].prepare(
+        RuleContext{*source_, envs_[i], request(i), task().scene(i), task().standing(i), task().stand_turn(i)}, rules);
     return rules;
   }
 
@@ -289,6 +290,8 @@ class TargetTask {
   // Whether env i's next decision asks the character to stand still (a task that stands hides
   // it; read after decision_action): no.
   bool standing(int) const { return false; }
+  // While standing, the turn left to the facing it stands with (radians): none.
+  float stand_turn(int) const { return 0.0f; }
   // The request code of env i (request_dim() floats) into out: all 0 without a request.
   void observe_request(int i, float* out) const {
     const State& s = envs_[i];

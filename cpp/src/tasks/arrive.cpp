@@ -114,28 +114,39 @@ TaskStep ArriveTask::end_step(int i, FrameEvent event) const {
 
 namespace {
 
-// Seconds each frame of db goes on standing (0 for a frame that does not stand): one table per
-// database, shared by every env's and character's rule while any lives (a crowd of 1,000
-// characters holds one copy, not 1,000).
-std::shared_ptr<const std::vector<float>> standing_seconds(const Database& db) {
+// Seconds each frame of db goes on standing, and on standing still (0 for a frame that does not):
+// one pair of tables per database, shared by every env's and character's rule while any lives (a
+// crowd of 1,000 characters holds one).
+struct StandingTables {
+  std::vector<float> idle, still;  // kIdleMeters; kIdleMeters and kIdleDegrees (features.hpp)
+};
+
+std::shared_ptr<const StandingTables> standing_seconds(const Database& db) {
   static std::mutex mutex;
   // Keyed by the database and its feature rows (a database freed and another built at its address
   // finds its table expired: a rule never outlives the database it borrows).
-  static std::map<std::pair<const Database*, const float*>, std::weak_ptr<const std::vector<float>>> tables;
+  static std::map<std::pair<const Database*, const float*>, std::weak_ptr<const StandingTables>> tables;
   const std::lock_guard<std::mutex> lock(mutex);
   for (auto it = tables.begin(); it != tables.end();) it = it->second.expired() ? tables.erase(it) : std::next(it);
   auto& slot = tables[{&db, db.features.data()}];
-  if (auto table = slot.lock(); table && table->size() == static_cast<size_t>(db.num_frames)) return table;
-  auto table = std::make_shared<std::vector<float>>(static_cast<size_t>(db.num_frames), 0.0f);
+  const size_t n = static_cast<size_t>(db.num_frames);
+  if (auto table = slot.lock(); table && table->idle.size() == n) return table;
+  auto table = std::make_shared<StandingTables>();
+  table->idle.assign(n, 0.0f);
+  table->still.assign(n, 0.0f);
   const int p = trajectory_position_column(2);
   const float lookahead = static_cast<float>(kTrajectoryOffsets[2]);
   for (int c = 0; c < db.num_clips(); ++c) {
-    float run = 0;  // idle frames from this one on, in this clip
+    float idle_run = 0, still_run = 0;  // such frames from this one on, in this clip
     for (int r = db.clip_ranges[2 * c + 1] - 1; r >= db.clip_ranges[2 * c]; --r) {
-      const float* f = &db.features[static_cast<size_t>(r) * kFeatureDim];
-      const bool idle = db.valid[static_cast<size_t>(r)] && std::hypot(f[p], f[p + 1]) < static_cast<float>(kIdleMeters);
-      run = idle ? run + 1 : 0;
-      if (idle) (*table)[static_cast<size_t>(r)] = (run - 1 + lookahead) / db.fps;
+      const size_t row = static_cast<size_t>(r);
+      const float* f = &db.features[row * kFeatureDim];
+      const bool idle = db.valid[row] && std::hypot(f[p], f[p + 1]) < static_cast<float>(kIdleMeters);
+      const bool still = idle && feature_row_stands_still(f);
+      idle_run = idle ? idle_run + 1 : 0;
+      still_run = still ? still_run + 1 : 0;
+      if (idle) table->idle[row] = (idle_run - 1 + lookahead) / db.fps;
+      if (still) table->still[row] = (still_run - 1 + lookahead) / db.fps;
     }
   }
   slot = table;
@@ -145,8 +156,13 @@ std::shared_ptr<const std::vector<float>> standing_seconds(const Database& db) {
 class StandIdleRule final : public CandidateRule {
  public:
   StandIdleRule(const Database& db, const ArriveTaskConfig& config)
-      : seconds_(standing_seconds(db)), cost_(config.stand_idle_cost), horizon_(config.stand_idle_seconds) {}
-  bool prepare(const RuleContext& context) override { return context.standing; }
+      : tables_(standing_seconds(db)), cost_(config.stand_idle_cost), horizon_(config.stand_idle_seconds) {}
+  bool prepare(const RuleContext& context) override {
+    // Facing within kStillTurn: long still idles; farther: idles that turn in place count too,
+    // so the stand turns to its facing before it stands still.
+    seconds_ = std::abs(context.stand_turn) <= kStillTurn ? &tables_->still : &tables_->idle;
+    return context.standing;
+  }
 
  protected:
   float cost(const Candidate& c) const override {
@@ -156,7 +172,9 @@ class StandIdleRule final : public CandidateRule {
   }
 
  private:
-  std::shared_ptr<const std::vector<float>> seconds_;
+  static constexpr float kStillTurn = 5.0f * kPi / 180.0f;
+  std::shared_ptr<const StandingTables> tables_;
+  const std::vector<float>* seconds_ = nullptr;
   float cost_, horizon_;
 };
 

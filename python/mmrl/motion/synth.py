@@ -52,7 +52,7 @@ __all__ = [
 ]
 
 # Bump when the generated motion changes, so cached default datasets are regenerated.
-SYNTH_VERSION = 2  # 2: side steps and backward walks
+SYNTH_VERSION = 3  # 2: side steps and backward walks; 3: slow turns in place
 
 _ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Yrotation", "Xrotation", "Zrotation")
 _JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")  # local rotation = Rz * Ry * Rx
@@ -240,6 +240,8 @@ _PLAN: Tuple[Tuple[str, float, float, float], ...] = (
     ("step-right", 0.25, 0.25, 0.0),
     ("walk-back", 0.7, 0.7, 0.0),
     ("back-stop", 0.7, 0.0, 0.0),
+    ("turn-in-place-left", 0.0, 0.0, 0.5),
+    ("turn-in-place-right", 0.0, 0.0, -0.5),
 )
 #: The direction of travel from the facing (rad, + = left) of the plan's kinds that do not walk forward.
 _DIRECTIONS = {"step-left": np.pi / 2, "step-right": -np.pi / 2, "walk-back": np.pi, "back-stop": np.pi}
@@ -270,9 +272,10 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
     The set (in this order, repeating nothing): straight walk and run, left and right turns at walk
     and run, speed-ups and slow-downs, standing, walks at 0.5 to 1.8 m/s, runs at 2.4 to 4 m/s,
     sharp walking turns, turns in place, starting and stopping, gentle and sharp turns at other
-    speeds, side steps to both sides, a backward walk and a backward walk that stops. Speeds and
+    speeds, side steps to both sides, a backward walk, a backward walk that stops and slow turns in
+    place (a fine correction of the facing at rest). Speeds and
     turn rates get a small seeded jitter. `num_clips` takes the first clips of that list
-    (default: all 31, 4.1 minutes at 8 s each); more clips than that add random constant
+    (default: all 33, 4.4 minutes at 8 s each); more clips than that add random constant
     (speed, turn rate) clips.
 
     ``manifest.json``: {"generator": "mmrl.synth", "version", "seed", "fps", "clips": [{"file",
@@ -319,7 +322,7 @@ def default_dataset_dir() -> Path:
 
     Location: ``<cache>/synth-v<SYNTH_VERSION>`` where <cache> is ``$MMRL_CACHE`` if set, else
     ``$XDG_CACHE_HOME/mmrl``, else ``~/.cache/mmrl``. It holds ``write_dataset(dir)`` with the
-    default arguments (31 clips, 4.1 minutes at 30 fps). Generation writes into a temporary
+    default arguments (33 clips, 4.4 minutes at 30 fps). Generation writes into a temporary
     sibling directory and renames it into place, so a crash never leaves a half-written dataset
     and concurrent first uses are safe (the loser of the race discards its copy).
     """

@@ -65,10 +65,12 @@ struct ArriveTaskConfig : TaskConfig {
       "target or turned more than stand_exit times facing_tolerance from its facing. 1: no more than before "
       "arriving.");
     v("stand_idle_seconds", &ArriveTaskConfig::stand_idle_seconds, kNonNegative,
-      "Once arrived, the stand's match prefers idle frames (moving less than 0.15 m over the next second) that "
-      "go on standing this long (s), so that a character stands through long idles rather than from one short "
-      "one to the next: a frame that stands for less costs stand_idle_cost times the share of this time it "
-      "falls short by (a frame that does not stand: all of it). 0: off.");
+      "Once arrived, the stand's match prefers frames that go on standing this long (s), so that a character "
+      "stands through long idles rather than from one short one to the next: a frame that stands for less costs "
+      "stand_idle_cost times the share of this time it falls short by (a frame that does not stand: all of it). "
+      "Within 5 degrees of its facing a frame stands when it moves less than 0.15 m and turns less than 20 "
+      "degrees over the next second; farther, a frame that turns in place stands too, so the character turns "
+      "to its facing first. 0: off.");
     v("stand_idle_cost", &ArriveTaskConfig::stand_idle_cost, kNonNegative,
       "The most a stand's match adds for a frame that stands shorter than stand_idle_seconds (squared "
       "normalized feature distance, as transition_cost). 0: off.");
@@ -115,6 +117,7 @@ class ArriveTask : public TargetTask<ArriveTask, ArriveTaskConfig, ArriveEnvStat
   // Once arrived (read after decision_action), the character stands: the stand-idle rule prices
   // the match.
   bool standing(int i) const { return config_.stand_radius > 0 && envs_[i].arrived; }
+  float stand_turn(int i) const { return wrap_angle(envs_[i].target_yaw - envs_[i].root.yaw); }
   // Within stand_radius and facing_tolerance, or once arrived within stand_exit times the
   // tolerances: stand at the target facing its facing, normalized. Updates s.arrived.
   const float* decision_action(int i, const float* action, float* scratch);
@@ -138,10 +141,10 @@ class ArriveVecEnv : public TargetVecEnv<ArriveTask> {
 
 // The arrive task's candidate rule "stand-idle" (rules.cpp registers it): while the character
 // stands (RuleContext::standing), a database frame costs stand_idle_cost * max(0, 1 - t /
-// stand_idle_seconds), t the seconds it goes on standing (kIdleMeters over the next second, for
-// each frame of its run of such frames in its clip, up to the last one's second); a compressed
-// controller's candidate (no row) costs nothing. Null unless the config is an arrive task's with
-// both numbers above 0.
+// stand_idle_seconds), t the seconds it goes on standing still (feature_row_stands_still:
+// kIdleMeters and kIdleDegrees over the next second, for each frame of its run of such frames in
+// its clip, up to the last one's second); a compressed controller's candidate (no row) costs
+// nothing. Null unless the config is an arrive task's with both numbers above 0.
 std::unique_ptr<CandidateRule> make_stand_idle_rule(const RuleSetup& setup);
 
 
