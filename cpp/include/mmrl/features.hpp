@@ -30,14 +30,14 @@ constexpr int kNumBlocks = 5;
 // A frame stands (is idle) when its +30-frame trajectory sample is nearer than this (m): the
 // measure of mmrl.motion.kinds (IDLE_METERS), mmrl db info and the raw idle frames' floor.
 constexpr double kIdleMeters = 0.15;
-// The arrive stand's long idles also turn less than this over that second (degrees): an idle
+// A frame stands still when it also turns less than this over that second (degrees): an idle
 // frame may turn in place, a frame that stands still does not (docs/arrive.md).
-constexpr double kIdleDegrees = 20.0;
-// Whether a feature row (raw, kFeatureDim floats) stands still: kIdleMeters and kIdleDegrees.
+constexpr double kStillDegrees = 20.0;
+// Whether a feature row (raw, kFeatureDim floats) stands still: kIdleMeters and kStillDegrees.
 inline bool feature_row_stands_still(const float* f) {
   const int p = trajectory_position_column(2), d = trajectory_direction_column(2);
   return std::hypot(f[p], f[p + 1]) < static_cast<float>(kIdleMeters) &&
-         std::abs(std::atan2(f[d], f[d + 1])) < static_cast<float>(kIdleDegrees) * (kPi / 180.0f);
+         std::abs(std::atan2(f[d], f[d + 1])) < static_cast<float>(kStillDegrees) * (kPi / 180.0f);
 }
 
 // A block shares one normalisation scale and one weight. Columns need not be contiguous

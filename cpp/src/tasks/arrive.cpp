@@ -118,7 +118,7 @@ namespace {
 // one pair of tables per database, shared by every env's and character's rule while any lives (a
 // crowd of 1,000 characters holds one).
 struct StandingTables {
-  std::vector<float> idle, still;  // kIdleMeters; kIdleMeters and kIdleDegrees (features.hpp)
+  std::vector<float> idle, still;  // kIdleMeters; kIdleMeters and kStillDegrees (features.hpp)
 };
 
 std::shared_ptr<const StandingTables> standing_seconds(const Database& db) {
