@@ -286,6 +286,30 @@ def test_default_dataset_dir_is_generated_once_atomically(tmp_path, monkeypatch)
     assert (d / "manifest.json").stat().st_mtime_ns == stamp  # not regenerated
 
 
+
+def test_a_run_is_evaluated_on_the_synthetic_data_it_was_trained_on(tmp_path, monkeypatch):
+    """Version 2 (what every run recorded as {"synthetic": true} trained on) is today's first 31
+    clips, byte for byte; a new run records today's version; a version this mmrl cannot make is
+    refused naming it."""
+    from mmrl.errors import InputError
+    from mmrl.motion.sources import data_spec, database_from_spec, synthetic_version
+
+    monkeypatch.setenv("MMRL_CACHE", str(tmp_path))
+    old, new = synth.default_dataset_dir(2), synth.default_dataset_dir()
+    assert old.name == "synth-v2" and json.loads((old / "manifest.json").read_text())["version"] == 2
+    old_files, new_files = sorted(old.glob("*.bvh")), sorted(new.glob("*.bvh"))
+    assert len(old_files) == 31 and len(new_files) == synth.DEFAULT_NUM_CLIPS > 31
+    assert [f.read_bytes() for f in old_files] == [f.read_bytes() for f in new_files[:31]]
+    assert data_spec() == {"synthetic": synth.SYNTH_VERSION}
+    assert synthetic_version({"synthetic": True}) == synthetic_version({}) == 2
+    assert database_from_spec({"synthetic": True}).num_clips == 31
+    assert database_from_spec(data_spec()).num_clips == synth.DEFAULT_NUM_CLIPS
+    for bad in (1, 99, "3", 2.0):
+        with pytest.raises(InputError, match="synthetic data version"):
+            synthetic_version({"synthetic": bad})
+    with pytest.raises(ValueError, match="data version 1"):
+        synth.default_dataset_dir(1)
+
 # ------------------------------------------------------------------------------------------
 # Against mmrl's own loader and database (from the BVH/database work on main)
 # ------------------------------------------------------------------------------------------

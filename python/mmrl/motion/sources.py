@@ -5,7 +5,9 @@ directories, a run's saved *data spec* (``config.json`` ``"data"``), or the pack
 synthetic locomotion (generated once into the cache).
 
 A data spec is a small JSON-able dict: ``{"db": FILE}``, ``{"data": [PATHS], "mirror":
-bool}`` or ``{"synthetic": true}`` (older runs may hold a bare path or list, also read).
+bool}`` or ``{"synthetic": VERSION}``, the synthetic data's version (``synth.SYNTH_VERSION``
+when the run was made; ``true``, what runs wrote before versions were recorded, and a spec with
+no data are version 2). Older runs may hold a bare path or list, also read.
 """
 from __future__ import annotations
 
@@ -13,21 +15,25 @@ import os
 from pathlib import Path
 from typing import Any, Dict, Optional, Sequence, Union
 
+from ..errors import InputError
 from .checks import is_database_file
 from .database import Database
 
 PathLike = Union[str, os.PathLike]
-_DEFAULT_DB: Optional[Database] = None
+_DEFAULT_DBS: Dict[int, Database] = {}
+#: The synthetic data's version of a run that recorded none (it was made before version 3).
+UNRECORDED_SYNTH_VERSION = 2
 
 
-def default_database() -> Database:
-    """The package's synthetic locomotion database (generated once into the cache)."""
-    global _DEFAULT_DB
-    if _DEFAULT_DB is None:
-        from . import synth
+def default_database(version: Optional[int] = None) -> Database:
+    """The package's synthetic locomotion database (generated once into the cache): today's, or
+    an earlier ``version`` a run was trained on (``synth.default_dataset_dir``)."""
+    from . import synth
 
-        _DEFAULT_DB = Database.from_bvh(synth.default_dataset_dir())
-    return _DEFAULT_DB
+    version = synth.SYNTH_VERSION if version is None else int(version)
+    if version not in _DEFAULT_DBS:
+        _DEFAULT_DBS[version] = Database.from_bvh(synth.default_dataset_dir(version))
+    return _DEFAULT_DBS[version]
 
 
 def resolve_database(db: Union[Database, PathLike, None] = None,
@@ -49,7 +55,23 @@ def data_spec(db: Optional[PathLike] = None, data: Optional[Sequence[PathLike]] 
         return {"db": str(Path(db).resolve())}
     if data:
         return {"data": [str(Path(d).resolve()) for d in data], "mirror": bool(mirror)}
-    return {"synthetic": True}
+    from .synth import SYNTH_VERSION
+
+    return {"synthetic": SYNTH_VERSION}
+
+
+def synthetic_version(spec: Dict[str, Any]) -> int:
+    """The synthetic data's version a data spec names (``{"synthetic": VERSION}``; ``true`` or no
+    data: :data:`UNRECORDED_SYNTH_VERSION`)."""
+    v = spec.get("synthetic", True)
+    if v is True or v is None:
+        return UNRECORDED_SYNTH_VERSION
+    from .synth import VERSION_CLIPS
+
+    if isinstance(v, bool) or not isinstance(v, int) or v not in VERSION_CLIPS:
+        raise InputError(f"data spec: synthetic data version {v!r} is not one this mmrl makes "
+                         f"({', '.join(map(str, sorted(VERSION_CLIPS)))}); a newer mmrl made this run?")
+    return v
 
 
 def database_from_spec(spec: Any) -> Database:
@@ -61,7 +83,7 @@ def database_from_spec(spec: Any) -> Database:
         return resolve_database(db=spec["db"])
     if spec.get("data"):
         return resolve_database(data=spec["data"], mirror=bool(spec.get("mirror", False)))
-    return resolve_database()
+    return default_database(synthetic_version(spec))
 
 
 def load_any(path: PathLike, **import_options) -> Database:

@@ -247,6 +247,10 @@ _PLAN: Tuple[Tuple[str, float, float, float], ...] = (
 _DIRECTIONS = {"step-left": np.pi / 2, "step-right": -np.pi / 2, "walk-back": np.pi, "back-stop": np.pi}
 
 DEFAULT_NUM_CLIPS = len(_PLAN)
+#: The data versions this package still makes, with how many of the plan's clips each holds: a
+#: version only added clips at the plan's end, so an earlier one is a prefix of today's (a run
+#: trained on one is evaluated on it again: mmrl.motion.sources).
+VERSION_CLIPS = {2: 31, SYNTH_VERSION: DEFAULT_NUM_CLIPS}
 
 
 def _clip_plan(num_clips: int, rng: np.random.Generator) -> List[Tuple[str, float, float, float]]:
@@ -266,7 +270,7 @@ def _clip_plan(num_clips: int, rng: np.random.Generator) -> List[Tuple[str, floa
 
 
 def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip: float = 8.0,
-                  fps: float = 30, seed: int = 0) -> List[Path]:
+                  fps: float = 30, seed: int = 0, version: int = SYNTH_VERSION) -> List[Path]:
     """Write a varied set of synthetic clips as BVH files plus ``manifest.json`` into `out_dir`.
 
     The set (in this order, repeating nothing): straight walk and run, left and right turns at walk
@@ -284,10 +288,15 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
     "ramp_seconds" ([start, end] of a linear speed ramp, or null), "frames", "fps",
     "contacts" (stance intervals per foot, [start, stop) frames)}]}.
 
+    ``version``: the data version the manifest records; without ``num_clips``, that version's
+    clips (:data:`VERSION_CLIPS`: 31 for version 2, all 33 today).
+
     Returns the BVH paths in clip order. Deterministic: the same arguments give the same bytes.
     """
+    if version not in VERSION_CLIPS:
+        raise ValueError(f"synth: data version {version!r} is not one this mmrl makes ({sorted(VERSION_CLIPS)})")
     if num_clips is None:
-        num_clips = DEFAULT_NUM_CLIPS
+        num_clips = VERSION_CLIPS[version]
     if isinstance(num_clips, bool) or not isinstance(num_clips, (int, np.integer)) or num_clips < 1:
         raise ValueError(f"synth: num_clips must be a positive integer, got {num_clips!r}")
     _check_args(seconds_per_clip, fps)
@@ -307,7 +316,7 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
         paths.append(path)
     manifest = {
         "generator": "mmrl.synth",
-        "version": SYNTH_VERSION,
+        "version": version,
         "seed": seed,
         "fps": fps,
         "units": {"speed": "m/s", "turn_rate": "rad/s, positive = left (counter-clockwise from above)"},
@@ -317,10 +326,11 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
     return paths
 
 
-def default_dataset_dir() -> Path:
-    """The default synthetic dataset, generated once on first use and cached.
+def default_dataset_dir(version: int = SYNTH_VERSION) -> Path:
+    """The default synthetic dataset, generated once on first use and cached; ``version``: an
+    earlier one of :data:`VERSION_CLIPS` (its first clips).
 
-    Location: ``<cache>/synth-v<SYNTH_VERSION>`` where <cache> is ``$MMRL_CACHE`` if set, else
+    Location: ``<cache>/synth-v<version>`` where <cache> is ``$MMRL_CACHE`` if set, else
     ``$XDG_CACHE_HOME/mmrl``, else ``~/.cache/mmrl``. It holds ``write_dataset(dir)`` with the
     default arguments (33 clips, 4.4 minutes at 30 fps). Generation writes into a temporary
     sibling directory and renames it into place, so a crash never leaves a half-written dataset
@@ -328,14 +338,16 @@ def default_dataset_dir() -> Path:
     """
     from .data import cache_root
 
+    if version not in VERSION_CLIPS:
+        raise ValueError(f"synth: data version {version!r} is not one this mmrl makes ({sorted(VERSION_CLIPS)})")
     root = cache_root()
-    final = root / f"synth-v{SYNTH_VERSION}"
+    final = root / f"synth-v{version}"
     if (final / "manifest.json").is_file():
         return final
     root.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.", suffix=".tmp", dir=root))
     try:
-        write_dataset(tmp)
+        write_dataset(tmp, version=version)
         try:
             os.rename(tmp, final)
         except OSError:
