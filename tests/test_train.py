@@ -44,7 +44,7 @@ def test_training_reaches_targets(trained_run, tmp_path):
 
 def test_run_directory_contents(trained_run):
     cfg = json.loads((trained_run / "config.json").read_text())
-    assert cfg["task"] == "plane" and cfg["data"] == {"synthetic": True}
+    assert cfg["task"] == "plane" and cfg["data"] == {"synthetic": mmrl.motion.synth.SYNTH_VERSION}
     with open(trained_run / "metrics.csv") as f:
         rows = list(csv.DictReader(f))
     for col in ("step", "wall_s", "episode_return", "episode_length", "success_rate"):

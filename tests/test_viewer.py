@@ -21,7 +21,7 @@ TRACE_KEYS = {"t", "root", "target", "frame", "transition"}
 
 @pytest.fixture(scope="module")
 def db():
-    return mmrl.motion.sources.database_from_spec({"synthetic": True})
+    return mmrl.motion.sources.database_from_spec(mmrl.motion.sources.data_spec())
 
 
 def session(db, task="plane", **kw):
