@@ -33,11 +33,15 @@ constexpr double kIdleMeters = 0.15;
 // A frame stands still when it also turns less than this over that second (degrees): an idle
 // frame may turn in place, a frame that stands still does not (docs/arrive.md).
 constexpr double kStillDegrees = 20.0;
-// Whether a feature row (raw, kFeatureDim floats) stands still: kIdleMeters and kStillDegrees.
-inline bool feature_row_stands_still(const float* f) {
-  const int p = trajectory_position_column(2), d = trajectory_direction_column(2);
-  return std::hypot(f[p], f[p + 1]) < static_cast<float>(kIdleMeters) &&
-         std::abs(std::atan2(f[d], f[d + 1])) < static_cast<float>(kStillDegrees) * (kPi / 180.0f);
+// Whether a feature row (raw, kFeatureDim floats) is idle: kIdleMeters over the next second.
+inline bool feature_row_idle(const float* f) {
+  const int p = trajectory_position_column(2);
+  return std::hypot(f[p], f[p + 1]) < static_cast<float>(kIdleMeters);
+}
+// Whether an idle feature row also stands still: it turns less than kStillDegrees.
+inline bool idle_row_stands_still(const float* f) {
+  const int d = trajectory_direction_column(2);
+  return std::abs(std::atan2(f[d], f[d + 1])) < static_cast<float>(kStillDegrees) * (kPi / 180.0f);
 }
 
 // A block shares one normalisation scale and one weight. Columns need not be contiguous

@@ -134,15 +134,14 @@ std::shared_ptr<const StandingTables> standing_seconds(const Database& db) {
   auto table = std::make_shared<StandingTables>();
   table->idle.assign(n, 0.0f);
   table->still.assign(n, 0.0f);
-  const int p = trajectory_position_column(2);
   const float lookahead = static_cast<float>(kTrajectoryOffsets[2]);
   for (int c = 0; c < db.num_clips(); ++c) {
     float idle_run = 0, still_run = 0;  // such frames from this one on, in this clip
     for (int r = db.clip_ranges[2 * c + 1] - 1; r >= db.clip_ranges[2 * c]; --r) {
       const size_t row = static_cast<size_t>(r);
       const float* f = &db.features[row * kFeatureDim];
-      const bool idle = db.valid[row] && std::hypot(f[p], f[p + 1]) < static_cast<float>(kIdleMeters);
-      const bool still = idle && feature_row_stands_still(f);
+      const bool idle = db.valid[row] && feature_row_idle(f);
+      const bool still = idle && idle_row_stands_still(f);
       idle_run = idle ? idle_run + 1 : 0;
       still_run = still ? still_run + 1 : 0;
       if (idle) table->idle[row] = (idle_run - 1 + lookahead) / db.fps;
