@@ -130,6 +130,7 @@ def main() -> None:
     # The frozen scenes: reachability, straight paths and the planner's distance fields.
     env = make(cfg, 0.0)
     env.reset(seed=args.seed)
+    joystick.bind_layout(env.observation_layout)
     reachable, straight, fields_ = np.zeros(n, bool), np.zeros(n, bool), []
     for i in range(n):
         st, ob = env.env_state(i), env.obstacles(i)

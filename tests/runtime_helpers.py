@@ -102,7 +102,7 @@ def drive_stick(path, task, db, config, phases, seed: int = 0, request: str = ""
             _, direction, speed, decisions = phase
             d = np.asarray(direction, np.float64) / np.hypot(*direction)
             ch.set_stick(float(direction[0]), float(direction[1]), float(speed))
-            joystick = JoystickPolicy(db, speed)
+            joystick = JoystickPolicy(db, speed, layout=fp.env.observation_layout)
         else:
             _, offset, decisions = phase
             target = root0[:2] + np.asarray(offset)

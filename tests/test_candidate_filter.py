@@ -68,7 +68,7 @@ def run_env(env, steps, seed):
     the (action, frame) of every env kept on env.trace for a brute-force check."""
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
-    joy = JoystickPolicy(env.db)
+    joy = JoystickPolicy(env.db, layout=env.observation_layout)
     env.trace = []
     for _ in range(steps):
         frames = env.current_frames()
@@ -126,7 +126,7 @@ def test_the_full_path_plays_the_env_decisions(db):
     run = FullPath(task, db, config=base.replace(clip_costs=clip_spec(db, clip), max_steps=30), seed=3,
                    record=False)
     rng = np.random.default_rng(3)
-    joy = JoystickPolicy(db)
+    joy = JoystickPolicy(db, layout=run.env.observation_layout)
     ends = 0
     for _ in range(300):
         out = run.step((joy.act(run.obs[None]) + rng.normal(0, 0.8, (1, 12))).astype(np.float32)[0])

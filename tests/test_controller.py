@@ -62,6 +62,8 @@ def test_full_and_fast_paths_match_the_env(synth_db):
         np.testing.assert_allclose(full.observation(s["target"]), obs[0], rtol=1e-5, atol=1e-5)
         transitions += rf.transition
     assert transitions > 5
+    # The observation's segments are the plane env's, by name.
+    assert mmrl.Character.observation_layout == tuple((str(n), int(k)) for n, k in env.obs_layout)
     assert rq.positions is None
 
 

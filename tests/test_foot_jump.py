@@ -149,7 +149,7 @@ def test_a_standalone_character_decides_with_the_rule(db):
     env = PlaneVectorEnv(1, db=db, config=PlaneConfig(), num_threads=1)
     low, high = env.single_action_space.low, env.single_action_space.high
     rng = np.random.default_rng(5)
-    joy = JoystickPolicy(db)
+    joy = JoystickPolicy(db, layout=mmrl.Character.observation_layout)
     characters = {lim: mmrl.Character(db, fast=True, transition_cost=TRANSITION_COST, foot_jump_limit=lim,
                                       start_frame=int(np.flatnonzero(db.valid_mask)[50])) for lim in (0.0, limit)}
     checked = differ = 0

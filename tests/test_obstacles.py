@@ -667,6 +667,7 @@ def test_fast_evaluation_counts_each_first_episode(db):
     env = make(db, n=64)
     env.set_stage(*stage_params(10), 10)
     obs, _ = env.reset(seed=3)
+    joy.bind_layout(env.observation_layout)
     first = np.full(64, -1)
     while (first < 0).any():
         obs, _, term, trunc, info = env.step(joy.act(obs))

@@ -39,8 +39,8 @@ def normal_db(shared_data):
 def run_lockstep(db, steps, seed, stage=10):
     """Joystick actions with random perturbations (to force transitions); checks every step."""
     rng = np.random.default_rng(seed)
-    joy = JoystickPolicy.preset(db, "joystick")
     run = FullPath(OBSTACLES, db, stage=stage, seed=seed, scene=True)
+    joy = JoystickPolicy.preset(db, "joystick").bind_layout(run.env.observation_layout)
     low, high = run.env.single_action_space.low, run.env.single_action_space.high
     ends = {"success": 0, "collision": 0}
     checked = 0
@@ -99,13 +99,25 @@ def test_obstacle_corners_match_the_env_inside_test(db):
 
 
 def test_joystick_reads_the_target_of_obstacle_observations(db):
-    joy = JoystickPolicy.preset(db, "joystick")
+    maps = (("maps", 512), ("pose", 15), ("goal", 2))
+    plane = (("pose", 15), ("goal", 2))
+    obstacles, on_plane = (JoystickPolicy.preset(db, "joystick").bind_layout(layout) for layout in (maps, plane))
     obs = np.random.default_rng(0).normal(size=(5, 529)).astype(np.float32)
-    np.testing.assert_array_equal(joy.act(obs), joy.act(obs[:, -17:]))
+    np.testing.assert_array_equal(obstacles.act(obs), on_plane.act(obs[:, -17:]))
     # A request code (docs/styles.md) may follow either observation: the goal stays where it was.
     coded = np.concatenate([obs, np.ones((5, 9), np.float32)], 1)
-    np.testing.assert_array_equal(joy.act(coded), joy.act(obs))
-    np.testing.assert_array_equal(joy.act(coded[:, -26:]), joy.act(obs[:, -17:]))
+    np.testing.assert_array_equal(obstacles.act(coded), obstacles.act(obs))
+    np.testing.assert_array_equal(on_plane.act(coded[:, -26:]), on_plane.act(obs[:, -17:]))
+    with pytest.raises(ValueError, match="expected shape"):
+        obstacles.act(obs[:, :500])  # ends before the layout's goal
+    # Deprecated for one release: a joystick bound to no layout tells the two built-in tasks
+    # apart by the observation's length, and says so.
+    joy = JoystickPolicy.preset(db, "joystick")
+    with pytest.warns(DeprecationWarning, match="bind the joystick"):
+        np.testing.assert_array_equal(joy.act(obs), joy.act(obs[:, -17:]))
+        np.testing.assert_array_equal(joy.act(coded), joy.act(obs))
+        np.testing.assert_array_equal(joy.act(coded[:, -26:]), joy.act(obs[:, -17:]))
+        np.testing.assert_array_equal(joy.act(obs), obstacles.act(obs))
     with pytest.raises(ValueError, match="expected shape"):
         joy.act(obs[:, :10])  # shorter than any task's observation
 

@@ -100,7 +100,7 @@ def stepped(env, steps, seed, noise=0.8):
     """Steps env with noisy joystick actions; yields (states before, obstacles before, actions)."""
     obs, _ = env.reset(seed=seed)
     rng = np.random.default_rng(seed)
-    joy = JoystickPolicy(env.db)
+    joy = JoystickPolicy(env.db, layout=env.observation_layout)
     for _ in range(steps):
         actions = (joy.act(obs) + rng.normal(0, noise, (env.num_envs, 12))).astype(np.float32)
         yield obs, actions

@@ -149,7 +149,7 @@ def test_obstacles_take_requests_too():
     env.set_request(0, "gait=run")
     obs, _ = env.reset(seed=0)
     run = db.clip_tags[:, db.tag_names.index("gait=run")]
-    joy = JoystickPolicy(db)
+    joy = JoystickPolicy(db, layout=env.observation_layout)
     for _ in range(100):
         obs, *_ = env.step(joy.act(obs))
         assert run[db.frame_clip[env.current_frames()[0]]]

@@ -37,7 +37,7 @@ def test_env_decisions_follow_the_rule_by_brute_force(db, transition_cost):
     obs, _ = env.reset(seed=4)
     rng = np.random.default_rng(0)
     low, high = env.single_action_space.low, env.single_action_space.high
-    joy = JoystickPolicy(db)
+    joy = JoystickPolicy(db, layout=env.observation_layout)
     checked = 0
     for _ in range(40):
         frames = env.current_frames()
@@ -77,7 +77,7 @@ def test_fast_and_full_paths_agree_with_a_transition_cost(db, task_name):
     task = get_task(task_name)
     run = FullPath(task, db, config=task.default_config().replace(transition_cost=2.0), seed=5, record=False)
     rng = np.random.default_rng(5)
-    joy = JoystickPolicy(db)
+    joy = JoystickPolicy(db, layout=run.env.observation_layout)
     low, high = run.env.single_action_space.low, run.env.single_action_space.high
     checked = 0
     for _ in range(150):

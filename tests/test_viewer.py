@@ -116,10 +116,15 @@ def test_policy_switch_follows_the_same_target(db):
     s.policies["trained"] = None  # never asked once the switch has applied
     calls = []
 
+    joystick = JoystickPolicy.preset(db, "joystick")
+
     class Spy:
+        def bind_layout(self, layout):
+            joystick.bind_layout(layout)
+
         def act(self, obs, deterministic=True):
             calls.append(obs.copy())
-            return JoystickPolicy.preset(db, "joystick").act(obs)
+            return joystick.act(obs)
 
     s.policies["joystick"] = Spy()
     s.set_policy("joystick")

@@ -192,6 +192,10 @@ class Character:
         gp, gr, _, _ = self._core.current_pose()
         return np.array(gp), np.array(gr)
 
+    #: The segments of :meth:`observation` (the plane task's), for a policy that reads them by name
+    #: (``JoystickPolicy(db, layout=Character.observation_layout)``).
+    observation_layout = (("pose", POSE_DIM), ("goal", 2))
+
     def observation(self, target: Sequence[float]) -> np.ndarray:
         """The plane task's observation (17,) for a world target (x, z): pose features + target in the character frame.
         ValueError for a character that shows no database frame (a compressed controller's rows:

@@ -1,12 +1,12 @@
 """Scripted policies with the same interface as trained ones: ``act(obs[N, D]) -> actions[N, 12]``.
 
-Observations are the plane task's (D = 17, see :mod:`mmrl.tasks.plane`): ``obs = [pose features (15,
-normalized), target (x, z) in the character frame (meters)]``, or the moving-obstacles task's
-(D = 529, :mod:`mmrl.tasks.obstacles`), which holds the same 17 floats after its sensor maps.
+Observations are a task's (its ``observation_layout`` names the segments; the joystick reads the
+"goal", the target (x, z) in the character frame, meters, and the arrive task's "facing").
 Actions are the 12-d trajectory features in the database's normalized units.
 """
 from __future__ import annotations
 
+import warnings
 from typing import Optional, Tuple
 
 import numpy as np
@@ -15,17 +15,11 @@ from .. import _core
 from ..motion.database import POSE_DIM, TRAJECTORY_DIM, Database
 from ..tasks.layout import obs_segment
 
-#: Observation sizes the scripted policies read: the plane task's and the moving-obstacles task's.
+#: Observation sizes an unbound joystick told apart (deprecated: bind it to the env's layout).
 _OBSTACLE_GOAL = sum(size for name, size in _core.ObstacleVecEnv.layout if name != "goal")
 OBSERVATION_DIMS = (POSE_DIM + 2, _OBSTACLE_GOAL + 2)
 
 
-def goal_offset(obs_dim: int) -> int:
-    """Where g_t starts in an observation of ``obs_dim`` floats of one of the two built-in tasks,
-    told by its length: what a joystick reads before it is bound to an env's layout
-    (:meth:`JoystickPolicy.bind_layout`; the episode loops bind it). Any other task's observation
-    must come with its layout."""
-    return _OBSTACLE_GOAL if int(obs_dim) >= _OBSTACLE_GOAL + 2 else POSE_DIM
 #: Frames ahead of the three trajectory samples (+10, +20, +30), from the C++ feature layout.
 TRAJECTORY_FRAMES = tuple(_core.TRAJECTORY_OFFSETS)
 _LAST_POSITION = _core.TRAJECTORY_POSITION_COLUMNS[2]  # x of the +30-frame position (z next)
@@ -83,7 +77,7 @@ class JoystickPolicy:
             on: the arrive joystick (docs/arrive.md), which slows down and turns at the end.
     """
 
-    def __init__(self, db: Database, speed: Optional[float] = None, arrive: bool = False):
+    def __init__(self, db: Database, speed: Optional[float] = None, arrive: bool = False, layout=None):
         self.arrive = bool(arrive)
         if speed is None:
             speed = database_speeds(db)[0]
@@ -95,10 +89,13 @@ class JoystickPolicy:
         self._times = np.array(TRAJECTORY_FRAMES, np.float32) / db.fps
         self._goal: Optional[int] = None  # where g_t starts, from bind_layout
         self._facing: Optional[int] = None  # where the target facing starts, if the layout has one
+        if layout is not None:
+            self.bind_layout(layout)
 
     def bind_layout(self, layout) -> "JoystickPolicy":
         """Read g_t where the env's ``observation_layout`` ((name, size), ...) puts the "goal"
-        segment (the episode loops call it through ``policy_actions``). Returns self."""
+        segment (the episode loops call it through ``policy_actions``; ``layout=`` at construction
+        does the same). Returns self."""
         try:
             self._goal = obs_segment(layout, "goal").start
         except KeyError as e:
@@ -119,7 +116,7 @@ class JoystickPolicy:
 
     def raw_trajectory(self, obs: np.ndarray) -> np.ndarray:
         """(N, 12) trajectory in meters / unit directions, character frame."""
-        start = goal_offset(obs.shape[1]) if self._goal is None else self._goal
+        start = self._goal if self._goal is not None else self._unbound_goal(obs.shape[1])
         g = obs[:, start:start + 2].astype(np.float64)
         dist = np.linalg.norm(g, axis=1, keepdims=True)
         d = np.where(dist > 1e-6, g / np.maximum(dist, 1e-6), np.array([[0.0, 1.0]]))
@@ -132,13 +129,23 @@ class JoystickPolicy:
             out[:, 4 * k + 2:4 * k + 4] = d if facing is None else np.where(self.speed * t >= dist, facing, d)
         return out
 
+    @staticmethod
+    def _unbound_goal(obs_dim: int) -> int:
+        """Deprecated (goes in the next release): where g_t starts in a plane or obstacles
+        observation, told by its length."""
+        warnings.warn("JoystickPolicy: reading the goal by the observation's length is deprecated; bind the "
+                      "joystick to the env's layout (JoystickPolicy(db, layout=env.observation_layout), or "
+                      "bind_layout)", DeprecationWarning, stacklevel=4)
+        return _OBSTACLE_GOAL if int(obs_dim) >= _OBSTACLE_GOAL + 2 else POSE_DIM
+
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
-        """Actions (N, 12) in the env's normalized units for observations (N, 17) or (N, 529), each
-        possibly followed by a request code (docs/styles.md)."""
+        """Actions (N, 12) in the env's normalized units for observations (N, D) of the layout it
+        is bound to (:meth:`bind_layout`)."""
         obs = np.asarray(obs)
-        if obs.ndim != 2 or obs.shape[1] < OBSERVATION_DIMS[0]:
-            raise ValueError(f"obs: expected shape (N, D) with D in {OBSERVATION_DIMS} (plane, obstacles), "
-                             f"or one of them and a request code, got {obs.shape}")
+        need = OBSERVATION_DIMS[0] if self._goal is None else self._goal + 2
+        if obs.ndim != 2 or obs.shape[1] < need:
+            raise ValueError(f"obs: expected shape (N, D) with D >= {need} (the goal's end in the layout), "
+                             f"got {obs.shape}")
         if not np.isfinite(obs).all():
             raise ValueError("obs: contains NaN or inf")
         return ((self.raw_trajectory(obs) - self._mean) / self._scale).astype(np.float32)

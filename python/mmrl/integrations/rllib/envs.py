@@ -68,10 +68,12 @@ def worker_database(shared: SharedDatabase):
 
 class EpisodeLog(VectorWrapper):
     """Records the finished episodes and the decisions' statistics of a vector env, and
-    optionally scales its rewards (``reward_scale``; the logged returns stay unscaled)."""
+    optionally scales its rewards (``reward_scale``; the logged returns stay unscaled).
+    ``task``: the env's task (its ``stages`` say whether a curriculum stage applies)."""
 
-    def __init__(self, env, reward_scale: float = 1.0):
+    def __init__(self, env, task, reward_scale: float = 1.0):
         super().__init__(env)
+        self.task = task
         self.reward_scale = float(reward_scale)
         self._returns: List[float] = []
         self._lengths: List[int] = []
@@ -107,9 +109,8 @@ def drain_worker(_runner=None) -> List[Dict[str, Any]]:
 
 def _apply_stage(params, label: int, _runner=None) -> int:
     for log in _WORKER_ENVS:
-        env = log.env.unwrapped
-        if hasattr(env, "set_stage"):
-            env.set_stage(*params, label=label)
+        if log.task.stages:  # a process may hold envs of an earlier trainer's task without stages
+            log.env.unwrapped.set_stage(*params, label=label)
     return len(_WORKER_ENVS)
 
 
@@ -145,7 +146,7 @@ def make_env(config) -> EpisodeLog:
     env = task.make_vector_env(int(config.get("num_envs", 1)), db=db, config=task.train_config(task_config),
                                num_threads=threads,
                                autoreset_mode=AutoresetMode.NEXT_STEP)
-    return EpisodeLog(env, reward_scale=float(config.get("reward_scale", 1.0)))
+    return EpisodeLog(env, task, reward_scale=float(config.get("reward_scale", 1.0)))
 
 
 def register_envs() -> List[str]:
