@@ -52,7 +52,8 @@ double run_variant(const mmrl::RuntimeController& c, const Variant& v, int chars
   mmrl::DatabaseDecider decider(db, c.matcher(), plain);
   for (int i = 0; i < chars; ++i) {
     cs.push_back(std::make_unique<mmrl::Character>(db, o));
-    cs.back()->reset(valid[(static_cast<size_t>(i) * 7919) % valid.size()], mmrl::RootState{float(i), 0.0f, 0.0f});
+    mmrl::show_database_frame(*cs.back(), db, valid[(static_cast<size_t>(i) * 7919) % valid.size()],
+                              mmrl::RootState{float(i), 0.0f, 0.0f});
   }
   mmrl::PolicyScratch scratch = c.policy().make_scratch();
   std::vector<float> obs(c.policy().obs_dim()), action(12);
@@ -69,7 +70,7 @@ double run_variant(const mmrl::RuntimeController& c, const Variant& v, int chars
       c.policy().act(obs.data(), action.data(), scratch);
       if (policy_only) continue;
       const mmrl::Decision decision = decider.decide(ch.frame(), action.data());
-      ch.play(decision.match, decision.cost);
+      mmrl::play_database_match(ch, db, decision.match, decision.cost);
     }
   return since(t0);
 }

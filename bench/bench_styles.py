@@ -76,7 +76,7 @@ def switch_run(task, db, policy, config, styles, seconds_each: float, seed: int,
             if s % 10 == 0:
                 x, z, _ = run.character.root
                 run.set_target(x + rng.uniform(-4, 4), z + rng.uniform(-4, 4))
-            out = run.step(policy_actions(policy, run.obs[None]).reshape(-1))
+            out = run.step(policy_actions(policy, run.obs[None], layout=run.env.observation_layout).reshape(-1))
             frames = out["res"].frames
             if delay is None:
                 inside = np.flatnonzero(clips[db.frame_clip[frames]])
@@ -142,7 +142,7 @@ def figure(task, db, policy, config, styles, path: Path, target=(4.0, 3.0), seed
         run.character.reset(start, (0.0, 0.0), 0.0)
         run.set_target(*target)
         for _ in range(100):
-            out = run.step(policy_actions(policy, run.obs[None]).reshape(-1))
+            out = run.step(policy_actions(policy, run.obs[None], layout=run.env.observation_layout).reshape(-1))
             if out["done"]:
                 break
         roots = run.recording()["roots"]

@@ -171,7 +171,7 @@ def main(argv=None) -> int:
     avoided = {kind: np.zeros(n, bool) for kind in AVOIDANCE}  # per episode: any step near an obstacle
     while not done.all():
         live = np.flatnonzero(~done)
-        actions = policy_actions(policy, obs, True)
+        actions = policy_actions(policy, obs, True, env.observation_layout)
         # Before the step: the state, the obstacles, the map's sensors, the action's test, and
         # the k nearest candidates' paths.
         snap = {}

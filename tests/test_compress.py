@@ -258,7 +258,7 @@ def test_the_full_path_plays_the_projector_and_the_stepper(db, trained):
     transitions = 0
     for _ in range(60):
         before = env.compressed_state(0).copy()
-        action = policy_actions(pol, run.obs[None]).reshape(-1)
+        action = policy_actions(pol, run.obs[None], layout=run.env.observation_layout).reshape(-1)
         query = np.concatenate([before[:15], np.clip(action, low, high)]).astype(np.float32)
         proj = cc.core.project(query[None])[0]
         stay, jump = ((query - before[:27]) ** 2).sum(), ((query - proj[:27]) ** 2).sum()
@@ -390,7 +390,7 @@ def test_the_obstacles_task_plays_a_compressed_controller(db, trained):
     endings = {"success": 0, "collision": 0, "other": 0}
     steps = 0
     while sum(endings.values()) < 4 and steps < 2000:
-        out = run.step(policy_actions(pol, run.obs[None]).reshape(-1))
+        out = run.step(policy_actions(pol, run.obs[None], layout=run.env.observation_layout).reshape(-1))
         steps += 1
         if not out["done"]:
             assert run.root_error()[1] == 0.0

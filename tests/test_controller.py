@@ -230,7 +230,7 @@ def test_a_locked_foot_does_not_move(synth_db):
     feet = [synth_db.joint_names.index(synth_db.roles[k]) for k in ("left_foot", "right_foot")]
     held, heights, starts, first = [], [], [], []
     for _ in range(20):
-        while not run.step(policy_actions(pol, run.obs[None]).reshape(-1))["done"]:
+        while not run.step(policy_actions(pol, run.obs[None], layout=run.env.observation_layout).reshape(-1))["done"]:
             pass
         rec = run.last_recording
         p, w, anim = rec["positions"], rec["lock_weights"], rec["animated_feet"]

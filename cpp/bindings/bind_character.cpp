@@ -1,5 +1,6 @@
 #include "bindings.hpp"
 #include "mmrl/character.hpp"
+#include "mmrl/compressed_source.hpp"
 #include "mmrl/database_source.hpp"
 #include "py_matcher.hpp"
 
@@ -84,7 +85,7 @@ void bind_character(py::module_& m) {
             if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw))
               throw py::value_error("position and yaw must be finite");
             try {
-              c.reset(frame, RootState{x, z, yaw});
+              show_database_frame(c, c.database(), frame, RootState{x, z, yaw});
             } catch (const std::out_of_range&) {
               throw py::index_error("start_frame " + std::to_string(frame) + " is out of range");
             }
@@ -94,28 +95,28 @@ void bind_character(py::module_& m) {
           "play",
           [](Character& c, int64_t match, float cost) {
             py::gil_scoped_release release;
-            c.play(match, cost);
+            play_database_match(c, c.database(), match, cost);
           },
           py::arg("match"), py::arg("cost"),
           "Plays a database decision (a Decider's, or the env's last_step_match): frames match+1 .. match+F.")
       .def(
           "reset_row",
           [](Character& c, const py::handle& row, float x, float z, float yaw) {
-            auto r = check_array<float>(row, "row", {c.pose_row_dim()});
+            auto r = check_array<float>(row, "row", {pose_row_dim(c.num_joints())});
             check_finite(r.data(), r.size(), "row");
             if (!std::isfinite(x) || !std::isfinite(z) || !std::isfinite(yaw))
               throw py::value_error("position and yaw must be finite");
-            c.reset_row(r.data(), RootState{x, z, yaw});
+            show_compressed_row(c, r.data(), RootState{x, z, yaw});
           },
           py::arg("row"), py::arg("x"), py::arg("z"), py::arg("yaw"),
           "A compressed controller's start: shows a pose row (9 J + 5) at the world root.")
       .def(
           "play_rows",
           [](Character& c, const py::handle& rows, bool transition, float cost) {
-            auto r = check_array<float>(rows, "rows", {c.options().frames_per_step + 1, c.pose_row_dim()});
+            auto r = check_array<float>(rows, "rows", {c.options().frames_per_step + 1, pose_row_dim(c.num_joints())});
             check_finite(r.data(), r.size(), "rows");
             py::gil_scoped_release release;
-            c.play_rows(r.data(), transition, cost);
+            play_compressed_rows(c, r.data(), transition, cost);
           },
           py::arg("rows"), py::arg("transition"), py::arg("cost"),
           "Plays a compressed controller's decision (the env's compressed_rows): rows 1.. are shown.")

@@ -1,7 +1,5 @@
 #include "mmrl/character.hpp"
 
-#include "mmrl/compressed.hpp"
-
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -44,17 +42,6 @@ void database_frame_pose(const Database& db, int64_t f, FramePose& out) {
   out.contacts[1] = db.contacts[static_cast<size_t>(f) * 2 + 1];
 }
 
-void compressed_frame_pose(const float* row, FramePose& out) {
-  const int J = static_cast<int>(out.rotations.size());
-  for (int j = 0; j < J; ++j) {
-    out.rotations[j] = rotation_from_6d(row + 6 * j);
-    out.translations[j] = load3(row + 6 * J + 3 * j);
-  }
-  for (int k = 0; k < 3; ++k) out.root_delta[k] = row[9 * J + k];
-  out.contacts[0] = row[9 * J + 3] > 0.5f;
-  out.contacts[1] = row[9 * J + 4] > 0.5f;
-}
-
 void database_pose_global(const Database& db, int64_t frame, float* positions, float* rotations_scratch) {
   const size_t o = static_cast<size_t>(frame) * db.num_joints;
   pose_forward_kinematics(db.skeleton.parents, &db.bone_translations[o * 3], &db.bone_rotations[o * 4], positions,
@@ -79,7 +66,7 @@ Character::Character(const Database& db, const CharacterOptions& options)
   for (int j = 0; j < J_; ++j) blended[j] = !above_hips_[j];
   inertializer_.reset(J_, db.roles.hips, blended, options.inertialization_halflife);
   for (BlendPose* p : {&src_, &dst_, &anim_, &shown_, &scratch_}) p->resize(J_);
-  for (FramePose* p : {&fp_a_, &fp_b_, &fp_shown_, &fp_shown_prev_}) p->resize(J_);
+  for (FramePose* p : {&fp_a_, &fp_b_, &fp_shown_, &vel_a_, &vel_b_}) p->resize(J_);
   src_vel_.resize(J_);
   dst_vel_.resize(J_);
   loc_t_.assign(J_, Vec3::Zero());
@@ -102,11 +89,14 @@ Character::Character(const Database& db, const CharacterOptions& options)
     lrot_.assign(F * J_ * 4, 0);
     anim_feet_.assign(F * 2 * 3, 0);
   }
-  reset(0, RootState{});
+  database_frame_pose(db, 0, fp_shown_);  // frame 0 at the origin until a source shows its start
+  database_frame_pose(db, 0, vel_a_);
+  database_frame_pose(db, db.num_frames > 1 ? 1 : 0, vel_b_);
+  if (options_.poses) show_frame(fp_shown_, false);
 }
 
-void Character::clear(int64_t frame, const RootState& root) {
-  frame_ = frame;
+void Character::show(const PlayedFrames& frames, const RootState& root) {
+  frame_ = frames.frame(0);
   root_ = root;
   last_match_ = -1;
   last_transition_ = false;
@@ -115,19 +105,10 @@ void Character::clear(int64_t frame, const RootState& root) {
     locked_[s] = released_in_contact_[s] = false;
     lock_weight_[s] = 0;
   }
-}
-
-void Character::reset(int64_t frame, const RootState& root) {
-  if (frame < 0 || frame >= db_.num_frames) throw std::out_of_range("start frame out of range");
-  clear(frame, root);
-  if (options_.poses) show_database_frame(frame, false);
-}
-
-void Character::reset_row(const float* row, const RootState& root) {
-  clear(-1, root);
-  compressed_frame_pose(row, fp_shown_);
-  fp_shown_prev_ = fp_shown_;
-  if (options_.poses) show_frame(fp_shown_, false);
+  if (!options_.poses) return;
+  frames.pose(0, fp_shown_);
+  frames.velocity_pair(0, vel_a_, vel_b_);
+  show_frame(fp_shown_, false);
 }
 
 void Character::blend_pose_of(const FramePose& fp, BlendPose& pose) const {
@@ -152,16 +133,6 @@ void Character::blend_velocity(const FramePose& a, const FramePose& b, BlendVelo
     vel.angular[j] = quat_to_rotation_vector(anim_.rotations[j] * scratch_.rotations[j].conjugate()) * fps;
   vel.hips_angular = quat_to_rotation_vector(anim_.hips_rotation * scratch_.hips_rotation.conjugate()) * fps;
   vel.hips_linear = (anim_.hips_position - scratch_.hips_position) * fps;
-}
-
-void Character::blend_velocity_of(int64_t f, BlendVelocity& vel) {
-  // Forward difference inside the clip (backward at its last frame).
-  const int clip = db_.frame_clip[f];
-  const bool forward = f + 1 < db_.clip_ranges[clip * 2 + 1];
-  const int64_t a = forward ? f : f - 1, b = forward ? f + 1 : f;
-  database_frame_pose(db_, a, fp_a_);
-  database_frame_pose(db_, b, fp_b_);
-  blend_velocity(fp_a_, fp_b_, vel);
 }
 
 void Character::forward_kinematics_joint(int j) {
@@ -205,11 +176,6 @@ void Character::solve_leg(int side, const Vec3& target) {
   const int ft_parent = db_.skeleton.parents[ft];
   loc_r_[ft] = (glob_r_[ft_parent].conjugate() * foot_global).normalized();
   forward_kinematics();
-}
-
-void Character::show_database_frame(int64_t f, bool decay) {
-  database_frame_pose(db_, f, fp_a_);
-  show_frame(fp_a_, decay);
 }
 
 void Character::show_frame(const FramePose& fp, bool decay) {
@@ -303,55 +269,33 @@ void Character::lock_feet(const FramePose& fp, bool decay) {
   }
 }
 
-void Character::play(int64_t j, float cost) {
-  if (j < 0 || j >= db_.num_frames || !db_.valid[j])
-    throw std::invalid_argument("play: frame " + std::to_string(j) + " is not a valid match of the database");
-  if (frame_ < 0) throw std::invalid_argument("play: the character shows no database frame (it played pose rows: play_rows)");
-  last_cost_ = cost;
-  last_transition_ = (j != frame_);
-  last_match_ = j;
-  if (options_.poses && last_transition_ && inertializer_.enabled()) {
-    blend_velocity_of(frame_, src_vel_);
-    blend_velocity_of(j, dst_vel_);
-    database_frame_pose(db_, frame_, fp_a_);
-    blend_pose_of(fp_a_, src_);
-    database_frame_pose(db_, j, fp_a_);
-    blend_pose_of(fp_a_, dst_);
-    inertializer_.transition(src_, src_vel_, dst_, dst_vel_);
-  }
-  const int F = options_.frames_per_step;
-  for (int k = 0; k < F; ++k) {
-    root_advance(root_, &db_.root_deltas[static_cast<size_t>(j + k) * 3]);
-    const int64_t f = j + k + 1;
-    if (options_.poses) show_database_frame(f, true);
-    record_step_frame(k, f, &db_.contacts[f * 2]);
-  }
-  frame_ = j + F;
-}
-
-void Character::play_rows(const float* rows, bool transition, float cost) {
-  const int F = options_.frames_per_step;
-  const size_t P = static_cast<size_t>(pose_row_dim());
+void Character::play(const PlayedFrames& frames, bool transition, float cost) {
   last_cost_ = cost;
   last_transition_ = transition;
-  last_match_ = -1;
-  frame_ = -1;
-  if (options_.poses && transition && inertializer_.enabled()) {
-    blend_velocity(fp_shown_prev_, fp_shown_, src_vel_);  // backward: the frames shown last
-    compressed_frame_pose(rows, fp_a_);
-    compressed_frame_pose(rows + P, fp_b_);
+  last_match_ = frames.frame(0);
+  const bool blend = options_.poses && inertializer_.enabled();
+  if (blend && transition) {
+    blend_velocity(vel_a_, vel_b_, src_vel_);  // the velocity of the frame shown now
+    frames.pose(0, fp_a_);
+    frames.pose(1, fp_b_);
     blend_velocity(fp_a_, fp_b_, dst_vel_);
     blend_pose_of(fp_shown_, src_);
     blend_pose_of(fp_a_, dst_);
     inertializer_.transition(src_, src_vel_, dst_, dst_vel_);
   }
+  const int F = options_.frames_per_step;
+  uint8_t contacts[2];
   for (int k = 0; k < F; ++k) {
-    root_advance(root_, rows + k * P + 9 * J_);
-    std::swap(fp_shown_prev_, fp_shown_);
-    compressed_frame_pose(rows + (k + 1) * P, fp_shown_);
-    if (options_.poses) show_frame(fp_shown_, true);
-    record_step_frame(k, -1, fp_shown_.contacts);
+    root_advance(root_, frames.root_delta(k));
+    if (options_.poses) {
+      frames.pose(k + 1, fp_shown_);
+      show_frame(fp_shown_, true);
+    }
+    frames.contacts(k + 1, contacts);
+    record_step_frame(k, frames.frame(k + 1), contacts);
   }
+  frame_ = frames.frame(F);
+  if (blend) frames.velocity_pair(F, vel_a_, vel_b_);
 }
 
 void Character::record_step_frame(int k, int64_t f, const uint8_t* contacts) {

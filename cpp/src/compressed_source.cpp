@@ -57,12 +57,41 @@ Decision CompressedSource::decide(MotionState& s, const float* query, const Deci
 }
 
 void CompressedSource::play(Character& character, const MotionState& s, const Decision& d) const {
-  character.play_rows(s.crows.data(), d.transition, d.cost);
+  play_compressed_rows(character, s.crows.data(), d.transition, d.cost);
 }
 
 void CompressedSource::show(Character& character, MotionState& s, const RootState& root) const {
   model_->decode(s.cstate.data(), s.crows.data(), s.cscratch);
-  character.reset_row(s.crows.data(), root);
+  show_compressed_row(character, s.crows.data(), root);
+}
+
+void CompressedRows::pose(int k, FramePose& out) const {
+  const float* r = row(k);
+  for (int j = 0; j < J_; ++j) {
+    out.rotations[j] = rotation_from_6d(r + 6 * j);
+    out.translations[j] = Vec3(r[6 * J_ + 3 * j], r[6 * J_ + 3 * j + 1], r[6 * J_ + 3 * j + 2]);
+  }
+  for (int c = 0; c < 3; ++c) out.root_delta[c] = r[9 * J_ + c];
+  contacts(k, out.contacts);
+}
+
+void CompressedRows::contacts(int k, uint8_t out[2]) const {
+  const float* r = row(k);
+  out[0] = r[9 * J_ + 3] > 0.5f;
+  out[1] = r[9 * J_ + 4] > 0.5f;
+}
+
+void CompressedRows::velocity_pair(int k, FramePose& a, FramePose& b) const {
+  pose(k > 0 ? k - 1 : k, a);
+  pose(k, b);
+}
+
+void show_compressed_row(Character& character, const float* row, const RootState& root) {
+  character.show(CompressedRows(row, character.num_joints()), root);
+}
+
+void play_compressed_rows(Character& character, const float* rows, bool transition, float cost) {
+  character.play(CompressedRows(rows, character.num_joints()), transition, cost);
 }
 
 }  // namespace mmrl

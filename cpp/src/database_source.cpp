@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include "mmrl/character.hpp"
 
@@ -16,11 +17,37 @@ Decision DatabaseSource::decide(MotionState& s, const float* query, const Decisi
 }
 
 void DatabaseSource::play(Character& character, const MotionState&, const Decision& d) const {
-  character.play(d.match, d.cost);
+  play_database_match(character, *db_, d.match, d.cost);
 }
 
 void DatabaseSource::show(Character& character, MotionState& s, const RootState& root) const {
-  character.reset(s.frame, root);
+  show_database_frame(character, *db_, s.frame, root);
+}
+
+void DatabaseFrames::contacts(int k, uint8_t out[2]) const {
+  const size_t f = static_cast<size_t>(first_ + k);
+  out[0] = db_.contacts[f * 2];
+  out[1] = db_.contacts[f * 2 + 1];
+}
+
+void DatabaseFrames::velocity_pair(int k, FramePose& a, FramePose& b) const {
+  const int64_t f = first_ + k;
+  const bool forward = f + 1 < db_.clip_ranges[db_.frame_clip[f] * 2 + 1];
+  database_frame_pose(db_, forward ? f : f - 1, a);
+  database_frame_pose(db_, forward ? f + 1 : f, b);
+}
+
+void show_database_frame(Character& character, const Database& db, int64_t frame, const RootState& root) {
+  if (frame < 0 || frame >= db.num_frames) throw std::out_of_range("start frame out of range");
+  character.show(DatabaseFrames(db, frame), root);
+}
+
+void play_database_match(Character& character, const Database& db, int64_t match, float cost) {
+  if (match < 0 || match >= db.num_frames || !db.valid[match])
+    throw std::invalid_argument("play: frame " + std::to_string(match) + " is not a valid match of the database");
+  if (character.frame() < 0)
+    throw std::invalid_argument("play: the character shows no database frame (it played a compressed controller's rows)");
+  character.play(DatabaseFrames(db, match), match != character.frame(), cost);
 }
 
 DatabaseDecider::DatabaseDecider(const Database& db, const Matcher& matcher, const TaskConfig& config)

@@ -285,7 +285,7 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
   std::vector<float> row(m.pose_dim());
   CompressedScratch s = m.make_scratch();
   m.decode(env.motion(0).cstate.data(), row.data(), s);
-  ch.reset_row(row.data(), RootState{});
+  show_compressed_row(ch, row.data(), RootState{});
   float action[kTrajectoryDim];
   std::mt19937 rng(9);
   std::normal_distribution<float> n(0.0f, 1.0f);
@@ -301,7 +301,7 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
     for (float& a : action) a = n(rng);
     env.set_state(0, -1, ch.root().x, ch.root().z, ch.root().yaw);
     env.decide(0, action);
-    ch.play_rows(env.motion(0).crows.data(), env.state(0).decision.transition, env.state(0).decision.cost);
+    play_compressed_rows(ch, env.motion(0).crows.data(), env.state(0).decision.transition, env.state(0).decision.cost);
     env.end_playback(0);
     transitions += env.state(0).decision.transition;
   }

@@ -152,16 +152,16 @@ TEST(Character, AnimatedFeetAreTheAnklesOfTheSameRunWithIkOff) {
   Character a(db, on), b(db, off);
   DatabaseDecider decider(db, matcher(), TaskConfig{});
   const int64_t start = db.clip_ranges[2 * 3] + 4;
-  a.reset(start, RootState{1.0f, -2.0f, 0.4f});
-  b.reset(start, RootState{1.0f, -2.0f, 0.4f});
+  show_database_frame(a, db, start, RootState{1.0f, -2.0f, 0.4f});
+  show_database_frame(b, db, start, RootState{1.0f, -2.0f, 0.4f});
   const int F = on.frames_per_step, J = db.num_joints;
   std::mt19937 gen(2);
   double moved_by_ik = 0;
   for (int t = 0; t < 40; ++t) {
     const std::vector<float> act = random_actions(gen, 1);
     const Decision d = decider.decide(a.frame(), act.data());
-    a.play(d.match, d.cost);
-    b.play(d.match, d.cost);
+    play_database_match(a, db, d.match, d.cost);
+    play_database_match(b, db, d.match, d.cost);
     ASSERT_EQ(a.last_match(), b.last_match());
     for (int k = 0; k < F; ++k)
       for (int side = 0; side < 2; ++side) {

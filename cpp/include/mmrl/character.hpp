@@ -1,7 +1,6 @@
 // A motion-matching character: plays decisions (decider.hpp's Decider makes them; a motion
-// source hands them over: play for a database match, play_rows for a compressed controller's
-// playback) as root motion and, on the full path, world-space poses with inertialization, foot
-// locking and leg IK. It never decides: the root motion is exactly decision.hpp's playback
+// source hands each one over as PlayedFrames) as root motion and, on the full path,
+// world-space poses with inertialization, foot locking and leg IK. It never decides: the root motion is exactly decision.hpp's playback
 // (root_advance over the played frames' deltas), so the fast path and the full path follow
 // the same root trajectory for the same decisions.
 //
@@ -26,9 +25,10 @@
 // orientation.
 //
 // Where the frames come from. Playback shows FramePoses: a frame's pose in its own character
-// frame. The database path makes them from database frames (database_frame_pose); a
-// compressed controller (compressed.hpp) decodes them from its networks (compressed_frame_pose)
-// and plays them with play_rows: the same inertialization, foot locking and IK.
+// frame. A motion source's PlayedFrames makes them (the database's from its frames,
+// database_source.hpp; a compressed controller's from the rows its networks decode,
+// compressed_source.hpp); the character never asks which: the same inertialization, foot
+// locking and IK for both.
 //
 // The step allocates nothing: every buffer is sized at construction.
 #pragma once
@@ -67,8 +67,25 @@ struct FramePose {
 
 // Database frame f as a FramePose (sized to the database's joints).
 void database_frame_pose(const Database& db, int64_t frame, FramePose& out);
-// A compressed controller's pose row (compressed.hpp: 9 J + 5 floats) as a FramePose.
-void compressed_frame_pose(const float* row, FramePose& out);
+
+// The frames of one decision, as a motion source hands them to a character: frame 0 is the
+// chosen frame (the transition's destination), frames 1..F are shown. Each source implements it
+// in its own file.
+class PlayedFrames {
+ public:
+  virtual ~PlayedFrames() = default;
+  // The database frame that frame k is, or -1 (the character's frame() once it shows it).
+  virtual int64_t frame(int k) const = 0;
+  // Frame k's pose in its own character frame (out is sized to the character's joints).
+  virtual void pose(int k, FramePose& out) const = 0;
+  // The root's motion from frame k to frame k + 1: dx, dz in frame k's character frame, dyaw.
+  virtual const float* root_delta(int k) const = 0;
+  // Frame k's foot contacts (left, right; 1 planted).
+  virtual void contacts(int k, uint8_t out[2]) const = 0;
+  // Two poses one frame apart whose difference is frame k's velocity (a, then b): a later
+  // transition from frame k blends from this velocity.
+  virtual void velocity_pair(int k, FramePose& a, FramePose& b) const = 0;
+};
 
 // Global positions (J x 3, meters) of database frame f in the database's world.
 // rotations_scratch: J x 4 floats of caller-owned scratch (the global rotations on return).
@@ -80,28 +97,17 @@ class Character {
   Character(const Database& db, const CharacterOptions& options);
 
   const CharacterOptions& options() const { return options_; }
-  // The pose rows of a compressed controller this character plays (9 J + 5 floats each).
-  int pose_row_dim() const { return 9 * J_ + 5; }
+  const Database& database() const { return db_; }
   int num_joints() const { return J_; }
 
-  // Puts the character on database frame `frame` (any frame) at the world root; clears
+  // Shows frame 0 of `frames` at the world root (frame() becomes frames.frame(0)); clears
   // offsets and locks, and computes the shown pose.
-  void reset(int64_t frame, const RootState& root);
-
-  // A compressed controller's start: shows the pose row `row` at the world root (frame() is -1
-  // from now on: no database frame is shown); clears offsets and locks.
-  void reset_row(const float* row, const RootState& root);
-  // Plays a compressed controller's decision (the env's, compressed.hpp): rows are
-  // (frames_per_step + 1) pose rows, row 0 the chosen state's pose and rows 1.. the frames shown;
-  // the root advances by rows 0 .. F-1's root deltas. transition: the projection replaced the
-  // state played so far (inertialized from the pose shown now, with its velocity from the two
-  // frames shown last, to row 0 with its velocity from rows 0 and 1). played_frames() are -1.
-  void play_rows(const float* rows, bool transition, float cost);
-  // Plays a database decision (a Decider's: the batched env's, so the full path never decides
-  // again): frames j+1 .. j+F, inertialized from the frame shown when j is not its
-  // continuation, with root motion and poses. j must be a valid match frame
-  // (std::invalid_argument otherwise); cost is what last_cost reports.
-  void play(int64_t j, float cost);
+  void show(const PlayedFrames& frames, const RootState& root);
+  // Plays a decision (a Decider's: the batched env's, so the full path never decides again):
+  // frames 1..F shown, the root advanced by frames 0..F-1's root deltas. transition: frame 0
+  // replaces what played so far, inertialized from the pose shown now (with its velocity) to
+  // frame 0 (with its velocity from frames 0 and 1). cost is what last_cost reports.
+  void play(const PlayedFrames& frames, bool transition, float cost);
 
   const RootState& root() const { return root_; }
   int64_t frame() const { return frame_; }
@@ -133,15 +139,11 @@ class Character {
   const float* current_lock_weights() const { return cur_lock_w_; }      // 2, see lock_weights
 
  private:
-  // Puts the character on `frame` (-1: a compressed state) at root, with no offsets or locks.
-  void clear(int64_t frame, const RootState& root);
   void blend_pose_of(const FramePose& frame, BlendPose& pose) const;
   // Velocities from frame a to the next frame b (1/fps apart).
   void blend_velocity(const FramePose& a, const FramePose& b, BlendVelocity& vel);
-  void blend_velocity_of(int64_t frame, BlendVelocity& vel);
   // Shows a frame (root_ already advanced to it): fills the current pose.
   void show_frame(const FramePose& frame, bool decay);
-  void show_database_frame(int64_t f, bool decay);
   void lock_feet(const FramePose& frame, bool decay);
   // The step outputs of the k-th frame shown.
   void record_step_frame(int k, int64_t frame, const uint8_t* contacts);
@@ -164,7 +166,8 @@ class Character {
   Inertializer inertializer_;
   BlendPose src_, dst_, anim_, shown_, scratch_;
   FramePose fp_a_, fp_b_;                // scratch frames
-  FramePose fp_shown_, fp_shown_prev_;   // compressed play: the last two frames shown
+  FramePose fp_shown_;                   // the frame shown now (a transition's source pose)
+  FramePose vel_a_, vel_b_;              // its velocity pair (PlayedFrames::velocity_pair)
   BlendVelocity src_vel_, dst_vel_;
 
   // Foot locks.

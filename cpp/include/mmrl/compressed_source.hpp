@@ -10,9 +10,41 @@
 // crows, its (frames_per_step + 1) pose rows (row 0 the chosen state's pose, rows 1.. shown).
 #pragma once
 
+#include "mmrl/character.hpp"
 #include "mmrl/decider.hpp"
 
 namespace mmrl {
+
+// Floats of one pose row of a compressed controller of num_joints joints (compressed.hpp:
+// 6D rotations, translations, root delta, contacts).
+constexpr int pose_row_dim(int num_joints) { return 9 * num_joints + 5; }
+
+// A compressed controller's decoded pose rows as a character plays them (character.hpp): frame
+// k is row k (no database frame); a row's velocity is the backward difference from the row
+// before (row 0 stands still).
+class CompressedRows final : public PlayedFrames {
+ public:
+  // rows: at least one row of pose_row_dim(num_joints) floats per frame asked for, borrowed.
+  CompressedRows(const float* rows, int num_joints) : rows_(rows), J_(num_joints) {}
+  int64_t frame(int) const override { return -1; }
+  void pose(int k, FramePose& out) const override;
+  const float* root_delta(int k) const override { return row(k) + 9 * J_; }
+  void contacts(int k, uint8_t out[2]) const override;
+  void velocity_pair(int k, FramePose& a, FramePose& b) const override;
+
+ private:
+  const float* row(int k) const { return rows_ + static_cast<size_t>(k) * pose_row_dim(J_); }
+  const float* rows_;
+  int J_;
+};
+
+// Shows a compressed controller's start, pose row `row`, at the world root (frame() is -1 from
+// now on: no database frame is shown).
+void show_compressed_row(Character& character, const float* row, const RootState& root);
+// Plays a compressed controller's decision (the env's): rows are (frames_per_step + 1) pose
+// rows, row 0 the chosen state's pose and rows 1.. the frames shown. transition: the projection
+// replaced the state played so far.
+void play_compressed_rows(Character& character, const float* rows, bool transition, float cost);
 
 class CompressedSource final : public MotionSource {
  public:

@@ -4,6 +4,7 @@
 // match with their stored root deltas.
 #pragma once
 
+#include "mmrl/character.hpp"
 #include "mmrl/decider.hpp"
 #include "mmrl/rules.hpp"
 
@@ -37,6 +38,32 @@ class DatabaseSource final : public MotionSource {
   const Database* db_ = nullptr;
   const Matcher* matcher_ = nullptr;
 };
+
+// The database frames j, j+1, ... as a character plays them (character.hpp): frame k is
+// database frame j + k; a frame's velocity is the forward difference inside its clip (backward
+// at the clip's last frame).
+class DatabaseFrames final : public PlayedFrames {
+ public:
+  // db is borrowed and must outlive this.
+  DatabaseFrames(const Database& db, int64_t first) : db_(db), first_(first) {}
+  int64_t frame(int k) const override { return first_ + k; }
+  void pose(int k, FramePose& out) const override { database_frame_pose(db_, first_ + k, out); }
+  const float* root_delta(int k) const override { return &db_.root_deltas[static_cast<size_t>(first_ + k) * 3]; }
+  void contacts(int k, uint8_t out[2]) const override;
+  void velocity_pair(int k, FramePose& a, FramePose& b) const override;
+
+ private:
+  const Database& db_;
+  int64_t first_;
+};
+
+// Puts a character on database frame `frame` (any frame of db) at the world root
+// (std::out_of_range otherwise).
+void show_database_frame(Character& character, const Database& db, int64_t frame, const RootState& root);
+// Plays the database decision `match` (a Decider's, or an env's): frames match+1 .. match+F, a
+// transition unless match is the frame the character shows. std::invalid_argument when match
+// is not a valid match frame, or when the character shows no database frame.
+void play_database_match(Character& character, const Database& db, int64_t match, float cost);
 
 // One database character's decisions outside an env (mmrl.Character.step): a Decider over the
 // database source with the registered rules (rules.hpp) that `config` turns on, as any env's
