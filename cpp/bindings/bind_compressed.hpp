@@ -28,11 +28,12 @@ const CompressedSource& compressed_of(const Wrapper& s, const char* method) {
   return *source;
 }
 
-// One of env i's compressed states (a MotionState buffer of state_dim floats) as a numpy view.
+// One of env i's compressed states (a CompressedState buffer of state_dim floats) as a numpy view.
 template <class Wrapper>
-auto state_view(std::vector<float> MotionState::*buffer, const char* method) {
+auto state_view(std::vector<float> CompressedState::*buffer, const char* method) {
   return [buffer, method](const Wrapper& s, int i) {
-    return py::array_t<float>(compressed_of(s, method).state_dim(), (s.env.motion(checked_env_index(s, i)).*buffer).data());
+    const int dim = compressed_of(s, method).state_dim();
+    return py::array_t<float>(dim, (CompressedState::of(s.env.motion(checked_env_index(s, i))).*buffer).data());
   };
 }
 
@@ -61,14 +62,14 @@ void bind_compressed_env(py::class_<Wrapper>& c) {
           [](const Wrapper& s, int i) {
             const CompressedModel& m = compressed_of(s, "compressed_rows").model();
             const py::ssize_t F = s.env.config().frames_per_step + 1, P = m.pose_dim();
-            return py::array_t<float>({F, P}, s.env.motion(checked_env_index(s, i)).crows.data());
+            return py::array_t<float>({F, P}, CompressedState::of(s.env.motion(checked_env_index(s, i))).rows.data());
           },
           py::arg("index"), "Env i's last decision's pose rows (frames_per_step + 1, pose_dim): row 0 the chosen state.")
-      .def("compressed_state", state_view<Wrapper>(&MotionState::cstate, "compressed_state"), py::arg("index"),
+      .def("compressed_state", state_view<Wrapper>(&CompressedState::shown, "compressed_state"), py::arg("index"),
            "Env i's compressed state shown now (state_dim).")
-      .def("compressed_played", state_view<Wrapper>(&MotionState::cnext, "compressed_played"), py::arg("index"),
+      .def("compressed_played", state_view<Wrapper>(&CompressedState::next, "compressed_played"), py::arg("index"),
            "The state at the end of env i's last playback (kept through the autoreset).")
-      .def("compressed_chosen", state_view<Wrapper>(&MotionState::cchosen, "compressed_chosen"), py::arg("index"),
+      .def("compressed_chosen", state_view<Wrapper>(&CompressedState::chosen, "compressed_chosen"), py::arg("index"),
            "The state env i's last decision chose (the projection or the continuation; state_dim).")
       .def(
           "set_compressed_state",

@@ -20,18 +20,21 @@ CompressedSource::CompressedSource(const Database& db, const CompressedModel& mo
 }
 
 void CompressedSource::prepare(MotionState& s, int frames_per_step) const {
+  auto c = std::make_unique<CompressedState>();
   const size_t S = static_cast<size_t>(model_->state_dim());
-  s.cstate.assign(S, 0.0f);
-  s.cchosen.assign(S, 0.0f);
-  s.cnext.assign(S, 0.0f);
-  s.crows.assign(static_cast<size_t>(frames_per_step + 1) * model_->pose_dim(), 0.0f);
-  s.cscratch = model_->make_scratch();
+  c->shown.assign(S, 0.0f);
+  c->chosen.assign(S, 0.0f);
+  c->next.assign(S, 0.0f);
+  c->rows.assign(static_cast<size_t>(frames_per_step + 1) * model_->pose_dim(), 0.0f);
+  c->scratch = model_->make_scratch();
+  s.own = std::move(c);
 }
 
 void CompressedSource::set_state(MotionState& s, const float* state) const {
-  for (size_t k = 0; k < s.cstate.size(); ++k)
+  std::vector<float>& shown = CompressedState::of(s).shown;
+  for (size_t k = 0; k < shown.size(); ++k)
     if (!std::isfinite(state[k])) throw std::invalid_argument("set_state: the state is not finite");
-  std::copy(state, state + s.cstate.size(), s.cstate.begin());
+  std::copy(state, state + shown.size(), shown.begin());
 }
 
 void CompressedSource::start(MotionState& s, int64_t frame) const {
@@ -39,7 +42,7 @@ void CompressedSource::start(MotionState& s, int64_t frame) const {
   s.frame = frame;
   const size_t S = static_cast<size_t>(model_->state_dim());
   const float* row = frame_states_ + static_cast<size_t>(frame) * S;
-  std::copy(row, row + S, s.cstate.begin());
+  std::copy(row, row + S, CompressedState::of(s).shown.begin());
 }
 
 Decision CompressedSource::decide(MotionState& s, const float* query, const DecisionRules& rules) const {
@@ -47,22 +50,24 @@ Decision CompressedSource::decide(MotionState& s, const float* query, const Deci
   // projected too.
   float queries[kMaxShortlistQueries * kFeatureDim];  // shortlist_queries' bound (compressed_decision takes <= 8)
   const int n = shortlist_queries(*db_, query, rules.projections, queries);
+  CompressedState& c = CompressedState::of(s);
   Decision d;
-  d.transition = compressed_decision(*model_, s.cstate.data(), queries, n, rules.transition_cost, rules.filter,
-                                     s.cchosen.data(), &d.cost, s.cscratch);
-  if (!d.transition) std::copy(s.cstate.begin(), s.cstate.end(), s.cchosen.begin());
-  const int frames = static_cast<int>(s.crows.size() / static_cast<size_t>(model_->pose_dim())) - 1;
-  compressed_playback(*model_, s.cchosen.data(), frames, s.crows.data(), s.cnext.data(), s.cscratch);
+  d.transition = compressed_decision(*model_, c.shown.data(), queries, n, rules.transition_cost, rules.filter,
+                                     c.chosen.data(), &d.cost, c.scratch);
+  if (!d.transition) std::copy(c.shown.begin(), c.shown.end(), c.chosen.begin());
+  const int frames = static_cast<int>(c.rows.size() / static_cast<size_t>(model_->pose_dim())) - 1;
+  compressed_playback(*model_, c.chosen.data(), frames, c.rows.data(), c.next.data(), c.scratch);
   return d;
 }
 
 void CompressedSource::play(Character& character, const MotionState& s, const Decision& d) const {
-  play_compressed_rows(character, s.crows.data(), d.transition, d.cost);
+  play_compressed_rows(character, CompressedState::of(s).rows.data(), d.transition, d.cost);
 }
 
 void CompressedSource::show(Character& character, MotionState& s, const RootState& root) const {
-  model_->decode(s.cstate.data(), s.crows.data(), s.cscratch);
-  show_compressed_row(character, s.crows.data(), root);
+  CompressedState& c = CompressedState::of(s);
+  model_->decode(c.shown.data(), c.rows.data(), c.scratch);
+  show_compressed_row(character, c.rows.data(), root);
 }
 
 void CompressedRows::pose(int k, FramePose& out) const {

@@ -284,7 +284,7 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
   Character ch(db, o);
   std::vector<float> row(m.pose_dim());
   CompressedScratch s = m.make_scratch();
-  m.decode(env.motion(0).cstate.data(), row.data(), s);
+  m.decode(CompressedState::of(env.motion(0)).shown.data(), row.data(), s);
   show_compressed_row(ch, row.data(), RootState{});
   float action[kTrajectoryDim];
   std::mt19937 rng(9);
@@ -301,7 +301,8 @@ TEST(Compressed, AnEnvAndACharacterPlayItWithoutAllocating) {
     for (float& a : action) a = n(rng);
     env.set_state(0, -1, ch.root().x, ch.root().z, ch.root().yaw);
     env.decide(0, action);
-    play_compressed_rows(ch, env.motion(0).crows.data(), env.state(0).decision.transition, env.state(0).decision.cost);
+    play_compressed_rows(ch, CompressedState::of(env.motion(0)).rows.data(), env.state(0).decision.transition,
+                         env.state(0).decision.cost);
     env.end_playback(0);
     transitions += env.state(0).decision.transition;
   }

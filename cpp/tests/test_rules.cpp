@@ -156,10 +156,10 @@ TEST(CandidateRules, ACompressedControllersStatesArePricedByARegisteredRule) {
   for (int d = 0; d < 200; ++d) {
     float action[kTrajectoryDim];
     for (float& a : action) a = n(rng);
-    const std::vector<float> shown = env.motion(0).cstate;
+    const std::vector<float> shown = CompressedState::of(env.motion(0)).shown;
     env.decide(0, action);
     const Decision& dec = env.state(0).decision;
-    const std::vector<float>& chosen = env.motion(0).cchosen;
+    const std::vector<float>& chosen = CompressedState::of(env.motion(0)).chosen;
     float q[kFeatureDim];
     for (int k = 0; k < kPoseDim; ++k) q[k] = shown[k];
     for (int k = 0; k < kTrajectoryDim; ++k)

@@ -5,12 +5,14 @@
 // rows. A start from database frame f takes f's stored state (frame_states: one row of
 // state_dim floats per database frame).
 //
-// The state of a character (MotionState): cstate, the state shown now; cchosen, the one the last
-// decision chose (the projection, or cstate); cnext, the state after that decision's playback;
-// crows, its (frames_per_step + 1) pose rows (row 0 the chosen state's pose, rows 1.. shown).
+// The state of a character (MotionState::own, a CompressedState): shown, the state shown now;
+// chosen, the one the last decision chose (the projection, or shown); next, the state after that
+// decision's playback; rows, its (frames_per_step + 1) pose rows (row 0 the chosen state's pose,
+// rows 1.. shown).
 #pragma once
 
 #include "mmrl/character.hpp"
+#include "mmrl/compressed.hpp"
 #include "mmrl/decider.hpp"
 
 namespace mmrl {
@@ -46,6 +48,15 @@ void show_compressed_row(Character& character, const float* row, const RootState
 // replaced the state played so far.
 void play_compressed_rows(Character& character, const float* rows, bool transition, float cost);
 
+struct CompressedState final : SourceState {
+  std::vector<float> shown, chosen, next, rows;
+  CompressedScratch scratch;
+  std::unique_ptr<SourceState> clone() const override { return std::make_unique<CompressedState>(*this); }
+  // The compressed part of a state a CompressedSource prepared.
+  static CompressedState& of(MotionState& s) { return static_cast<CompressedState&>(*s.own); }
+  static const CompressedState& of(const MotionState& s) { return static_cast<const CompressedState&>(*s.own); }
+};
+
 class CompressedSource final : public MotionSource {
  public:
   // db, model and frame_states are borrowed and must outlive the source. Throws
@@ -57,15 +68,18 @@ class CompressedSource final : public MotionSource {
   bool rowless_candidates() const override { return true; }
   bool starts_at(int64_t frame) const override { return frame == -1 || (frame >= 0 && frame < db_->num_frames); }
   void start(MotionState& s, int64_t frame) const override;
-  Candidate current(const MotionState& s) const override { return Candidate{-1, s.cstate.data()}; }
+  Candidate current(const MotionState& s) const override { return Candidate{-1, CompressedState::of(s).shown.data()}; }
   bool can_continue(const MotionState&) const override { return true; }
   Decision decide(MotionState& s, const float* query, const DecisionRules& rules) const override;
-  Candidate chosen(const MotionState& s, const Decision&) const override { return Candidate{-1, s.cchosen.data()}; }
+  Candidate chosen(const MotionState& s, const Decision&) const override {
+    return Candidate{-1, CompressedState::of(s).chosen.data()};
+  }
   const float* played_delta(const MotionState& s, const Decision&, int k) const override {
-    return &s.crows[static_cast<size_t>(k) * model_->pose_dim() + 9 * model_->num_joints];
+    return &CompressedState::of(s).rows[static_cast<size_t>(k) * model_->pose_dim() + 9 * model_->num_joints];
   }
   void end_playback(MotionState& s, const Decision&, int) const override {
-    std::copy(s.cnext.begin(), s.cnext.end(), s.cstate.begin());
+    CompressedState& c = CompressedState::of(s);
+    std::copy(c.next.begin(), c.next.end(), c.shown.begin());
   }
   void play(Character& character, const MotionState& s, const Decision& d) const override;
   void show(Character& character, MotionState& s, const RootState& root) const override;

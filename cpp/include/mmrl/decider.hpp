@@ -18,9 +18,9 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
-#include "mmrl/compressed.hpp"
 #include "mmrl/decision.hpp"
 
 namespace mmrl {
@@ -52,10 +52,27 @@ struct DecisionRules {
 // One character's place in its motion source. A database source keeps `frame` (the frame
 // shown now); a compressed source keeps the state shown now and its playback (its file says
 // how), and `frame` is the database frame its state started from.
+// What a source keeps of a character beyond `frame` (a compressed controller's states, rows
+// and scratch): its prepare() makes it, and only that source reads it.
+struct SourceState {
+  virtual ~SourceState() = default;
+  virtual std::unique_ptr<SourceState> clone() const = 0;
+};
+
 struct MotionState {
   int64_t frame = 0;
-  std::vector<float> cstate, cchosen, cnext, crows;  // compressed_source.hpp
-  CompressedScratch cscratch;
+  std::unique_ptr<SourceState> own;  // the source's own part (null for the database)
+  MotionState() = default;
+  MotionState(const MotionState& o) : frame(o.frame), own(o.own ? o.own->clone() : nullptr) {}
+  MotionState(MotionState&&) = default;
+  MotionState& operator=(const MotionState& o) {
+    if (this != &o) {
+      frame = o.frame;
+      own = o.own ? o.own->clone() : nullptr;
+    }
+    return *this;
+  }
+  MotionState& operator=(MotionState&&) = default;
 };
 
 class MotionSource {

@@ -46,6 +46,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "mmrl/compressed.hpp"  // kMlpMaxRows: compressed_path_fan's bound
 #include "mmrl/grid.hpp"
 #include "mmrl/tasks/path_filter.hpp"
 #include "mmrl/vecenv.hpp"
