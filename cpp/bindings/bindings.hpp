@@ -17,11 +17,11 @@ namespace mmrl {
 void bind_bvh(py::module_& m);
 void bind_database(py::module_& m);
 void bind_search(py::module_& m);
-void bind_plane(py::module_& m);
 void bind_character(py::module_& m);
-void bind_obstacles(py::module_& m);
-void bind_arrive(py::module_& m);
 void bind_runtime(py::module_& m);
+#define MMRL_TASK(name) void bind_##name(py::module_& m);
+#include "mmrl/tasks/builtin.hpp"
+#undef MMRL_TASK
 
 template <class T>
 using carray = py::array_t<T, py::array::c_style>;

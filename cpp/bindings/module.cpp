@@ -9,9 +9,9 @@ PYBIND11_MODULE(_core, m) {
   mmrl::bind_database(m);
   mmrl::bind_search(m);
   mmrl::bind_compressed(m);
-  mmrl::bind_plane(m);
   mmrl::bind_character(m);
-  mmrl::bind_obstacles(m);
-  mmrl::bind_arrive(m);
+#define MMRL_TASK(name) mmrl::bind_##name(m);
+#include "mmrl/tasks/builtin.hpp"
+#undef MMRL_TASK
   mmrl::bind_runtime(m);
 }

@@ -2,16 +2,16 @@
 
 namespace mmrl {
 
-// Each built-in core's registration (cpp/runtime/tasks/).
-RuntimeTaskType plane_runtime_task();
-RuntimeTaskType obstacles_runtime_task();
-RuntimeTaskType arrive_runtime_task();
+// Each built-in core's registration (cpp/runtime/tasks/<name>.cpp), from the one list.
+#define MMRL_TASK(name) RuntimeTaskType name##_runtime_task();
+#include "mmrl/tasks/builtin.hpp"
+#undef MMRL_TASK
 
 const std::vector<RuntimeTaskType>& runtime_task_types() {
   static const std::vector<RuntimeTaskType> types = {
-      plane_runtime_task(),
-      obstacles_runtime_task(),
-      arrive_runtime_task(),
+#define MMRL_TASK(name) name##_runtime_task(),
+#include "mmrl/tasks/builtin.hpp"
+#undef MMRL_TASK
   };
   return types;
 }

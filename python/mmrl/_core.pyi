@@ -283,6 +283,136 @@ class CompressedModel:
     @property
     def state_dim(self) -> int:
         ...
+class CharacterOptions:
+    """
+    Options of a Character (see character.hpp).
+    """
+    foot_locking: bool
+    ik: bool
+    poses: bool
+    def __init__(self) -> None:
+        ...
+    @property
+    def frames_per_step(self) -> int:
+        ...
+    @frames_per_step.setter
+    def frames_per_step(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def ik_margin(self) -> float:
+        ...
+    @ik_margin.setter
+    def ik_margin(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def inertialization_halflife(self) -> float:
+        ...
+    @inertialization_halflife.setter
+    def inertialization_halflife(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def lock_blend_time(self) -> float:
+        ...
+    @lock_blend_time.setter
+    def lock_blend_time(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    @property
+    def lock_release_distance(self) -> float:
+        ...
+    @lock_release_distance.setter
+    def lock_release_distance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+class Decider:
+    """
+    One database character's decisions (decider.hpp's Decider over the database source, with a transition cost and the registered candidate rules: clip costs, the foot-jump limit): what mmrl.Character.step decides with.
+    """
+    def __init__(self, db: Database, matcher: Matcher, action_limit_std: typing.SupportsFloat | typing.SupportsIndex = 3.0, transition_cost: typing.SupportsFloat | typing.SupportsIndex = 0.0, clip_costs: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex] = [], foot_jump_limit: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> None:
+        ...
+    def decide(self, frame: typing.SupportsInt | typing.SupportsIndex, trajectory_query: typing.Any) -> tuple[int, float]:
+        """
+        The decision of a character showing `frame` for a 12-d normalized trajectory: (match, cost).
+        """
+    @property
+    def transition_cost(self) -> float:
+        """
+        transition cost of the next decisions (finite, >= 0)
+        """
+    @transition_cost.setter
+    def transition_cost(self, arg1: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+class Character:
+    """
+    A motion-matching character that plays decisions (C++ core of mmrl.Character).
+    """
+    def __init__(self, db: Database, options: CharacterOptions) -> None:
+        ...
+    def animated_feet(self) -> numpy.ndarray:
+        """
+        View (overwritten by the next step), (F, 2, 3) world meters: the left and right ankles of the frames played by the last step before foot locking and IK, i.e. the ankles of the same run with IK off.
+        """
+    def current_animated_feet(self) -> numpy.ndarray:
+        """
+        View (2, 3): the ankles of the pose shown now before foot locking and IK.
+        """
+    def current_lock_weights(self) -> numpy.ndarray:
+        """
+        View (2,): the left and right foot lock weights (0..1) of the pose shown now.
+        """
+    def current_pose(self) -> tuple[numpy.ndarray, numpy.ndarray, numpy.ndarray, numpy.ndarray]:
+        """
+        Views of the pose shown now.
+        """
+    def play(self, match: typing.SupportsInt | typing.SupportsIndex, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        Plays a database decision (a Decider's, or the env's last_step_match): frames match+1 .. match+F.
+        """
+    def play_rows(self, rows: typing.Any, transition: bool, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        Plays a compressed controller's decision (the env's compressed_rows): rows 1.. are shown.
+        """
+    def poses(self) -> tuple[numpy.ndarray, numpy.ndarray, numpy.ndarray, numpy.ndarray]:
+        """
+        Views (overwritten by the next step): global positions, global rotations, local translations, local rotations of the frames played by the last step.
+        """
+    def reset(self, frame: typing.SupportsInt | typing.SupportsIndex, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        ...
+    def reset_row(self, row: typing.Any, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
+        """
+        A compressed controller's start: shows a pose row (9 J + 5) at the world root.
+        """
+    @property
+    def contacts(self) -> numpy.ndarray:
+        ...
+    @property
+    def frame(self) -> int:
+        ...
+    @property
+    def frames_per_step(self) -> int:
+        ...
+    @property
+    def last_cost(self) -> float:
+        ...
+    @property
+    def last_match(self) -> int:
+        ...
+    @property
+    def last_transition(self) -> bool:
+        ...
+    @property
+    def lock_weights(self) -> numpy.ndarray:
+        ...
+    @property
+    def num_joints(self) -> int:
+        ...
+    @property
+    def played_frames(self) -> numpy.typing.NDArray[numpy.int64]:
+        ...
+    @property
+    def root(self) -> tuple[float, float, float]:
+        ...
+    @property
+    def roots(self) -> numpy.ndarray:
+        ...
 class PlaneTaskConfig:
     """
     Numbers of the plane task (see tasks/plane.hpp).
@@ -541,136 +671,6 @@ class PlaneVecEnv:
         """
     @property
     def request_groups(self) -> list[str]:
-        ...
-class CharacterOptions:
-    """
-    Options of a Character (see character.hpp).
-    """
-    foot_locking: bool
-    ik: bool
-    poses: bool
-    def __init__(self) -> None:
-        ...
-    @property
-    def frames_per_step(self) -> int:
-        ...
-    @frames_per_step.setter
-    def frames_per_step(self, arg0: typing.SupportsInt | typing.SupportsIndex) -> None:
-        ...
-    @property
-    def ik_margin(self) -> float:
-        ...
-    @ik_margin.setter
-    def ik_margin(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
-    @property
-    def inertialization_halflife(self) -> float:
-        ...
-    @inertialization_halflife.setter
-    def inertialization_halflife(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
-    @property
-    def lock_blend_time(self) -> float:
-        ...
-    @lock_blend_time.setter
-    def lock_blend_time(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
-    @property
-    def lock_release_distance(self) -> float:
-        ...
-    @lock_release_distance.setter
-    def lock_release_distance(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
-class Decider:
-    """
-    One database character's decisions (decider.hpp's Decider over the database source, with a transition cost and the registered candidate rules: clip costs, the foot-jump limit): what mmrl.Character.step decides with.
-    """
-    def __init__(self, db: Database, matcher: Matcher, action_limit_std: typing.SupportsFloat | typing.SupportsIndex = 3.0, transition_cost: typing.SupportsFloat | typing.SupportsIndex = 0.0, clip_costs: collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex] = [], foot_jump_limit: typing.SupportsFloat | typing.SupportsIndex = 0.0) -> None:
-        ...
-    def decide(self, frame: typing.SupportsInt | typing.SupportsIndex, trajectory_query: typing.Any) -> tuple[int, float]:
-        """
-        The decision of a character showing `frame` for a 12-d normalized trajectory: (match, cost).
-        """
-    @property
-    def transition_cost(self) -> float:
-        """
-        transition cost of the next decisions (finite, >= 0)
-        """
-    @transition_cost.setter
-    def transition_cost(self, arg1: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
-class Character:
-    """
-    A motion-matching character that plays decisions (C++ core of mmrl.Character).
-    """
-    def __init__(self, db: Database, options: CharacterOptions) -> None:
-        ...
-    def animated_feet(self) -> numpy.ndarray:
-        """
-        View (overwritten by the next step), (F, 2, 3) world meters: the left and right ankles of the frames played by the last step before foot locking and IK, i.e. the ankles of the same run with IK off.
-        """
-    def current_animated_feet(self) -> numpy.ndarray:
-        """
-        View (2, 3): the ankles of the pose shown now before foot locking and IK.
-        """
-    def current_lock_weights(self) -> numpy.ndarray:
-        """
-        View (2,): the left and right foot lock weights (0..1) of the pose shown now.
-        """
-    def current_pose(self) -> tuple[numpy.ndarray, numpy.ndarray, numpy.ndarray, numpy.ndarray]:
-        """
-        Views of the pose shown now.
-        """
-    def play(self, match: typing.SupportsInt | typing.SupportsIndex, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        """
-        Plays a database decision (a Decider's, or the env's last_step_match): frames match+1 .. match+F.
-        """
-    def play_rows(self, rows: typing.Any, transition: bool, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        """
-        Plays a compressed controller's decision (the env's compressed_rows): rows 1.. are shown.
-        """
-    def poses(self) -> tuple[numpy.ndarray, numpy.ndarray, numpy.ndarray, numpy.ndarray]:
-        """
-        Views (overwritten by the next step): global positions, global rotations, local translations, local rotations of the frames played by the last step.
-        """
-    def reset(self, frame: typing.SupportsInt | typing.SupportsIndex, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        ...
-    def reset_row(self, row: typing.Any, x: typing.SupportsFloat | typing.SupportsIndex, z: typing.SupportsFloat | typing.SupportsIndex, yaw: typing.SupportsFloat | typing.SupportsIndex) -> None:
-        """
-        A compressed controller's start: shows a pose row (9 J + 5) at the world root.
-        """
-    @property
-    def contacts(self) -> numpy.ndarray:
-        ...
-    @property
-    def frame(self) -> int:
-        ...
-    @property
-    def frames_per_step(self) -> int:
-        ...
-    @property
-    def last_cost(self) -> float:
-        ...
-    @property
-    def last_match(self) -> int:
-        ...
-    @property
-    def last_transition(self) -> bool:
-        ...
-    @property
-    def lock_weights(self) -> numpy.ndarray:
-        ...
-    @property
-    def num_joints(self) -> int:
-        ...
-    @property
-    def played_frames(self) -> numpy.typing.NDArray[numpy.int64]:
-        ...
-    @property
-    def root(self) -> tuple[float, float, float]:
-        ...
-    @property
-    def roots(self) -> numpy.ndarray:
         ...
 class ObstacleTaskConfig:
     """
