@@ -43,6 +43,8 @@ def test_success_is_a_hold_at_rest_facing_the_target_frame_by_frame():
 
     policy = JoystickPolicy(db, database_speeds(db)[0], arrive=True)  # slows down at the target
     policy.bind_layout(fp.env.observation_layout)
+    with pytest.raises(ValueError, match="goal and facing end"):
+        policy.act(fp.obs[None, :18])  # ends inside the facing: one clear error, not numpy's
     hold = successes = 0
     velocity = np.zeros(2)  # the root's smoothed world velocity (a time constant of 0.25 s), 0 at a start
     smoothing = 1 - math.exp(-1 / (0.25 * db.fps))

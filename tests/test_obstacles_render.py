@@ -120,6 +120,10 @@ def test_joystick_reads_the_target_of_obstacle_observations(db):
         np.testing.assert_array_equal(joy.act(obs), obstacles.act(obs))
     with pytest.raises(ValueError, match="expected shape"):
         joy.act(obs[:, :10])  # shorter than any task's observation
+    from mmrl.rl.policies import goal_offset
+
+    with pytest.warns(DeprecationWarning, match="observation_layout"):
+        assert (goal_offset(529), goal_offset(17)) == (527, 15)  # after the maps and the pose features
 
 
 def test_evaluate_obstacles_counts_outcomes(db):

@@ -1,5 +1,7 @@
 #include "mmrl/character.hpp"
 
+#include "mmrl/database_source.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -89,10 +91,7 @@ Character::Character(const Database& db, const CharacterOptions& options)
     lrot_.assign(F * J_ * 4, 0);
     anim_feet_.assign(F * 2 * 3, 0);
   }
-  database_frame_pose(db, 0, fp_shown_);  // frame 0 at the origin until a source shows its start
-  database_frame_pose(db, 0, vel_a_);
-  database_frame_pose(db, db.num_frames > 1 ? 1 : 0, vel_b_);
-  if (options_.poses) show_frame(fp_shown_, false);
+  show_database_frame(*this, db, 0, RootState{});  // until a source shows its start (out_of_range: no frames)
 }
 
 void Character::show(const PlayedFrames& frames, const RootState& root) {
@@ -107,7 +106,7 @@ void Character::show(const PlayedFrames& frames, const RootState& root) {
   }
   if (!options_.poses) return;
   frames.pose(0, fp_shown_);
-  frames.velocity_pair(0, vel_a_, vel_b_);
+  if (inertializer_.enabled()) frames.velocity_pair(0, fp_shown_, vel_a_, vel_b_);
   show_frame(fp_shown_, false);
 }
 
@@ -284,6 +283,7 @@ void Character::play(const PlayedFrames& frames, bool transition, float cost) {
     inertializer_.transition(src_, src_vel_, dst_, dst_vel_);
   }
   const int F = options_.frames_per_step;
+  if (blend) fp_b_ = fp_shown_;  // the pose shown before frame 1 (velocity_pair's `before`)
   uint8_t contacts[2];
   for (int k = 0; k < F; ++k) {
     root_advance(root_, frames.root_delta(k));
@@ -295,7 +295,7 @@ void Character::play(const PlayedFrames& frames, bool transition, float cost) {
     record_step_frame(k, frames.frame(k + 1), contacts);
   }
   frame_ = frames.frame(F);
-  if (blend) frames.velocity_pair(F, vel_a_, vel_b_);
+  if (blend) frames.velocity_pair(F, fp_b_, vel_a_, vel_b_);
 }
 
 void Character::record_step_frame(int k, int64_t f, const uint8_t* contacts) {

@@ -86,8 +86,11 @@ void CompressedRows::contacts(int k, uint8_t out[2]) const {
   out[1] = r[9 * J_ + 4] > 0.5f;
 }
 
-void CompressedRows::velocity_pair(int k, FramePose& a, FramePose& b) const {
-  pose(k > 0 ? k - 1 : k, a);
+void CompressedRows::velocity_pair(int k, const FramePose& before, FramePose& a, FramePose& b) const {
+  if (k == 1)
+    a = before;
+  else
+    pose(k > 0 ? k - 1 : k, a);
   pose(k, b);
 }
 

@@ -30,10 +30,12 @@ void DatabaseFrames::contacts(int k, uint8_t out[2]) const {
   out[1] = db_.contacts[f * 2 + 1];
 }
 
-void DatabaseFrames::velocity_pair(int k, FramePose& a, FramePose& b) const {
+void DatabaseFrames::velocity_pair(int k, const FramePose&, FramePose& a, FramePose& b) const {
   const int64_t f = first_ + k;
-  const bool forward = f + 1 < db_.clip_ranges[db_.frame_clip[f] * 2 + 1];
-  database_frame_pose(db_, forward ? f : f - 1, a);
+  const int clip = db_.frame_clip[f];
+  const bool forward = f + 1 < db_.clip_ranges[clip * 2 + 1];
+  const bool backward = f > db_.clip_ranges[clip * 2];
+  database_frame_pose(db_, forward || !backward ? f : f - 1, a);
   database_frame_pose(db_, forward ? f + 1 : f, b);
 }
 

@@ -1,8 +1,8 @@
 // A motion-matching character: plays decisions (decider.hpp's Decider makes them; a motion
 // source hands each one over as PlayedFrames) as root motion and, on the full path,
-// world-space poses with inertialization, foot locking and leg IK. It never decides: the root motion is exactly decision.hpp's playback
-// (root_advance over the played frames' deltas), so the fast path and the full path follow
-// the same root trajectory for the same decisions.
+// world-space poses with inertialization, foot locking and leg IK. It never decides: the root
+// motion is exactly decision.hpp's playback (root_advance over the played frames' deltas), so
+// the fast path and the full path follow the same root trajectory for the same decisions.
 //
 // Poses. The database frame f is stored in the database's world, where its character frame
 // is C_f = (root_positions[f], root_yaws[f]); the character is at the world root
@@ -83,8 +83,9 @@ class PlayedFrames {
   // Frame k's foot contacts (left, right; 1 planted).
   virtual void contacts(int k, uint8_t out[2]) const = 0;
   // Two poses one frame apart whose difference is frame k's velocity (a, then b): a later
-  // transition from frame k blends from this velocity.
-  virtual void velocity_pair(int k, FramePose& a, FramePose& b) const = 0;
+  // transition from frame k blends from this velocity. before: the pose shown before frame 1
+  // (what the character showed when the decision began; frame k - 1 when k is 1).
+  virtual void velocity_pair(int k, const FramePose& before, FramePose& a, FramePose& b) const = 0;
 };
 
 // Global positions (J x 3, meters) of database frame f in the database's world.

@@ -11,6 +11,8 @@
 // rows 1.. shown).
 #pragma once
 
+#include <cassert>
+
 #include "mmrl/character.hpp"
 #include "mmrl/compressed.hpp"
 #include "mmrl/decider.hpp"
@@ -22,8 +24,9 @@ namespace mmrl {
 constexpr int pose_row_dim(int num_joints) { return 9 * num_joints + 5; }
 
 // A compressed controller's decoded pose rows as a character plays them (character.hpp): frame
-// k is row k (no database frame); a row's velocity is the backward difference from the row
-// before (row 0 stands still).
+// k is row k (no database frame); a frame's velocity is the backward difference from the frame
+// shown before it (row k - 1, or for row 1 the pose shown before the decision; row 0 stands
+// still).
 class CompressedRows final : public PlayedFrames {
  public:
   // rows: at least one row of pose_row_dim(num_joints) floats per frame asked for, borrowed.
@@ -32,7 +35,7 @@ class CompressedRows final : public PlayedFrames {
   void pose(int k, FramePose& out) const override;
   const float* root_delta(int k) const override { return row(k) + 9 * J_; }
   void contacts(int k, uint8_t out[2]) const override;
-  void velocity_pair(int k, FramePose& a, FramePose& b) const override;
+  void velocity_pair(int k, const FramePose& before, FramePose& a, FramePose& b) const override;
 
  private:
   const float* row(int k) const { return rows_ + static_cast<size_t>(k) * pose_row_dim(J_); }
@@ -53,8 +56,14 @@ struct CompressedState final : SourceState {
   CompressedScratch scratch;
   std::unique_ptr<SourceState> clone() const override { return std::make_unique<CompressedState>(*this); }
   // The compressed part of a state a CompressedSource prepared.
-  static CompressedState& of(MotionState& s) { return static_cast<CompressedState&>(*s.own); }
-  static const CompressedState& of(const MotionState& s) { return static_cast<const CompressedState&>(*s.own); }
+  static CompressedState& of(MotionState& s) {
+    assert(s.own);
+    return static_cast<CompressedState&>(*s.own);
+  }
+  static const CompressedState& of(const MotionState& s) {
+    assert(s.own);
+    return static_cast<const CompressedState&>(*s.own);
+  }
 };
 
 class CompressedSource final : public MotionSource {

@@ -16,7 +16,7 @@ class DatabaseSource final : public MotionSource {
   // db and matcher are borrowed and must outlive the source.
   DatabaseSource(const Database& db, const Matcher& matcher) : db_(&db), matcher_(&matcher) {}
 
-  void prepare(MotionState&, int) const override {}
+  void prepare(MotionState& s, int) const override { s.own.reset(); }
   bool rowless_candidates() const override { return false; }
   bool starts_at(int64_t frame) const override { return frame >= 0 && frame < db_->num_frames; }
   void start(MotionState& s, int64_t frame) const override { s.frame = frame; }
@@ -41,7 +41,7 @@ class DatabaseSource final : public MotionSource {
 
 // The database frames j, j+1, ... as a character plays them (character.hpp): frame k is
 // database frame j + k; a frame's velocity is the forward difference inside its clip (backward
-// at the clip's last frame).
+// at the clip's last frame; none in a clip of one frame).
 class DatabaseFrames final : public PlayedFrames {
  public:
   // db is borrowed and must outlive this.
@@ -50,7 +50,7 @@ class DatabaseFrames final : public PlayedFrames {
   void pose(int k, FramePose& out) const override { database_frame_pose(db_, first_ + k, out); }
   const float* root_delta(int k) const override { return &db_.root_deltas[static_cast<size_t>(first_ + k) * 3]; }
   void contacts(int k, uint8_t out[2]) const override;
-  void velocity_pair(int k, FramePose& a, FramePose& b) const override;
+  void velocity_pair(int k, const FramePose& before, FramePose& a, FramePose& b) const override;
 
  private:
   const Database& db_;

@@ -49,19 +49,19 @@ struct DecisionRules {
   Shortlist projections;
 };
 
-// One character's place in its motion source. A database source keeps `frame` (the frame
-// shown now); a compressed source keeps the state shown now and its playback (its file says
-// how), and `frame` is the database frame its state started from.
-// What a source keeps of a character beyond `frame` (a compressed controller's states, rows
-// and scratch): its prepare() makes it, and only that source reads it.
+// What a source keeps of a character beyond MotionState::frame (a compressed controller's
+// states, rows and scratch): its prepare() makes it, and only that source reads it.
 struct SourceState {
   virtual ~SourceState() = default;
   virtual std::unique_ptr<SourceState> clone() const = 0;
 };
 
+// One character's place in its motion source. A database source keeps `frame` (the frame
+// shown now); a compressed source keeps the state shown now and its playback in `own` (its file
+// says how), and `frame` is the database frame its state started from.
 struct MotionState {
   int64_t frame = 0;
-  std::unique_ptr<SourceState> own;  // the source's own part (null for the database)
+  std::unique_ptr<SourceState> own;  // the source's own part (null for the database's)
   MotionState() = default;
   MotionState(const MotionState& o) : frame(o.frame), own(o.own ? o.own->clone() : nullptr) {}
   MotionState(MotionState&&) = default;

@@ -20,6 +20,19 @@ _OBSTACLE_GOAL = sum(size for name, size in _core.ObstacleVecEnv.layout if name 
 OBSERVATION_DIMS = (POSE_DIM + 2, _OBSTACLE_GOAL + 2)
 
 
+def goal_offset(obs_dim: int) -> int:
+    """Deprecated (goes in the next release): where g_t starts in a plane or obstacles
+    observation of ``obs_dim`` floats, told by its length. Read the env's
+    ``observation_layout`` instead (:func:`mmrl.tasks.layout.obs_segment`)."""
+    warnings.warn("goal_offset is deprecated: read the goal from the env's observation_layout "
+                  "(mmrl.tasks.layout.obs_segment(layout, 'goal'))", DeprecationWarning, stacklevel=2)
+    return _goal_by_length(obs_dim)
+
+
+def _goal_by_length(obs_dim: int) -> int:
+    return _OBSTACLE_GOAL if int(obs_dim) >= _OBSTACLE_GOAL + 2 else POSE_DIM
+
+
 #: Frames ahead of the three trajectory samples (+10, +20, +30), from the C++ feature layout.
 TRAJECTORY_FRAMES = tuple(_core.TRAJECTORY_OFFSETS)
 _LAST_POSITION = _core.TRAJECTORY_POSITION_COLUMNS[2]  # x of the +30-frame position (z next)
@@ -136,15 +149,17 @@ class JoystickPolicy:
         warnings.warn("JoystickPolicy: reading the goal by the observation's length is deprecated; bind the "
                       "joystick to the env's layout (JoystickPolicy(db, layout=env.observation_layout), or "
                       "bind_layout)", DeprecationWarning, stacklevel=4)
-        return _OBSTACLE_GOAL if int(obs_dim) >= _OBSTACLE_GOAL + 2 else POSE_DIM
+        return _goal_by_length(obs_dim)
 
     def act(self, obs: np.ndarray, deterministic: bool = True) -> np.ndarray:
         """Actions (N, 12) in the env's normalized units for observations (N, D) of the layout it
         is bound to (:meth:`bind_layout`)."""
         obs = np.asarray(obs)
         need = OBSERVATION_DIMS[0] if self._goal is None else self._goal + 2
+        if self._facing is not None and self.arrive:
+            need = max(need, self._facing + 2)
         if obs.ndim != 2 or obs.shape[1] < need:
-            raise ValueError(f"obs: expected shape (N, D) with D >= {need} (the goal's end in the layout), "
+            raise ValueError(f"obs: expected shape (N, D) with D >= {need} (where the layout's goal and facing end), "
                              f"got {obs.shape}")
         if not np.isfinite(obs).all():
             raise ValueError("obs: contains NaN or inf")
