@@ -6,6 +6,7 @@
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace mmrl {
 
@@ -68,7 +69,7 @@ Character::Character(const Database& db, const CharacterOptions& options)
   for (int j = 0; j < J_; ++j) blended[j] = !above_hips_[j];
   inertializer_.reset(J_, db.roles.hips, blended, options.inertialization_halflife);
   for (BlendPose* p : {&src_, &dst_, &anim_, &shown_, &scratch_}) p->resize(J_);
-  for (FramePose* p : {&fp_a_, &fp_b_, &fp_shown_, &vel_a_, &vel_b_}) p->resize(J_);
+  for (FramePose* p : {&fp_a_, &fp_b_, &fp_shown_, &fp_before_, &vel_a_, &vel_b_}) p->resize(J_);
   src_vel_.resize(J_);
   dst_vel_.resize(J_);
   loc_t_.assign(J_, Vec3::Zero());
@@ -283,11 +284,11 @@ void Character::play(const PlayedFrames& frames, bool transition, float cost) {
     inertializer_.transition(src_, src_vel_, dst_, dst_vel_);
   }
   const int F = options_.frames_per_step;
-  if (blend) fp_b_ = fp_shown_;  // the pose shown before frame 1 (velocity_pair's `before`)
   uint8_t contacts[2];
   for (int k = 0; k < F; ++k) {
     root_advance(root_, frames.root_delta(k));
     if (options_.poses) {
+      std::swap(fp_before_, fp_shown_);  // O(1): the pose shown before this frame
       frames.pose(k + 1, fp_shown_);
       show_frame(fp_shown_, true);
     }
@@ -295,7 +296,7 @@ void Character::play(const PlayedFrames& frames, bool transition, float cost) {
     record_step_frame(k, frames.frame(k + 1), contacts);
   }
   frame_ = frames.frame(F);
-  if (blend) frames.velocity_pair(F, fp_b_, vel_a_, vel_b_);
+  if (blend) frames.velocity_pair(F, fp_before_, vel_a_, vel_b_);
 }
 
 void Character::record_step_frame(int k, int64_t f, const uint8_t* contacts) {

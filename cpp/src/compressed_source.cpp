@@ -87,10 +87,10 @@ void CompressedRows::contacts(int k, uint8_t out[2]) const {
 }
 
 void CompressedRows::velocity_pair(int k, const FramePose& before, FramePose& a, FramePose& b) const {
-  if (k == 1)
+  if (k > 0)
     a = before;
   else
-    pose(k > 0 ? k - 1 : k, a);
+    pose(0, a);
   pose(k, b);
 }
 

@@ -83,8 +83,8 @@ class PlayedFrames {
   // Frame k's foot contacts (left, right; 1 planted).
   virtual void contacts(int k, uint8_t out[2]) const = 0;
   // Two poses one frame apart whose difference is frame k's velocity (a, then b): a later
-  // transition from frame k blends from this velocity. before: the pose shown before frame 1
-  // (what the character showed when the decision began; frame k - 1 when k is 1).
+  // transition from frame k blends from this velocity. before: the pose shown before frame k
+  // (k > 0).
   virtual void velocity_pair(int k, const FramePose& before, FramePose& a, FramePose& b) const = 0;
 };
 
@@ -168,6 +168,7 @@ class Character {
   BlendPose src_, dst_, anim_, shown_, scratch_;
   FramePose fp_a_, fp_b_;                // scratch frames
   FramePose fp_shown_;                   // the frame shown now (a transition's source pose)
+  FramePose fp_before_;                  // the frame shown before it (during a step)
   FramePose vel_a_, vel_b_;              // its velocity pair (PlayedFrames::velocity_pair)
   BlendVelocity src_vel_, dst_vel_;
 

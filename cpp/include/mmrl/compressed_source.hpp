@@ -24,9 +24,8 @@ namespace mmrl {
 constexpr int pose_row_dim(int num_joints) { return 9 * num_joints + 5; }
 
 // A compressed controller's decoded pose rows as a character plays them (character.hpp): frame
-// k is row k (no database frame); a frame's velocity is the backward difference from the frame
-// shown before it (row k - 1, or for row 1 the pose shown before the decision; row 0 stands
-// still).
+// k is row k (no database frame); a frame's velocity is the backward difference from the pose
+// shown before it (row 0 stands still).
 class CompressedRows final : public PlayedFrames {
  public:
   // rows: at least one row of pose_row_dim(num_joints) floats per frame asked for, borrowed.

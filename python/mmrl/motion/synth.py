@@ -253,6 +253,11 @@ DEFAULT_NUM_CLIPS = len(_PLAN)
 VERSION_CLIPS = {2: 31, SYNTH_VERSION: DEFAULT_NUM_CLIPS}
 
 
+def _check_version(version) -> None:
+    if version not in VERSION_CLIPS:
+        raise ValueError(f"synth: data version {version!r} is not one this mmrl makes ({sorted(VERSION_CLIPS)})")
+
+
 def _clip_plan(num_clips: int, rng: np.random.Generator) -> List[Tuple[str, float, float, float]]:
     """The first `num_clips` plan entries with seeded jitter (speeds +-4%, turn rates +-8%);
     beyond the fixed plan, clips with random constant speed and turn rate."""
@@ -293,8 +298,7 @@ def write_dataset(out_dir, *, num_clips: Optional[int] = None, seconds_per_clip:
 
     Returns the BVH paths in clip order. Deterministic: the same arguments give the same bytes.
     """
-    if version not in VERSION_CLIPS:
-        raise ValueError(f"synth: data version {version!r} is not one this mmrl makes ({sorted(VERSION_CLIPS)})")
+    _check_version(version)
     if num_clips is None:
         num_clips = VERSION_CLIPS[version]
     if isinstance(num_clips, bool) or not isinstance(num_clips, (int, np.integer)) or num_clips < 1:
@@ -338,8 +342,7 @@ def default_dataset_dir(version: int = SYNTH_VERSION) -> Path:
     """
     from .data import cache_root
 
-    if version not in VERSION_CLIPS:
-        raise ValueError(f"synth: data version {version!r} is not one this mmrl makes ({sorted(VERSION_CLIPS)})")
+    _check_version(version)
     root = cache_root()
     final = root / f"synth-v{version}"
     if (final / "manifest.json").is_file():

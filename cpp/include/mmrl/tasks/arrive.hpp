@@ -142,9 +142,10 @@ class ArriveVecEnv : public TargetVecEnv<ArriveTask> {
 // The arrive task's candidate rule "stand-idle" (rules.cpp registers it): while the character
 // stands (RuleContext::standing), a database frame costs stand_idle_cost * max(0, 1 - t /
 // stand_idle_seconds), t the seconds it goes on standing still (feature_row_idle and
-// idle_row_stands_still: kIdleMeters and kStillDegrees over the next second, for each frame of its run of such frames in
-// its clip, up to the last one's second); a compressed controller's candidate (no row) costs
-// nothing. Null unless the config is an arrive task's with both numbers above 0.
+// idle_row_stands_still: kIdleMeters and kStillDegrees over the next second, for each frame of
+// its run of such frames in its clip, up to the last one's second); a compressed controller's
+// candidate (no row) costs nothing. Null unless the config is an arrive task's with both numbers
+// above 0.
 std::unique_ptr<CandidateRule> make_stand_idle_rule(const RuleSetup& setup);
 
 
