@@ -12,7 +12,8 @@ same decisions, for 1,000 decisions per task and across episode ends.
 
 The configs switch on every rule that changes a match: a transition cost, the obstacles'
 look-ahead and hit disc, a clip-cost filter, (a third config) the collision-aware search, and (a
-fourth) the deployed search's twenty escapes, whose table the runtime reads from the file."""
+fourth) the deployed search's twenty escapes, whose table the runtime reads from the file; the
+arrive task's stand moves the root at its transitions (stand_anchor) on every path."""
 import numpy as np
 import pytest
 
@@ -39,7 +40,7 @@ def configs(db):
     # (Its clip-cost rule is the same chain as the plane's: the plane config covers it.)
     arrive = mmrl.get_task("arrive").default_config().replace(transition_cost=3.0,
                                                               max_steps=40, success_radius=2.0, stop_speed=3.0,
-                                                              facing_tolerance=1.5, hold_time=0.1,
+                                                              facing_tolerance=1.5, hold_time=1.0,
                                                               target_half_extent=3.0)
     return {"plane": (plane, random_plane_policy(4)), "obstacles": (obstacles, random_obstacle_policy(5)),
             "obstacles-path": (path, random_obstacle_policy(5)),
@@ -66,7 +67,7 @@ def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path
     apply_stage(task, fast, None)  # the full path's stage: the last
     fast.reset(seed=11)
     rng = np.random.default_rng(0)
-    decisions = episodes = transitions = filtered = successes = 0
+    decisions = episodes = transitions = filtered = successes = anchored = 0
     while decisions < 1000:
         character = _core.RuntimeCharacter(controller, *fp.character.root, fp.character.frame)  # each episode's start
         character.set_target(*fp.target)
@@ -84,6 +85,8 @@ def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path
             match, cost = fp.env.last_step_decision(0)
             # fast path == the full path's env
             assert fast.last_step_decision(0) == (match, cost)
+            assert fast.last_step_anchor(0) == fp.env.last_step_anchor(0)
+            anchored += fp.env.last_step_anchor(0) != (0.0, 0.0)
             np.testing.assert_array_equal(fast_obs[0], fp.obs)
             # full path plays the env's decision
             res = out["res"]
@@ -105,3 +108,5 @@ def test_fast_path_full_path_and_runtime_agree_for_1000_decisions(kind, tmp_path
     # Not vacuous: many episodes and clip changes; the filtered clip still plays sometimes.
     assert episodes >= 10 and transitions >= 50 and filtered >= 1, (episodes, transitions, filtered)
     assert successes >= 5 or task_name != "arrive", successes  # the hold ends episodes mid-step
+    # The arrive task's stand moves the root to keep planted feet (stand_anchor) on every path.
+    assert anchored >= 3 or task_name != "arrive", (anchored, successes, episodes)

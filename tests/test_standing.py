@@ -119,7 +119,8 @@ def test_the_match_asks_for_a_stand_within_stand_radius_and_the_facing_tolerance
     features = np.asarray(db.features)
     config = ARRIVE.default_config().replace(success_radius=0.5, stand_radius=0.3, facing_tolerance=0.5,
                                              target_half_extent=2.0, min_target_distance=0.8, hold_time=3.0,
-                                             stand_exit=stand_exit, stand_idle_cost=0.0)
+                                             stand_exit=stand_exit, stand_idle_cost=0.0,
+                                             stand_anchor=False)  # its root move: the test of planted feet below
     standing = ARRIVE.make_vector_env(1, db=db, config=config, num_threads=1)
     plain = ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_radius=0.0), num_threads=1)
     obs, _ = standing.reset(seed=2)
@@ -303,3 +304,86 @@ def test_the_stand_idle_rule_waits_for_the_arrival():
             if terminated[0] or truncated[0]:
                 break
     assert compared >= 100 and stood >= 5, (compared, stood)
+
+
+def _anchor_by_hand(db, shown, match, root, target, success_radius):
+    """Decider::anchor and ArriveTask::keep_anchor in float64: with both feet slower than 0.3 m/s
+    in both frames, minus their mean offset (x, z) from the frame shown to the match, unless that
+    takes the root farther from the target than it is and than half the success radius."""
+    f = np.asarray(db.features, np.float64)
+    speeds = np.linalg.norm(f[[shown, match], 6:12].reshape(2, 2, 3), axis=2)
+    if not (speeds < 0.3).all():
+        return np.zeros(2)
+    offset = (f[match, :6] - f[shown, :6]).reshape(2, 3)[:, [0, 2]].mean(0)
+    anchor = -offset
+    x, z, yaw = root
+    moved = np.array([x + math.cos(yaw) * anchor[0] + math.sin(yaw) * anchor[1],
+                      z - math.sin(yaw) * anchor[0] + math.cos(yaw) * anchor[1]])
+    before = math.hypot(target[0] - x, target[1] - z)
+    if np.hypot(*(np.asarray(target) - moved)) > max(before, 0.5 * success_radius):
+        return np.zeros(2)
+    return anchor
+
+
+def _feet_path(character, first: int, match: int, root, anchor, steps: int = 3) -> float:
+    """The horizontal path (m) of both animated ankles over up to `steps` decisions: the
+    transition from `first` to `match` (with `anchor`), then its continuation."""
+    character.reset(first, (root[0], root[1]), root[2])
+    before = np.asarray(character._core.current_animated_feet(), np.float64)
+    feet = []
+    for k in range(steps):
+        if k > 0 and not character.db.valid_mask[character.frame]:
+            break  # the clip ends: the same frames with and without the anchor
+        res = character.play(match if k == 0 else int(character.frame), 0.0, anchor=anchor if k == 0 else (0, 0))
+        feet.append(np.asarray(res.animated_feet, np.float64))
+    path = np.concatenate([before[None]] + feet)[:, :, [0, 2]]
+    return float(np.linalg.norm(np.diff(path, axis=0), axis=2).sum())
+
+
+@pytest.mark.parametrize("which", ["synthetic", "mixamo"])
+def test_an_arrived_stand_keeps_both_planted_feet_where_they_stand(which, tmp_path):
+    """An arrived character on still frames, with the transition cost 0 so that the stand
+    transitions: the anchor (stand_anchor) never changes the decision; it is the feet's offset
+    by hand; the env's root moves by it; and the full path's ankles, played with it, travel less
+    over the transition's blend than without it (same decisions)."""
+    db = (mmrl.default_database() if which == "synthetic" else
+          other_skeleton_database(tmp_path, clips=((1.4, 0.3), (0.0, 0.0), (1.2, -0.5))))
+    features = np.asarray(db.features)
+    valid = np.asarray(db.valid_mask, bool)
+    still = np.flatnonzero(valid & (np.hypot(features[:, 12], features[:, 14]) < 0.05))
+    still = still[valid[np.minimum(still + 18, db.num_frames - 1)]]  # room for three decisions
+    config = ARRIVE.default_config().replace(success_radius=0.3, stand_radius=0.1, facing_tolerance=0.5,
+                                             hold_time=5.0, transition_cost=0.0, stand_idle_cost=0.0)
+    assert config.stand_anchor  # the default
+    envs = {on: ARRIVE.make_vector_env(1, db=db, config=config.replace(stand_anchor=on), num_threads=1)
+            for on in (True, False)}
+    character = mmrl.Character(db, frames_per_step=config.frames_per_step, record=False)
+    rng = np.random.default_rng(2)
+    walk = rng.normal(0, 1, (1, 12)).astype(np.float32)  # the stand overrides it
+    anchored = 0
+    with_anchor = without = 0.0
+    for frame in rng.choice(still, min(60, len(still)), replace=False):
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        target = (1.0 + 0.05 * math.sin(yaw), 2.0 + 0.05 * math.cos(yaw))
+        after = {}
+        for on, env in envs.items():
+            env.reset(seed=0)
+            env.set_state(0, int(frame), 1.0, 2.0, yaw)
+            env.set_facing(0, yaw)
+            env.set_target(0, *target)
+            env.step(walk)
+            st = env.env_state(0)
+            after[on] = (env.last_step_decision(0)[0], np.array([st["x"], st["z"]]), env.last_step_anchor(0))
+        (match, root_on, anchor), (match_off, root_off, none) = after[True], after[False]
+        assert match == match_off and none == (0.0, 0.0)
+        want = _anchor_by_hand(db, int(frame), match, (1.0, 2.0, yaw), target, config.success_radius)
+        np.testing.assert_allclose(anchor, want, atol=1e-5)
+        shift = np.array([math.cos(yaw) * anchor[0] + math.sin(yaw) * anchor[1],
+                          -math.sin(yaw) * anchor[0] + math.cos(yaw) * anchor[1]])
+        np.testing.assert_allclose(root_on - root_off, shift, atol=1e-5)
+        if anchor != (0.0, 0.0):
+            anchored += 1
+            with_anchor += _feet_path(character, int(frame), match, (1.0, 2.0, yaw), anchor)
+            without += _feet_path(character, int(frame), match, (1.0, 2.0, yaw), (0.0, 0.0))
+    assert anchored >= 10, anchored
+    assert with_anchor < 0.8 * without, (with_anchor, without)

@@ -93,12 +93,14 @@ void bind_character(py::module_& m) {
           py::arg("frame"), py::arg("x"), py::arg("z"), py::arg("yaw"))
       .def(
           "play",
-          [](Character& c, int64_t match, float cost) {
+          [](Character& c, int64_t match, float cost, std::array<float, 2> anchor) {
+            check_finite(anchor.data(), 2, "anchor");
             py::gil_scoped_release release;
-            play_database_match(c, c.database(), match, cost);
+            play_database_match(c, c.database(), match, cost, anchor.data());
           },
-          py::arg("match"), py::arg("cost"),
-          "Plays a database decision (a Decider's, or the env's last_step_match): frames match+1 .. match+F.")
+          py::arg("match"), py::arg("cost"), py::arg("anchor") = std::array<float, 2>{0.0f, 0.0f},
+          "Plays a database decision (a Decider's, or the env's last_step_match): frames match+1 .. match+F. "
+          "anchor: the decision's root move that keeps the planted feet (the env's last_step_anchor).")
       .def(
           "reset_row",
           [](Character& c, const py::handle& row, float x, float z, float yaw) {
@@ -112,13 +114,14 @@ void bind_character(py::module_& m) {
           "A compressed controller's start: shows a pose row (9 J + 5) at the world root.")
       .def(
           "play_rows",
-          [](Character& c, const py::handle& rows, bool transition, float cost) {
+          [](Character& c, const py::handle& rows, bool transition, float cost, std::array<float, 2> anchor) {
             auto r = check_array<float>(rows, "rows", {c.options().frames_per_step + 1, pose_row_dim(c.num_joints())});
             check_finite(r.data(), r.size(), "rows");
+            check_finite(anchor.data(), 2, "anchor");
             py::gil_scoped_release release;
-            play_compressed_rows(c, r.data(), transition, cost);
+            play_compressed_rows(c, r.data(), transition, cost, anchor.data());
           },
-          py::arg("rows"), py::arg("transition"), py::arg("cost"),
+          py::arg("rows"), py::arg("transition"), py::arg("cost"), py::arg("anchor") = std::array<float, 2>{0.0f, 0.0f},
           "Plays a compressed controller's decision (the env's compressed_rows): rows 1.. are shown.")
       .def_property_readonly("num_joints", &Character::num_joints)
       .def_property_readonly("frames_per_step", [](const Character& c) { return c.options().frames_per_step; })

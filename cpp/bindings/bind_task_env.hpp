@@ -210,6 +210,15 @@ void bind_task_env(py::class_<Wrapper>& c, StateDict state_dict, const char* ste
           py::arg("index"),
           "(match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path "
           "plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.")
+      .def(
+          "last_step_anchor",
+          [](const Wrapper& s, int i) {
+            const TargetEnvState& st = s.env.state(checked_env_index(s, i));
+            return py::make_tuple(st.last_step.anchor[0], st.last_step.anchor[1]);
+          },
+          py::arg("index"),
+          "(dx, dz) the root moved by at env i's last step's transition to keep the planted feet (character frame, "
+          "meters; the task's anchor option), (0, 0) without one: what Character.play takes as anchor.")
       .def_property(
           "autoreset_next_step", [](const Wrapper& s) { return s.env.autoreset_next_step(); },
           [](Wrapper& s, bool on) { s.env.set_autoreset_next_step(on); },

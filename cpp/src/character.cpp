@@ -269,17 +269,23 @@ void Character::lock_feet(const FramePose& fp, bool decay) {
   }
 }
 
-void Character::play(const PlayedFrames& frames, bool transition, float cost) {
+void Character::play(const PlayedFrames& frames, bool transition, float cost, const float* anchor) {
   last_cost_ = cost;
   last_transition_ = transition;
   last_match_ = frames.frame(0);
   const bool blend = options_.poses && inertializer_.enabled();
+  const bool anchored = transition && anchor != nullptr && (anchor[0] != 0.0f || anchor[1] != 0.0f);
+  if (anchored) root_shift(root_, anchor);
   if (blend && transition) {
     blend_velocity(vel_a_, vel_b_, src_vel_);  // the velocity of the frame shown now
     frames.pose(0, fp_a_);
     frames.pose(1, fp_b_);
     blend_velocity(fp_a_, fp_b_, dst_vel_);
     blend_pose_of(fp_shown_, src_);
+    if (anchored) {  // the pose shown now, seen from the moved root
+      src_.hips_position.x() -= anchor[0];
+      src_.hips_position.z() -= anchor[1];
+    }
     blend_pose_of(fp_a_, dst_);
     inertializer_.transition(src_, src_vel_, dst_, dst_vel_);
   }

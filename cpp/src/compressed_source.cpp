@@ -61,7 +61,7 @@ Decision CompressedSource::decide(MotionState& s, const float* query, const Deci
 }
 
 void CompressedSource::play(Character& character, const MotionState& s, const Decision& d) const {
-  play_compressed_rows(character, CompressedState::of(s).rows.data(), d.transition, d.cost);
+  play_compressed_rows(character, CompressedState::of(s).rows.data(), d.transition, d.cost, d.anchor);
 }
 
 void CompressedSource::show(Character& character, MotionState& s, const RootState& root) const {
@@ -98,8 +98,9 @@ void show_compressed_row(Character& character, const float* row, const RootState
   character.show(CompressedRows(row, character.num_joints()), root);
 }
 
-void play_compressed_rows(Character& character, const float* rows, bool transition, float cost) {
-  character.play(CompressedRows(rows, character.num_joints()), transition, cost);
+void play_compressed_rows(Character& character, const float* rows, bool transition, float cost,
+                          const float* anchor) {
+  character.play(CompressedRows(rows, character.num_joints()), transition, cost, anchor);
 }
 
 }  // namespace mmrl

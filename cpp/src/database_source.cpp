@@ -17,7 +17,7 @@ Decision DatabaseSource::decide(MotionState& s, const float* query, const Decisi
 }
 
 void DatabaseSource::play(Character& character, const MotionState&, const Decision& d) const {
-  play_database_match(character, *db_, d.match, d.cost);
+  play_database_match(character, *db_, d.match, d.cost, d.anchor);
 }
 
 void DatabaseSource::show(Character& character, MotionState& s, const RootState& root) const {
@@ -44,12 +44,13 @@ void show_database_frame(Character& character, const Database& db, int64_t frame
   character.show(DatabaseFrames(db, frame), root);
 }
 
-void play_database_match(Character& character, const Database& db, int64_t match, float cost) {
+void play_database_match(Character& character, const Database& db, int64_t match, float cost,
+                         const float* anchor) {
   if (match < 0 || match >= db.num_frames || !db.valid[match])
     throw std::invalid_argument("play: frame " + std::to_string(match) + " is not a valid match of the database");
   if (character.frame() < 0)
     throw std::invalid_argument("play: the character shows no database frame (it played a compressed controller's rows)");
-  character.play(DatabaseFrames(db, match), match != character.frame(), cost);
+  character.play(DatabaseFrames(db, match), match != character.frame(), cost, anchor);
 }
 
 DatabaseDecider::DatabaseDecider(const Database& db, const Matcher& matcher, const TaskConfig& config)

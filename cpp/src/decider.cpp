@@ -24,6 +24,11 @@ Decider::Decider(const Database& db, float action_limit_std) {
     std::fill(low_, low_ + kTrajectoryDim, -INFINITY);
     std::fill(high_, high_ + kTrajectoryDim, INFINITY);
   }
+  const auto scale = db.normalization.column_scale();
+  for (int k = 0; k < kPoseDim; ++k) {
+    pose_mean_[k] = db.normalization.mean[k];
+    pose_scale_[k] = scale[k];
+  }
 }
 
 void Decider::set_action_box(const float* low, const float* high) {
@@ -46,8 +51,32 @@ Decision Decider::decide(const MotionSource& source, MotionState& s, const float
     const float* a = now.features;
     const float* b = source.chosen(s, d).features;
     for (int k = 0; k < kPoseDim; ++k) d.pose_jump += (a[k] - b[k]) * (a[k] - b[k]);
+    if (rules.anchor) anchor(a, b, d);
   }
   return d;
+}
+
+void Decider::anchor(const float* now, const float* chosen, Decision& d) const {
+  // Both feet planted in both poses (each slower than kAnchorFootSpeed, features [6:12],
+  // features.hpp): the root moves by minus their mean offset (x, z). One planted foot is left
+  // alone: anchoring it measured no stiller (docs/arrive.md).
+  auto raw = [this](const float* f, int k) { return f[k] * pose_scale_[k] + pose_mean_[k]; };
+  auto planted = [&](const float* f, int side) {
+    const int v = 6 + 3 * side;
+    const float vx = raw(f, v), vy = raw(f, v + 1), vz = raw(f, v + 2);
+    return vx * vx + vy * vy + vz * vz < kAnchorFootSpeed * kAnchorFootSpeed;
+  };
+  float dx = 0, dz = 0;
+  int n = 0;
+  for (int side = 0; side < 2; ++side) {
+    if (!planted(now, side) || !planted(chosen, side)) continue;
+    dx += raw(chosen, 3 * side) - raw(now, 3 * side);
+    dz += raw(chosen, 3 * side + 2) - raw(now, 3 * side + 2);
+    ++n;
+  }
+  if (n < 2 || !std::isfinite(dx) || !std::isfinite(dz)) return;  // a zero feature weight: no positions
+  d.anchor[0] = -dx / static_cast<float>(n);
+  d.anchor[1] = -dz / static_cast<float>(n);
 }
 
 }  // namespace mmrl

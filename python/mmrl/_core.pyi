@@ -362,11 +362,11 @@ class Character:
         """
         Views of the pose shown now.
         """
-    def play(self, match: typing.SupportsInt | typing.SupportsIndex, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
+    def play(self, match: typing.SupportsInt | typing.SupportsIndex, cost: typing.SupportsFloat | typing.SupportsIndex, anchor: typing.Annotated[collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex], "FixedSize(2)"] = [0.0, 0.0]) -> None:
         """
-        Plays a database decision (a Decider's, or the env's last_step_match): frames match+1 .. match+F.
+        Plays a database decision (a Decider's, or the env's last_step_match): frames match+1 .. match+F. anchor: the decision's root move that keeps the planted feet (the env's last_step_anchor).
         """
-    def play_rows(self, rows: typing.Any, transition: bool, cost: typing.SupportsFloat | typing.SupportsIndex) -> None:
+    def play_rows(self, rows: typing.Any, transition: bool, cost: typing.SupportsFloat | typing.SupportsIndex, anchor: typing.Annotated[collections.abc.Sequence[typing.SupportsFloat | typing.SupportsIndex], "FixedSize(2)"] = [0.0, 0.0]) -> None:
         """
         Plays a compressed controller's decision (the env's compressed_rows): rows 1.. are shown.
         """
@@ -574,6 +574,10 @@ class PlaneVecEnv:
     def draw_target_around_root(self, index: typing.SupportsInt | typing.SupportsIndex, half_extent: typing.SupportsFloat | typing.SupportsIndex) -> tuple[float, float]:
         """
         Draws env i a new target by the episode start's rule around where it stands now (its own RNG); returns it (world x, z).
+        """
+    def last_step_anchor(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[float, float]:
+        """
+        (dx, dz) the root moved by at env i's last step's transition to keep the planted feet (character frame, meters; the task's anchor option), (0, 0) without one: what Character.play takes as anchor.
         """
     def last_step_decision(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[int, float]:
         """
@@ -1051,6 +1055,10 @@ class ObstacleVecEnv:
         """
         Draws env i a new target by the episode start's rule around where it stands now (its own RNG); returns it (world x, z).
         """
+    def last_step_anchor(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[float, float]:
+        """
+        (dx, dz) the root moved by at env i's last step's transition to keep the planted feet (character frame, meters; the task's anchor option), (0, 0) without one: what Character.play takes as anchor.
+        """
     def last_step_decision(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[int, float]:
         """
         (match, cost) of env i's last step: the frame its match chose and the match's cost, what the full path plays (Character.play). Kept through the autoreset; (-1, 0) after reset and after a NEXT_STEP reset step.
@@ -1193,7 +1201,7 @@ class ArriveTaskConfig:
     """
     Numbers of the arrive task (see tasks/arrive.hpp).
     """
-    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit', 'stand_idle_seconds', 'stand_idle_cost')
+    field_names: typing.ClassVar[tuple] = ('frames_per_step', 'target_half_extent', 'min_target_distance', 'success_radius', 'success_bonus', 'max_steps', 'action_limit_std', 'random_heading', 'transition_cost', 'transition_pose_weight', 'transition_penalty', 'foot_jump_limit', 'clip_costs', 'request_groups', 'request_any', 'facing_tolerance', 'stop_speed', 'hold_time', 'facing_weight', 'precision_weight', 'stand_radius', 'stand_exit', 'stand_idle_seconds', 'stand_idle_cost', 'stand_anchor')
     options: typing.ClassVar[tuple]
     retired: typing.ClassVar[dict] = {}
     def __init__(self) -> None:
@@ -1301,6 +1309,14 @@ class ArriveTaskConfig:
         """
     @request_groups.setter
     def request_groups(self, arg0: collections.abc.Sequence[str]) -> None:
+        ...
+    @property
+    def stand_anchor(self) -> bool:
+        """
+        Once arrived, a transition between two poses with both feet planted keeps the feet where they stand: the root moves by their mean offset between the two, and the blend brings the body over them (unless that takes the root farther from the target than it is and than half success_radius).
+        """
+    @stand_anchor.setter
+    def stand_anchor(self, arg0: bool) -> None:
         ...
     @property
     def stand_exit(self) -> float:
@@ -1422,6 +1438,10 @@ class ArriveVecEnv:
     def draw_target_around_root(self, index: typing.SupportsInt | typing.SupportsIndex, half_extent: typing.SupportsFloat | typing.SupportsIndex) -> tuple[float, float]:
         """
         Draws env i a new target by the episode start's rule around where it stands now (its own RNG); returns it (world x, z).
+        """
+    def last_step_anchor(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[float, float]:
+        """
+        (dx, dz) the root moved by at env i's last step's transition to keep the planted feet (character frame, meters; the task's anchor option), (0, 0) without one: what Character.play takes as anchor.
         """
     def last_step_decision(self, index: typing.SupportsInt | typing.SupportsIndex) -> tuple[int, float]:
         """

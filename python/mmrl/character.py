@@ -59,6 +59,12 @@ class StepResult:
     the fast path): the ankles of the same run with IK off, since IK changes nothing later."""
 
 
+def _anchor(anchor) -> tuple:
+    """A decision's anchor (dx, dz) as two finite floats (ValueError otherwise)."""
+    a = real_array(anchor, "anchor", (2,), dtype=np.float64, finite=True)
+    return float(a[0]), float(a[1])
+
+
 def _query_or_zeros(trajectory_query: Optional[np.ndarray]) -> np.ndarray:
     """A decision's (12,) trajectory query as recorded; zeros when none is given."""
     if trajectory_query is None:
@@ -232,17 +238,20 @@ class Character:
         self._core.play(int(match), float(cost))
         return self._played(q)
 
-    def play(self, match: int, cost: float, trajectory_query: Optional[np.ndarray] = None) -> StepResult:
+    def play(self, match: int, cost: float, trajectory_query: Optional[np.ndarray] = None,
+             anchor: Sequence[float] = (0.0, 0.0)) -> StepResult:
         """Play a decision made elsewhere: frames ``match + 1 .. match + frames_per_step``, with
         the transition, root motion and poses of :meth:`step`. The full path plays the vector
         env's decision this way (``env.last_step_match``), so it never decides a second time.
-        ``trajectory_query`` (12,) is only recorded (``recording()["queries"]``)."""
+        ``trajectory_query`` (12,) is only recorded (``recording()["queries"]``); ``anchor``
+        (dx, dz) is the decision's root move that keeps the planted feet at a transition
+        (``env.last_step_anchor``; the arrive task's ``stand_anchor``)."""
         if not isinstance(match, (int, np.integer)) or isinstance(match, bool):
             raise TypeError(f"match: expected an int frame, got {type(match).__name__}")
         if not (0 <= int(match) < self.db.num_frames and self.db.valid_mask[int(match)]):
             raise ValueError(f"match: frame {match} is not a valid match frame of the database")
         q = _query_or_zeros(trajectory_query)
-        self._core.play(int(match), float(cost))
+        self._core.play(int(match), float(cost), _anchor(anchor))
         return self._played(q)
 
     # ------------------------------------------------------------------ compressed controllers
@@ -263,13 +272,14 @@ class Character:
             self._rec["natural_motion"] = []
 
     def play_rows(self, rows: np.ndarray, transition: bool, cost: float,
-                  trajectory_query: Optional[np.ndarray] = None) -> StepResult:
+                  trajectory_query: Optional[np.ndarray] = None, anchor: Sequence[float] = (0.0, 0.0)) -> StepResult:
         """Play a compressed controller's decision: its pose rows (frames_per_step + 1, 9 J + 5),
-        the env's ``compressed_rows`` (row 0 the chosen state's pose, rows 1.. shown)."""
+        the env's ``compressed_rows`` (row 0 the chosen state's pose, rows 1.. shown); ``anchor``
+        as in :meth:`play`."""
         rows = np.ascontiguousarray(real_array(rows, "rows", (self.frames_per_step + 1, 9 * self.db.num_joints + 5),
                                                dtype=np.float32))
         q = _query_or_zeros(trajectory_query)
-        self._core.play_rows(rows, bool(transition), float(cost))
+        self._core.play_rows(rows, bool(transition), float(cost), _anchor(anchor))
         if self._record and not self.fast:
             from .compress.model import natural_motion
 

@@ -107,8 +107,11 @@ class Character {
   // Plays a decision (a Decider's: the batched env's, so the full path never decides again):
   // frames 1..F shown, the root advanced by frames 0..F-1's root deltas. transition: frame 0
   // replaces what played so far, inertialized from the pose shown now (with its velocity) to
-  // frame 0 (with its velocity from frames 0 and 1). cost is what last_cost reports.
-  void play(const PlayedFrames& frames, bool transition, float cost);
+  // frame 0 (with its velocity from frames 0 and 1). cost is what last_cost reports. anchor
+  // (a transition's Decision::anchor, or null): the root first moves by it and the blend starts
+  // from the pose shown now moved back by as much, so the body does not jump and the planted
+  // feet stay where they stand while the blend brings the body over them.
+  void play(const PlayedFrames& frames, bool transition, float cost, const float* anchor = nullptr);
 
   const RootState& root() const { return root_; }
   int64_t frame() const { return frame_; }

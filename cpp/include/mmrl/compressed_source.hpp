@@ -47,8 +47,9 @@ class CompressedRows final : public PlayedFrames {
 void show_compressed_row(Character& character, const float* row, const RootState& root);
 // Plays a compressed controller's decision (the env's): rows are (frames_per_step + 1) pose
 // rows, row 0 the chosen state's pose and rows 1.. the frames shown. transition: the projection
-// replaced the state played so far.
-void play_compressed_rows(Character& character, const float* rows, bool transition, float cost);
+// replaced the state played so far. anchor: the decision's (Decision::anchor), or null.
+void play_compressed_rows(Character& character, const float* rows, bool transition, float cost,
+                          const float* anchor = nullptr);
 
 struct CompressedState final : SourceState {
   std::vector<float> shown, chosen, next, rows;

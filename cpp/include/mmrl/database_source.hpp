@@ -62,8 +62,10 @@ class DatabaseFrames final : public PlayedFrames {
 void show_database_frame(Character& character, const Database& db, int64_t frame, const RootState& root);
 // Plays the database decision `match` (a Decider's, or an env's): frames match+1 .. match+F, a
 // transition unless match is the frame the character shows. std::invalid_argument when match
-// is not a valid match frame, or when the character shows no database frame.
-void play_database_match(Character& character, const Database& db, int64_t match, float cost);
+// is not a valid match frame, or when the character shows no database frame. anchor: the
+// decision's (Decision::anchor), or null.
+void play_database_match(Character& character, const Database& db, int64_t match, float cost,
+                         const float* anchor = nullptr);
 
 // One database character's decisions outside an env (mmrl.Character.step): a Decider over the
 // database source with the registered rules (rules.hpp) that `config` turns on, as any env's

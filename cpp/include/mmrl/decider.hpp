@@ -36,17 +36,29 @@ struct Decision {
   // Squared normalized, weighted distance between the pose features (kPoseDim) of the
   // continuation and of the choice: what a transition asks the blend to hide; 0 without one.
   float pose_jump = 0;
+  // The root's move at a transition that keeps the planted feet where they stand (dx, dz in the
+  // character frame; DecisionRules::anchor): played before the first frame, by the env on its root
+  // and by a Character on its root and blend. (0, 0) otherwise.
+  float anchor[2] = {0, 0};
 };
 
 // What a task changes in a decision: the transition cost, the head of its candidate-filter
 // chain (each filter falls back to the one it was built over), and how the filter sees its
 // candidates: the database's shortlist (decision.hpp's Shortlist; k = 0: the exact filtered
 // search) and, for a compressed controller, the turned queries it projects (fan only).
+// A foot faster than this (m/s, its feature velocity) is not planted (DecisionRules::anchor).
+constexpr float kAnchorFootSpeed = 0.3f;
+
 struct DecisionRules {
   float transition_cost = 0;
   const CandidateFilter* filter = nullptr;
   Shortlist shortlist;
   Shortlist projections;
+  // Anchor a transition on the planted feet (Decider::decide): when both feet are planted in the
+  // pose shown and in the chosen one, the root moves by minus their mean offset between the two,
+  // so they stay where they stand while the blend moves the body over them (a task asks for it:
+  // the arrive task's stand, stand_anchor).
+  bool anchor = false;
 };
 
 // What a source keeps of a character beyond MotionState::frame (a compressed controller's
@@ -138,7 +150,10 @@ class Decider {
   Decision decide(const MotionSource& source, MotionState& s, const float* action, const DecisionRules& rules) const;
 
  private:
+  // d.anchor for a transition from the candidate shown (now) to the chosen one (normalized features).
+  void anchor(const float* now, const float* chosen, Decision& d) const;
   float low_[kTrajectoryDim] = {}, high_[kTrajectoryDim] = {};
+  float pose_mean_[kPoseDim] = {}, pose_scale_[kPoseDim] = {};  // the pose features' normalization
 };
 
 }  // namespace mmrl

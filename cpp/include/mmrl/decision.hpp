@@ -49,6 +49,14 @@ inline void root_advance(RootState& r, const float* delta) {
   r.yaw = wrap_angle(r.yaw + delta[2]);
 }
 
+// Moves the root by a decision's anchor (dx, dz in the character frame; Decision::anchor).
+inline void root_shift(RootState& r, const float* shift) {
+  if (shift[0] == 0.0f && shift[1] == 0.0f) return;  // none: the root unchanged bit for bit
+  const Vec2 w = local_to_world_xz(shift[0], shift[1], r.yaw);
+  r.x += w.x();
+  r.z += w.y();
+}
+
 // Writes the 27-d normalized query for the current frame and a normalized trajectory part.
 inline void decision_query(const Database& db, int64_t frame, const float* trajectory, float* query) {
   const float* pose = &db.normalized[static_cast<size_t>(frame) * kFeatureDim];

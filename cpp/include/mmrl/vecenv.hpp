@@ -202,12 +202,14 @@ class TargetTask {
     float query[kTrajectoryDim];
     const float* asked = task().decision_action(i, action, query);  // first: it may change what the rules read
     s.decision = decider_.decide(*source_, s, asked, decision_rules(i));
+    task().keep_anchor(i, s.decision.anchor);
     return s.decision.match;
   }
   // Env i's rules for its next decision (what decide uses).
   DecisionRules decision_rules(int i) {
     DecisionRules rules;
     rules.transition_cost = task().decision_transition_cost(i);
+    rules.anchor = task().anchors(i);
     rules_[static_cast<size_t>(i)].prepare(
         RuleContext{*source_, envs_[i], request(i), task().scene(i), task().standing(i), task().stand_turn(i)}, rules);
     return rules;
@@ -242,6 +244,7 @@ class TargetTask {
   TaskStep play_step(int i, const float* action) {
     State& s = envs_[i];
     decide(i, action);
+    root_shift(s.root, s.decision.anchor);
     task().begin_step(i, action);
     FrameEvent event = FrameEvent::kNone;
     int frames = config_.frames_per_step;
@@ -290,6 +293,10 @@ class TargetTask {
   // Whether env i's next decision asks the character to stand still (a task that stands hides
   // it; read after decision_action): no.
   bool standing(int) const { return false; }
+  // Whether env i's next transition keeps the planted feet in place (DecisionRules::anchor): no.
+  bool anchors(int) const { return false; }
+  // May cancel the anchor of env i's decision (sets it to (0, 0)): keeps it.
+  void keep_anchor(int, float*) const {}
   // While standing, the turn left to the facing it stands with (radians): none.
   float stand_turn(int) const { return 0.0f; }
   // The request code of env i (request_dim() floats) into out: all 0 without a request.

@@ -53,6 +53,17 @@ bool ArriveTask::within(const ArriveEnvState& s, float radius, float tolerance) 
   return dx * dx + dz * dz <= radius * radius && std::abs(wrap_angle(s.target_yaw - s.root.yaw)) <= tolerance;
 }
 
+void ArriveTask::keep_anchor(int i, float* anchor) const {
+  if (anchor[0] == 0.0f && anchor[1] == 0.0f) return;
+  const ArriveEnvState& s = envs_[i];
+  RootState moved = s.root;
+  root_shift(moved, anchor);
+  const float bx = s.target_x - s.root.x, bz = s.target_z - s.root.z;
+  const float ax = s.target_x - moved.x, az = s.target_z - moved.z;
+  const float half = 0.5f * config_.success_radius;
+  if (ax * ax + az * az > std::max(bx * bx + bz * bz, half * half)) anchor[0] = anchor[1] = 0.0f;
+}
+
 const float* ArriveTask::decision_action(int i, const float* action, float* scratch) {
   ArriveEnvState& s = envs_[i];
   if (config_.stand_radius <= 0) return action;

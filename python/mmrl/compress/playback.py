@@ -38,7 +38,8 @@ class CompressedPlayback:
 
     def play(self, character, env, i: int, match: int, cost: float, query: np.ndarray):
         transition = bool(env._step_transitions[i])
-        return character.play_rows(env._core.compressed_rows(i), transition, cost, query)
+        return character.play_rows(env._core.compressed_rows(i), transition, cost, query,
+                                   anchor=env.last_step_anchor(i))
 
     def keep_played(self, env, i: int) -> None:
         """Where the playback ended (the env's autoreset drew a new start since)."""

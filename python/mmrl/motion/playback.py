@@ -41,7 +41,7 @@ class DatabasePlayback:
 
     def play(self, character, env, i: int, match: int, cost: float, query: np.ndarray):
         """Plays env i's last decision (``match``, ``cost``) on ``character``: its StepResult."""
-        return character.play(match, cost, query)
+        return character.play(match, cost, query, anchor=env.last_step_anchor(i))
 
     def keep_played(self, env, i: int) -> None:
         """Makes env i's motion what its last playback ended on (the database: the env's frame)."""

@@ -305,6 +305,13 @@ class TargetVectorEnv(RequestMethods, VectorEnv):
         match, cost = self._core.last_step_decision(int(i))
         return int(match), float(cost)
 
+    def last_step_anchor(self, i: int) -> Tuple[float, float]:
+        """(dx, dz) the root moved by at env ``i``'s last transition to keep the planted feet
+        (character frame, meters; the arrive task's ``stand_anchor``), (0, 0) without one: what
+        :meth:`mmrl.Character.play` takes as ``anchor``."""
+        dx, dz = self._core.last_step_anchor(int(i))
+        return float(dx), float(dz)
+
     def last_step_transition_cost(self, i: int) -> float:
         """The transition cost env i's last step matched with (a task may vary it per decision)."""
         return float(self._core.last_step_transition_cost(int(i)))

@@ -35,6 +35,7 @@ struct ArriveTaskConfig : TaskConfig {
   float stand_exit = 2.0f;
   float stand_idle_seconds = 3.0f;
   float stand_idle_cost = 120.0f;
+  bool stand_anchor = true;
   ArriveTaskConfig() {
     success_radius = 0.15f;
     max_steps = 150;
@@ -74,6 +75,10 @@ struct ArriveTaskConfig : TaskConfig {
     v("stand_idle_cost", &ArriveTaskConfig::stand_idle_cost, kNonNegative,
       "The most a stand's match adds for a frame that stands shorter than stand_idle_seconds (squared "
       "normalized feature distance, as transition_cost). 0: off.");
+    v("stand_anchor", &ArriveTaskConfig::stand_anchor, kAny,
+      "Once arrived, a transition between two poses with both feet planted keeps the feet where they stand: "
+      "the root moves by their mean offset between the two, and the blend brings the body over them (unless "
+      "that takes the root farther from the target than it is and than half success_radius).");
   }
 };
 
@@ -117,6 +122,10 @@ class ArriveTask : public TargetTask<ArriveTask, ArriveTaskConfig, ArriveEnvStat
   // Once arrived (read after decision_action), the character stands: the stand-idle rule prices
   // the match.
   bool standing(int i) const { return config_.stand_radius > 0 && envs_[i].arrived; }
+  bool anchors(int i) const { return config_.stand_anchor && standing(i); }
+  // Cancels an anchor that would take the root farther from the target than it is and than
+  // half the success radius.
+  void keep_anchor(int i, float* anchor) const;
   float stand_turn(int i) const { return wrap_angle(envs_[i].target_yaw - envs_[i].root.yaw); }
   // Within stand_radius and facing_tolerance, or once arrived within stand_exit times the
   // tolerances: stand at the target facing its facing, normalized. Updates s.arrived.
