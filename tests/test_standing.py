@@ -207,18 +207,26 @@ def stand_idle_costs(db, seconds, cost, still=False) -> np.ndarray:
     motion kinds' measure) that goes on standing t seconds (its run of idle frames in its clip,
     to the last one's next second) costs cost * max(0, 1 - t / seconds); any other frame cost.
     ``still``: the same over the idle frames that also turn less than 20 degrees over their next
-    second (what the rule prices once the facing is within 5 degrees)."""
+    second, for no longer than both feet stay planted (slower than 0.3 m/s; a run of such frames
+    from this one on): what the rule prices once the facing is within 5 degrees."""
     idle = idle_frames(db)
+    f = np.asarray(db.features, np.float64)
+    planted = np.ones(db.num_frames, bool)
     if still:
-        f, d = np.asarray(db.features, np.float64), mmrl._core.TRAJECTORY_DIRECTION_COLUMNS[2]
+        d = mmrl._core.TRAJECTORY_DIRECTION_COLUMNS[2]
         idle = idle & (np.degrees(np.abs(np.arctan2(f[:, d], f[:, d + 1]))) < 20.0)
+        planted = (np.linalg.norm(f[:, 6:12].reshape(-1, 2, 3), axis=2) < 0.3).all(axis=1)
     out = np.full(db.num_frames, cost, np.float64)
     for a, b in np.asarray(db.clip_ranges):
-        run = 0
+        run = feet = 0
         for r in range(b - 1, a - 1, -1):
             run = run + 1 if idle[r] else 0
+            feet = feet + 1 if planted[r] else 0
             if idle[r]:
-                out[r] = cost * max(0.0, 1.0 - (run - 1 + 30) / db.fps / seconds)
+                t = (run - 1 + 30) / db.fps
+                if still:
+                    t = min(t, feet / db.fps)
+                out[r] = cost * max(0.0, 1.0 - t / seconds)
     return out
 
 
@@ -229,7 +237,8 @@ def test_a_standing_match_prefers_frames_that_go_on_standing(which, seconds, tur
     of 40 still frames: its match is the brute-force decision with every frame's stand-idle cost
     added (and without it when the rule is off); the rule changes some matches and makes every
     changed one stand longer. 0.1 rad (5.7 degrees) is farther than the rule's 5 degrees, so idle
-    frames that turn in place count as standing; 0.05 rad is within, so only still ones do. With
+    frames that turn in place count as standing; 0.05 rad is within, so only still ones do, and only
+    while both feet stay planted (the synthetic 1.5 s case fails without that part). With
     1.5 s the long runs' frames cost nothing and the last 0.5 s of each run costs, so a run length
     one frame off moves frames across that edge."""
     db = (mmrl.default_database() if which == "synthetic" else

@@ -57,14 +57,13 @@ Decision Decider::decide(const MotionSource& source, MotionState& s, const float
 }
 
 void Decider::anchor(const float* now, const float* chosen, Decision& d) const {
-  // Both feet planted in both poses (each slower than kAnchorFootSpeed, features [6:12],
-  // features.hpp): the root moves by minus their mean offset (x, z). One planted foot is left
-  // alone: anchoring it measured no stiller (docs/arrive.md).
+  // Both feet planted in both poses (foot_planted, features.hpp): the root moves by
+  // minus their mean offset (x, z). One planted foot is left alone: anchoring it measured no
+  // stiller (docs/arrive.md).
   auto raw = [this](const float* f, int k) { return f[k] * pose_scale_[k] + pose_mean_[k]; };
   auto planted = [&](const float* f, int side) {
-    const int v = 6 + 3 * side;
-    const float vx = raw(f, v), vy = raw(f, v + 1), vz = raw(f, v + 2);
-    return vx * vx + vy * vy + vz * vz < kAnchorFootSpeed * kAnchorFootSpeed;
+    const float v[3] = {raw(f, 6 + 3 * side), raw(f, 7 + 3 * side), raw(f, 8 + 3 * side)};
+    return foot_planted(v);
   };
   float dx = 0, dz = 0;
   int n = 0;

@@ -1337,7 +1337,7 @@ class ArriveTaskConfig:
     @property
     def stand_idle_seconds(self) -> float:
         """
-        Once arrived, the stand's match prefers frames that go on standing this long (s), so that a character stands through long idles rather than from one short one to the next: a frame that stands for less costs stand_idle_cost times the share of this time it falls short by (a frame that does not stand: all of it). Within 5 degrees of its facing a frame stands when it moves less than 0.15 m and turns less than 20 degrees over the next second; farther, a frame that turns in place stands too, so the character turns to its facing first. 0: off.
+        Once arrived, the stand's match prefers frames that go on standing this long (s), so that a character stands through long idles rather than from one short one to the next: a frame that stands for less costs stand_idle_cost times the share of this time it falls short by (a frame that does not stand: all of it). Within 5 degrees of its facing a frame stands when it moves less than 0.15 m and turns less than 20 degrees over the next second, until a foot lifts (a foot is planted below 0.3 m/s); farther, a frame that turns in place stands too, so the character turns to its facing first. 0: off.
         """
     @stand_idle_seconds.setter
     def stand_idle_seconds(self, arg0: typing.SupportsFloat | typing.SupportsIndex) -> None:

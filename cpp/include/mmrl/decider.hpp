@@ -46,9 +46,6 @@ struct Decision {
 // chain (each filter falls back to the one it was built over), and how the filter sees its
 // candidates: the database's shortlist (decision.hpp's Shortlist; k = 0: the exact filtered
 // search) and, for a compressed controller, the turned queries it projects (fan only).
-// A foot faster than this (m/s, its feature velocity) is not planted (DecisionRules::anchor).
-constexpr float kAnchorFootSpeed = 0.3f;
-
 struct DecisionRules {
   float transition_cost = 0;
   const CandidateFilter* filter = nullptr;

@@ -147,7 +147,7 @@ std::shared_ptr<const StandingTables> standing_seconds(const Database& db) {
   table->still.assign(n, 0.0f);
   const float lookahead = static_cast<float>(kTrajectoryOffsets[2]);
   for (int c = 0; c < db.num_clips(); ++c) {
-    float idle_run = 0, still_run = 0;  // such frames from this one on, in this clip
+    float idle_run = 0, still_run = 0, planted_run = 0;  // such frames from this one on, in this clip
     for (int r = db.clip_ranges[2 * c + 1] - 1; r >= db.clip_ranges[2 * c]; --r) {
       const size_t row = static_cast<size_t>(r);
       const float* f = &db.features[row * kFeatureDim];
@@ -156,7 +156,9 @@ std::shared_ptr<const StandingTables> standing_seconds(const Database& db) {
       idle_run = idle ? idle_run + 1 : 0;
       still_run = still ? still_run + 1 : 0;
       if (idle) table->idle[row] = (idle_run - 1 + lookahead) / db.fps;
-      if (still) table->still[row] = (still_run - 1 + lookahead) / db.fps;
+      planted_run = foot_planted(f + 6) && foot_planted(f + 9) ? planted_run + 1 : 0;
+      // Standing still lasts until the idle ends or a foot lifts (a fidget, a weight shift).
+      if (still) table->still[row] = std::min((still_run - 1 + lookahead) / db.fps, planted_run / db.fps);
     }
   }
   slot = table;

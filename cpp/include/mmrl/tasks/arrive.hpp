@@ -70,8 +70,8 @@ struct ArriveTaskConfig : TaskConfig {
       "stands through long idles rather than from one short one to the next: a frame that stands for less costs "
       "stand_idle_cost times the share of this time it falls short by (a frame that does not stand: all of it). "
       "Within 5 degrees of its facing a frame stands when it moves less than 0.15 m and turns less than 20 "
-      "degrees over the next second; farther, a frame that turns in place stands too, so the character turns "
-      "to its facing first. 0: off.");
+      "degrees over the next second, until a foot lifts (a foot is planted below 0.3 m/s); farther, a frame "
+      "that turns in place stands too, so the character turns to its facing first. 0: off.");
     v("stand_idle_cost", &ArriveTaskConfig::stand_idle_cost, kNonNegative,
       "The most a stand's match adds for a frame that stands shorter than stand_idle_seconds (squared "
       "normalized feature distance, as transition_cost). 0: off.");
@@ -152,7 +152,8 @@ class ArriveVecEnv : public TargetVecEnv<ArriveTask> {
 // stands (RuleContext::standing), a database frame costs stand_idle_cost * max(0, 1 - t /
 // stand_idle_seconds), t the seconds it goes on standing still (feature_row_idle and
 // idle_row_stands_still: kIdleMeters and kStillDegrees over the next second, for each frame of
-// its run of such frames in its clip, up to the last one's second); a compressed controller's
+// its run of such frames in its clip, up to the last one's second; within 5 degrees of the
+// facing no longer than both feet stay planted, foot_planted); a compressed controller's
 // candidate (no row) costs nothing. Null unless the config is an arrive task's with both numbers
 // above 0.
 std::unique_ptr<CandidateRule> make_stand_idle_rule(const RuleSetup& setup);
