@@ -57,9 +57,9 @@ Decision Decider::decide(const MotionSource& source, MotionState& s, const float
 }
 
 void Decider::anchor(const float* now, const float* chosen, Decision& d) const {
-  // Both feet planted in both poses (foot_planted, features.hpp): the root moves by
-  // minus their mean offset (x, z). One planted foot is left alone: anchoring it measured no
-  // stiller (docs/arrive.md).
+  // Both feet planted in both poses (foot_planted, features.hpp): the root moves by minus their
+  // mean offset (x, z), so their mean stays where it is. A transition with only one foot planted
+  // in both poses is left alone: anchoring it measured no stiller (docs/arrive.md).
   auto raw = [this](const float* f, int k) { return f[k] * pose_scale_[k] + pose_mean_[k]; };
   auto planted = [&](const float* f, int side) {
     const float v[3] = {raw(f, 6 + 3 * side), raw(f, 7 + 3 * side), raw(f, 8 + 3 * side)};

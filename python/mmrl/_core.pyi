@@ -1313,7 +1313,7 @@ class ArriveTaskConfig:
     @property
     def stand_anchor(self) -> bool:
         """
-        Once arrived, a transition between two poses with both feet planted keeps the feet where they stand: the root moves by their mean offset between the two, and the blend brings the body over them (unless that takes the root farther from the target than it is and than half success_radius).
+        Once arrived, a transition between two poses with both feet planted keeps the feet where they stand: the root moves so that their mean stays put, and the blend brings the body over them (unless that takes the root farther from the target than it is and than half success_radius).
         """
     @stand_anchor.setter
     def stand_anchor(self, arg0: bool) -> None:

@@ -41,10 +41,9 @@ inline bool feature_row_idle(const float* f) {
 // A foot slower than this (m/s, by its feature velocity) is planted: the arrive task's still
 // idles last while both feet are, and its stand's transitions keep both planted feet in place.
 constexpr float kPlantedFootSpeed = 0.3f;
-// Whether a foot whose velocity (3 floats, m/s: a raw feature row's [6, 9) left, [9, 12) right)
-// is this is planted.
-inline bool foot_planted(const float* velocity) {
-  const float* v = velocity;
+// Whether a foot with velocity v (3 floats, m/s: a raw feature row's [6, 9) left, [9, 12) right)
+// is planted.
+inline bool foot_planted(const float* v) {
   return v[0] * v[0] + v[1] * v[1] + v[2] * v[2] < kPlantedFootSpeed * kPlantedFootSpeed;
 }
 // Whether an idle feature row also stands still: it turns less than kStillDegrees.

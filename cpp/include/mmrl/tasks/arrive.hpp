@@ -77,8 +77,8 @@ struct ArriveTaskConfig : TaskConfig {
       "normalized feature distance, as transition_cost). 0: off.");
     v("stand_anchor", &ArriveTaskConfig::stand_anchor, kAny,
       "Once arrived, a transition between two poses with both feet planted keeps the feet where they stand: "
-      "the root moves by their mean offset between the two, and the blend brings the body over them (unless "
-      "that takes the root farther from the target than it is and than half success_radius).");
+      "the root moves so that their mean stays put, and the blend brings the body over them (unless that "
+      "takes the root farther from the target than it is and than half success_radius).");
   }
 };
 
