@@ -396,3 +396,18 @@ def test_an_arrived_stand_keeps_both_planted_feet_where_they_stand(which, tmp_pa
             without += _feet_path(character, int(frame), match, (1.0, 2.0, yaw), (0.0, 0.0))
     assert anchored >= 10, anchored
     assert with_anchor < 0.8 * without, (with_anchor, without)
+
+
+def test_an_anchor_that_is_not_two_finite_floats_is_refused():
+    """Character.play / play_rows take an anchor of two finite floats; anything else is one
+    ValueError naming it, and the character is unchanged."""
+    db = mmrl.default_database()
+    character = mmrl.Character(db, record=False)
+    start = int(np.flatnonzero(np.asarray(db.valid_mask, bool))[0])
+    character.reset(start)
+    for bad in ((math.nan, 0.0), (0.0, math.inf), (1.0, 2.0, 3.0)):
+        with pytest.raises(ValueError, match="anchor"):
+            character.play(start, 0.0, anchor=bad)
+        assert character.frame == start
+    with pytest.raises(ValueError, match="anchor"):
+        character._core.play(start, 0.0, (math.nan, 0.0))  # the binding checks too
