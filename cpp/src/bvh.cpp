@@ -56,11 +56,6 @@ class Lexer {
     }
   }
 
-  bool at_end() {
-    skip_space();
-    return pos_ >= s_.size();
-  }
-
   // Next token; token_line() is its line. Empty at end of input.
   std::string next() {
     skip_space();
@@ -129,10 +124,6 @@ class Lexer {
   int token_line() const { return tok_line_; }
   int line() const { return line_; }
   size_t pos() const { return pos_; }
-  void set_pos(size_t p, int line) {
-    pos_ = p;
-    line_ = line;
-  }
   const std::string& text() const { return s_; }
 
   static bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\f' || c == '\v'; }

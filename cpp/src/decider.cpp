@@ -11,12 +11,6 @@ void MotionSource::set_state(MotionState&, const float*) const {
   throw std::invalid_argument("set_state: this motion source shows database frames (set its frame instead)");
 }
 
-const float* candidate_raw_trajectory(const Database& db, const Candidate& c, float* scratch) {
-  if (c.row >= 0) return &db.features[static_cast<size_t>(c.row) * kFeatureDim + kPoseDim];
-  trajectory_denormalize(db, c.features + kPoseDim, scratch);
-  return scratch;
-}
-
 Decider::Decider(const Database& db, float action_limit_std) {
   if (action_limit_std > 0) {
     trajectory_action_box(db, action_limit_std, low_, high_);

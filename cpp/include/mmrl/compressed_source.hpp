@@ -78,7 +78,6 @@ class CompressedSource final : public MotionSource {
   bool starts_at(int64_t frame) const override { return frame == -1 || (frame >= 0 && frame < db_->num_frames); }
   void start(MotionState& s, int64_t frame) const override;
   Candidate current(const MotionState& s) const override { return Candidate{-1, CompressedState::of(s).shown.data()}; }
-  bool can_continue(const MotionState&) const override { return true; }
   Decision decide(MotionState& s, const float* query, const DecisionRules& rules) const override;
   Candidate chosen(const MotionState& s, const Decision&) const override {
     return Candidate{-1, CompressedState::of(s).chosen.data()};

@@ -21,7 +21,6 @@ class DatabaseSource final : public MotionSource {
   bool starts_at(int64_t frame) const override { return frame >= 0 && frame < db_->num_frames; }
   void start(MotionState& s, int64_t frame) const override { s.frame = frame; }
   Candidate current(const MotionState& s) const override { return row(s.frame); }
-  bool can_continue(const MotionState& s) const override { return db_->valid[s.frame] != 0; }
   Decision decide(MotionState& s, const float* query, const DecisionRules& rules) const override;
   Candidate chosen(const MotionState&, const Decision& d) const override { return row(d.match); }
   const float* played_delta(const MotionState&, const Decision& d, int k) const override {

@@ -96,8 +96,6 @@ class MotionSource {
   virtual void start(MotionState& s, int64_t frame) const = 0;
   // The candidate shown now: its continuation is the decision's starting best.
   virtual Candidate current(const MotionState& s) const = 0;
-  // Whether what is shown now can go on playing (a database frame too near its clip's end cannot).
-  virtual bool can_continue(const MotionState& s) const = 0;
   // The decision for a query (kFeatureDim normalized floats) under `rules`: match, transition
   // and cost (pose_jump and transition_cost are the Decider's). Writes d's playback into s.
   virtual Decision decide(MotionState& s, const float* query, const DecisionRules& rules) const = 0;
@@ -124,10 +122,6 @@ class MotionSource {
   // the source has no such state).
   virtual void set_state(MotionState& s, const float* state) const;
 };
-
-// A candidate's trajectory features in raw units (meters and unit directions, the character
-// frame): a row's own (db.features), or a state's denormalized (scratch, 12 floats).
-const float* candidate_raw_trajectory(const Database& db, const Candidate& c, float* scratch);
 
 // The decision engine: the action box and one rule for every character and every source.
 class Decider {

@@ -56,11 +56,6 @@ inline Vec3 world_to_local_dir(const Vec3& v, float yaw) {
   return Vec3(h.x(), v.y(), h.y());
 }
 
-inline Vec3 local_to_world_dir(const Vec3& v, float yaw) {
-  const Vec2 h = local_to_world_xz(v.x(), v.z(), yaw);
-  return Vec3(h.x(), v.y(), h.y());
-}
-
 // Reflection across the world YZ plane (x -> -x) applied to a rotation: R -> M R M.
 inline Quat quat_mirror_x(const Quat& q) { return Quat(q.w(), q.x(), -q.y(), -q.z()); }
 

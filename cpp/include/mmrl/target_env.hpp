@@ -62,16 +62,6 @@ struct ObsSegment {
 };
 using ObsLayout = std::vector<ObsSegment>;
 
-// The offset of segment `name` in a layout, or -1.
-inline int obs_segment_offset(const ObsLayout& layout, const std::string& name) {
-  int offset = 0;
-  for (const ObsSegment& s : layout) {
-    if (s.name == name) return offset;
-    offset += s.size;
-  }
-  return -1;
-}
-
 // What a played frame did to an episode: nothing, reached the task's goal, or failed it (a
 // collision). A step's first event ends its episode.
 enum class FrameEvent : uint8_t { kNone, kSuccess, kFailure };

@@ -121,9 +121,6 @@ class ObstaclePathFilter final : public CandidateRule {
   // character frame, within prepare()'s reach).
   int first_hit_state(const float* features) const;
   int first_hit_path(const float* path) const;
-  // Sample count within the horizon, and the cost of a first hit at sample s.
-  int samples() const { return samples_; }
-  float hit_cost(int s) const { return hit_cost_[s]; }
   // Obstacles near enough to matter for this decision (for tests and benches).
   int nearby() const { return kept_; }
 
