@@ -274,7 +274,7 @@ void Character::play(const PlayedFrames& frames, bool transition, float cost, co
   last_transition_ = transition;
   last_match_ = frames.frame(0);
   const bool blend = options_.poses && inertializer_.enabled();
-  const bool anchored = transition && anchor != nullptr && (anchor[0] != 0.0f || anchor[1] != 0.0f);
+  const bool anchored = transition && anchor != nullptr;  // (0, 0): root_shift and the blend change nothing
   if (anchored) root_shift(root_, anchor);
   if (blend && transition) {
     blend_velocity(vel_a_, vel_b_, src_vel_);  // the velocity of the frame shown now
